@@ -1,0 +1,17 @@
+"""skfem-nem: the Natural Element Method (Braun & Sambridge, Nature 1995) for scikit-fem.
+
+Layers (bottom to top): geometry (:mod:`~skfem_nem.predicates`,
+:mod:`~skfem_nem.triangulation`), coordinates (:mod:`~skfem_nem.coordinates`).
+"""
+from .coordinates import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
+from .triangulation import Triangulation
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Triangulation",
+    "sibson_coordinates",
+    "laplace_coordinates",
+    "natural_neighbour_coordinates",
+    "__version__",
+]

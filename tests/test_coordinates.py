@@ -1,0 +1,367 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from scipy.spatial import cKDTree
+
+from skfem_nem import Triangulation, laplace_coordinates, sibson_coordinates
+
+KINDS = [sibson_coordinates, laplace_coordinates]
+
+
+def random_nodes(n, seed=0):
+    """Random nodes in the unit square with its four corners (so the hull is the square)."""
+    rng = np.random.default_rng(seed)
+    return np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], rng.random((n - 4, 2))]
+
+
+def interior_queries(m, seed=1, margin=0.02):
+    rng = np.random.default_rng(seed)
+    return margin + (1 - 2 * margin) * rng.random((m, 2))
+
+
+def dense(A):
+    return np.asarray(A.todense())
+
+
+def check_properties(p, q, coords, tol=1e-12, grad=True, grad_tol=None):
+    if grad:
+        Phi, (Dx, Dy) = coords(p, q, gradient=True)
+    else:
+        Phi = coords(p, q)
+    if isinstance(p, Triangulation):
+        p = p.nodes
+    F = dense(Phi)
+    assert Phi.shape == (q.shape[0], p.shape[0])
+    assert np.all(F > -1e-14), "coordinates must be non-negative"
+    np.testing.assert_allclose(F.sum(1), 1.0, atol=tol)
+    np.testing.assert_allclose(F @ p, q, atol=tol * max(1.0, np.abs(p).max()))
+    if grad:
+        GX, GY = dense(Dx), dense(Dy)
+        L = np.ptp(p, axis=0).max()
+        # round-off scales with the largest gradient entry in each row
+        g = np.maximum(np.abs(GX).max(1), np.abs(GY).max(1))
+        atol = (grad_tol or tol * 100) * (1.0 / L + g)
+        for S in (GX.sum(1), GY.sum(1), GX @ p[:, 0] - 1, GY @ p[:, 0],
+                  GX @ p[:, 1], GY @ p[:, 1] - 1):
+            # (sum_i grad phi_i = 0 and sum_i x_i (x) grad phi_i = identity)
+            assert np.all(np.abs(S) <= atol * L), np.abs(S).max()
+    return Phi
+
+
+def fd_check(tri, q, coords, h=1e-7, rtol=1e-5):
+    """Central finite differences of the values against the gradients."""
+    Phi, (Dx, Dy) = coords(tri, q, gradient=True)
+    for k, D in enumerate((Dx, Dy)):
+        e = np.zeros(2)
+        e[k] = h
+        fd = (dense(coords(tri, q + e)) - dense(coords(tri, q - e))) / (2 * h)
+        G = dense(D)
+        err = np.abs(fd - G).max()
+        scale = max(1.0, np.abs(G).max())
+        assert err < rtol * scale, f"FD mismatch {err:.2e} in direction {k}"
+
+
+def away_from_hull(x, margin=0.05):
+    return np.all((x > margin) & (x < 1 - margin), axis=1)
+
+
+@pytest.mark.parametrize("coords", KINDS)
+def test_kronecker_delta(coords):
+    p = random_nodes(200)
+    Phi = coords(p, p)
+    np.testing.assert_array_equal(dense(Phi), np.eye(p.shape[0]))
+
+
+@pytest.mark.parametrize("coords", KINDS)
+def test_partition_of_unity_linear_precision(coords):
+    p = random_nodes(400)
+    q = np.r_[interior_queries(2000), np.random.default_rng(5).random((500, 2))]
+    check_properties(p, q, coords)
+
+
+@pytest.mark.parametrize("coords", KINDS)
+def test_finite_differences_random(coords):
+    p = random_nodes(300, seed=3)
+    tri = Triangulation(p)
+    fd_check(tri, interior_queries(300, seed=4), coords)
+
+
+@pytest.mark.parametrize("coords", KINDS)
+def test_on_delaunay_edges(coords):
+    p = random_nodes(300, seed=6)
+    tri = Triangulation(p)
+    T, N = tri.triangles, tri.neighbours
+    rng = np.random.default_rng(7)
+    t, k = np.nonzero(N >= 0)
+    sel = rng.choice(t.size, 200, replace=False)
+    a = p[T[t[sel], (k[sel] + 1) % 3]]
+    b = p[T[t[sel], (k[sel] + 2) % 3]]
+    s = rng.uniform(0.1, 0.9, (sel.size, 1))
+    q = a + s * (b - a)
+    q = np.r_[q, 0.5 * (a + b)]
+    check_properties(tri, q, coords)
+    fd_check(tri, q[away_from_hull(q)], coords)
+    # finite values everywhere (the Watson construction gives inf/NaN here)
+    Phi, D = coords(tri, q, gradient=True)
+    assert np.all(np.isfinite(Phi.data)) and all(np.all(np.isfinite(d.data)) for d in D)
+
+
+@pytest.mark.parametrize("coords", KINDS)
+def test_near_nodes(coords):
+    p = random_nodes(200, seed=8)
+    tri = Triangulation(p)
+    rng = np.random.default_rng(9)
+    i = rng.choice(np.flatnonzero(away_from_hull(p)), 50, replace=False)
+    for r in (1e-3, 1e-6, 1e-9):
+        ang = rng.uniform(0, 2 * np.pi, i.size)
+        q = p[i] + r * np.c_[np.cos(ang), np.sin(ang)]
+        # gradients lose digits like eps * spacing / r this close to a node
+        Phi = check_properties(tri, q, coords, tol=1e-12, grad_tol=max(1e-10, 1e-16 / r))
+        # the node's own coordinate tends to one
+        assert np.all(dense(Phi)[np.arange(i.size), i] > 1 - 1e4 * r)
+    q = p[i] + 1e-4 * np.c_[np.cos(ang), np.sin(ang)]
+    fd_check(tri, q, coords, h=1e-9, rtol=1e-5)
+
+
+def circumcircle(a, b, c):
+    d = 2 * ((b - a)[0] * (c - a)[1] - (b - a)[1] * (c - a)[0])
+    b_, c_ = b - a, c - a
+    o = np.array([c_[1] * (b_ @ b_) - b_[1] * (c_ @ c_), b_[0] * (c_ @ c_) - c_[0] * (b_ @ b_)]) / d
+    return a + o, np.hypot(*o)
+
+
+@pytest.mark.parametrize("coords", KINDS)
+def test_continuity_across_edges_and_circles(coords):
+    p = random_nodes(200, seed=10)
+    tri = Triangulation(p)
+    T, N = tri.triangles, tri.neighbours
+    rng = np.random.default_rng(11)
+    pts, nrm = [], []
+    # across interior edges
+    t, k = np.nonzero(N >= 0)
+    for j in rng.choice(t.size, 60, replace=False):
+        a = p[T[t[j], (k[j] + 1) % 3]]
+        b = p[T[t[j], (k[j] + 2) % 3]]
+        e = b - a
+        pts.append(a + rng.uniform(0.2, 0.8) * e)
+        nrm.append(np.array([-e[1], e[0]]) / np.hypot(*e))
+    # across circumcircles (points on a circle, inside the hull)
+    for s in rng.choice(tri.ntriangles, 200, replace=False):
+        o, r = circumcircle(*p[T[s]])
+        ang = rng.uniform(0, 2 * np.pi)
+        x = o + r * np.array([np.cos(ang), np.sin(ang)])
+        if np.all((x > 0.02) & (x < 0.98)):
+            pts.append(x)
+            nrm.append(np.array([np.cos(ang), np.sin(ang)]))
+    x, n = np.array(pts), np.array(nrm)
+    jumps = {}
+    for d in (1e-6, 1e-8):
+        Fp, Dp = coords(tri, x + d * n, gradient=True)
+        Fm, Dm = coords(tri, x - d * n, gradient=True)
+        Gp = np.stack([dense(D) for D in Dp], -1)
+        Gm = np.stack([dense(D) for D in Dm], -1)
+        gmax = np.maximum(np.abs(Gp).max((1, 2)), np.abs(Gm).max((1, 2)))
+        # values: Lipschitz with the local gradient bound (no jump)
+        dF = np.abs(dense(Fp) - dense(Fm)).max(1)
+        assert np.all(dF <= 2 * d * np.sqrt(2) * gmax * 1.01 + 1e-13)
+        jumps[d] = (np.abs(Gp - Gm).max((1, 2)), gmax)
+    if coords is sibson_coordinates:
+        # gradients: the jump shrinks with the distance (C1 across circles)
+        (g6, s6), (g8, _) = jumps[1e-6], jumps[1e-8]
+        assert np.all(g8 <= 0.05 * g6 + 1e-9 * s6)
+
+
+def grid_triangulations(n=7):
+    """A structured grid triangulated with all diagonals one way and the other."""
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    p = np.c_[x.ravel(), y.ravel()]
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    t1 = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+    t2 = np.r_[np.c_[a, b, d], np.c_[b, c, d]]
+    return p, Triangulation.from_triangles(p, t1), Triangulation.from_triangles(p, t2)
+
+
+@pytest.mark.parametrize("coords", KINDS)
+def test_cocircular_grid_independent_of_diagonal(coords):
+    p, tri1, tri2 = grid_triangulations()
+    assert tri1.is_delaunay() and tri2.is_delaunay()
+    assert (tri1.triangles != tri2.triangles).any()
+    rng = np.random.default_rng(12)
+    q = 0.01 + 0.98 * rng.random((500, 2))
+    # include points on the grid lines and exactly on the diagonals
+    h = 1 / 6
+    q = np.r_[q, [[0.5 * h, 0.5 * h], [2.5 * h, 1.5 * h], [2 * h, 2.3 * h], [2.2 * h, 3 * h]]]
+    F1, D1 = coords(tri1, q, gradient=True)
+    F2, D2 = coords(tri2, q, gradient=True)
+    np.testing.assert_allclose(dense(F1), dense(F2), atol=1e-13)
+    for a, b in zip(D1, D2):
+        np.testing.assert_allclose(dense(a), dense(b), atol=1e-11)
+    check_properties(tri1, q, coords)
+    # against a slightly rotated copy (Qhull picks its own diagonals there)
+    th = 1e-3
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    F3, (GX3, GY3) = coords(p @ R.T, q @ R.T, gradient=True)
+    assert np.abs(dense(F3) - dense(F1)).max() < 1e-8
+    G1 = np.stack([dense(D1[0]), dense(D1[1])], -1)
+    G3 = np.stack([dense(GX3), dense(GY3)], -1) @ R  # rotate gradients back
+    assert np.abs(G3 - G1).max() < 1e-6
+
+
+@pytest.mark.parametrize("coords", KINDS)
+@pytest.mark.parametrize("scale, shift", [(1.0, (1e3, -2e3)), (1e-6, (0, 0)), (1e6, (0, 0)),
+                                          (1e-6, (3e-3, 1e-3))])
+def test_invariance(coords, scale, shift):
+    p = random_nodes(150, seed=13)
+    q = interior_queries(400, seed=14)
+    F, (GX, GY) = coords(p, q, gradient=True)
+    shift = np.asarray(shift, dtype=float)
+    F2, (GX2, GY2) = coords(scale * p + shift, scale * q + shift, gradient=True)
+    np.testing.assert_allclose(dense(F2), dense(F), atol=1e-10)
+    np.testing.assert_allclose(scale * dense(GX2), dense(GX), atol=1e-8)
+    np.testing.assert_allclose(scale * dense(GY2), dense(GY), atol=1e-8)
+
+
+def test_sibson_against_discrete_voronoi_areas():
+    """Independent check: stolen areas measured by nearest-node counting on a fine grid."""
+    p = random_nodes(40, seed=15)
+    tri = Triangulation(p)
+    tree = cKDTree(p)
+    rng = np.random.default_rng(16)
+    for x in 0.2 + 0.6 * rng.random((3, 2)):
+        cav = tri.cavity(x)
+        boxes = []
+        for s in cav:
+            o, r = circumcircle(*p[tri.triangles[s]])
+            boxes.append(np.r_[o - r, o + r])
+        boxes = np.array(boxes)
+        lo, hi = boxes[:, :2].min(0), boxes[:, 2:].max(0)
+        g = 1500
+        gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], g), np.linspace(lo[1], hi[1], g))
+        y = np.c_[gx.ravel(), gy.ravel()]
+        d_old, i_old = tree.query(y)
+        mine = np.hypot(*(y - x).T) < d_old
+        counts = np.bincount(i_old[mine], minlength=p.shape[0])
+        ref = counts / counts.sum()
+        F = dense(sibson_coordinates(tri, x[None]))[0]
+        assert np.abs(F - ref).max() < 5e-3
+        assert set(np.flatnonzero(ref > 1e-3)) <= set(np.flatnonzero(F > 0))
+
+
+def test_hull_edges_are_linear():
+    p = random_nodes(100, seed=17)
+    s = np.linspace(0, 1, 11)
+    for coords in KINDS:
+        # the bottom side of the square: node 0 (0,0) and 1 (1,0) plus any nodes on it
+        q = np.c_[s, 0 * s]
+        F = dense(coords(p, q))
+        np.testing.assert_allclose(F[:, 0], 1 - s, atol=1e-15)
+        np.testing.assert_allclose(F[:, 1], s, atol=1e-15)
+        assert np.count_nonzero(F[:, 2:]) == 0
+    # a query 1e-300 inside the hull edge is treated as on it
+    F = dense(sibson_coordinates(p, np.array([[0.3, 1e-300]])))
+    np.testing.assert_allclose(F[0, :2], [0.7, 0.3])
+
+
+def test_near_hull_values_converge_to_linear():
+    p = random_nodes(100, seed=18)
+    for eps in (1e-4, 1e-8, 1e-12):
+        q = np.array([[0.37, eps]])
+        check_properties(p, q, sibson_coordinates, tol=1e-11, grad=False)
+        F = dense(sibson_coordinates(p, q))[0]
+        assert abs(F[0] - 0.63) < 100 * eps and abs(F[1] - 0.37) < 100 * eps
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(5, 80),
+       st.sampled_from(["uniform", "clustered", "nearly_collinear", "graded", "lattice"]))
+def test_hypothesis_properties(seed, n, kind):
+    rng = np.random.default_rng(seed)
+    if kind == "uniform":
+        p = rng.random((n, 2))
+    elif kind == "clustered":
+        p = np.r_[rng.random((n, 2)), 0.4 + 1e-5 * rng.random((n, 2))]
+    elif kind == "nearly_collinear":
+        t = rng.random(n)
+        p = np.r_[np.c_[t, 0.3 * t + 1e-7 * rng.standard_normal(n)], [[0.2, 0.5], [0.8, 0.1]]]
+    elif kind == "graded":
+        d = rng.random(n) ** 3
+        p = np.c_[rng.random(n), 0.5 + np.where(rng.random(n) < 0.5, -d, d) * 0.5]
+    else:
+        k = max(2, int(np.sqrt(n)))
+        x, y = np.meshgrid(np.arange(k + 1), np.arange(k))
+        p = np.c_[x.ravel(), y.ravel()].astype(float)
+    p = np.unique(p, axis=0)
+    tri = Triangulation(p)
+    # random queries inside the hull: convex combinations of triangle vertices
+    t = rng.integers(0, tri.ntriangles, 50)
+    lam = rng.dirichlet(np.ones(3), 50)
+    q = np.einsum("mk,mkd->md", lam, p[tri.triangles[t]])
+    for coords in KINDS:
+        Phi = coords(tri, q, gradient=True, undefined="nan")[0]
+        F = dense(Phi)
+        np.testing.assert_allclose(F.sum(1), 1.0, atol=1e-10)
+        np.testing.assert_allclose(F @ p, q, atol=1e-10 * max(1, np.abs(p).max()))
+        assert F.min() > -1e-12
+    np.testing.assert_array_equal(dense(sibson_coordinates(tri, p)), np.eye(p.shape[0]))
+
+
+def test_gradient_at_node_and_hull():
+    p = random_nodes(50, seed=19)
+    with pytest.raises(ValueError, match=r"x\[1\] .* \(node 7\)"):
+        sibson_coordinates(p, np.r_[[[0.5, 0.5]], p[7:8]], gradient=True)
+    with pytest.raises(ValueError, match=r"convex-hull edge; first is x\[0\]"):
+        sibson_coordinates(p, np.array([[0.5, 0.0], [0.5, 0.5]]), gradient=True)
+    F, (GX, GY) = sibson_coordinates(p, np.r_[[[0.5, 0.5]], p[7:8], [[0.5, 0.0]]],
+                                     gradient=True, undefined="nan")
+    assert np.all(np.isfinite(dense(GX)[0]))
+    assert np.isnan(GX[1, 7]) and np.isnan(GY[2, 0]) and np.isnan(GX[2, 1])
+    np.testing.assert_array_equal(dense(F)[1], np.eye(50)[7])
+
+
+def test_bad_queries():
+    p = random_nodes(50, seed=20)
+    tri = Triangulation(p)
+    q = np.array([[0.5, 0.5], [1.5, 0.5], [0.2, 0.2], [-0.1, 2.0]])
+    before = q.copy()
+    with pytest.raises(ValueError, match=r"2 query point\(s\) lie outside .* x\[1\]"):
+        sibson_coordinates(tri, q)
+    np.testing.assert_array_equal(q, before)
+    with pytest.raises(ValueError, match=r"non-finite.*x\[1\]"):
+        sibson_coordinates(tri, np.array([[0.5, 0.5], [np.nan, 0.1]]))
+    with pytest.raises(ValueError, match="shape"):
+        sibson_coordinates(tri, np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="kind"):
+        from skfem_nem import natural_neighbour_coordinates
+        natural_neighbour_coordinates(tri, q[:1], kind="watson")
+    with pytest.raises(ValueError, match=r"nodes\[3\] coincides"):
+        sibson_coordinates(np.array([[0, 0], [1, 0], [0, 1], [0, 0]]), q[:1])
+
+
+def test_many_natural_neighbours():
+    """Co-circular nodes: a point inside a regular 200-gon has all 200 as natural neighbours."""
+    k = 200
+    ang = 2 * np.pi * np.arange(k) / k
+    p = np.c_[np.cos(ang), np.sin(ang)]
+    tri = Triangulation(p)
+    q = np.array([[1e-3, 2e-3], [0.5, 0.1]])
+    Phi, (GX, GY) = sibson_coordinates(tri, q, gradient=True)
+    assert Phi[0].nnz == k and Phi[1].nnz == k
+    check_properties(tri, q, sibson_coordinates, tol=1e-11)
+
+
+def test_roundoff_outside_hull_is_snapped():
+    # a rotated square: points computed on its sides fall outside by round-off
+    th = 0.3
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    p = random_nodes(60, seed=21) @ R.T + np.array([3.7, -1.1])
+    a, b = p[0], p[1]  # the side from corner (0,0) to (1,0)
+    s = np.linspace(0.05, 0.95, 37)
+    q = a + s[:, None] * (b - a)
+    F = dense(sibson_coordinates(p, q))
+    np.testing.assert_allclose(F[:, 0], 1 - s, atol=1e-12)
+    np.testing.assert_allclose(F[:, 1], s, atol=1e-12)
+    # clearly outside is still an error
+    n = np.array([(b - a)[1], -(b - a)[0]])
+    with pytest.raises(ValueError, match=r"outside .* x\[0\]"):
+        sibson_coordinates(p, (q[3] + 1e-6 * n)[None])

@@ -1,0 +1,29 @@
+"""The examples run and produce what they claim."""
+import importlib
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def load(name):
+    sys.path.insert(0, str(EXAMPLES))
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.pop(0)
+
+
+def test_ex01_interpolation(tmp_path):
+    ex = load("ex01_interpolation")
+    # second-order accurate, comparable with linear interpolation on the same triangles
+    assert ex.errors["sibson"] < 0.03 and ex.errors["laplace"] < 0.03
+    assert ex.rms["sibson"] < 1.3 * ex.rms["linear"]
+    # nodal values are reproduced and the gradient is a real approximation
+    assert np.allclose(ex.sibson_coordinates(ex.tri, ex.nodes) @ ex.values, ex.values, atol=1e-14)
+    assert ex.grad_error < 1.0
+    png = ex.visualize(tmp_path / "ex01.png")
+    assert Path(png).stat().st_size > 10_000

@@ -1,0 +1,159 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from scipy.spatial import Delaunay
+
+from skfem_nem import Triangulation
+
+
+def edge_set(T):
+    e = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    e.sort(axis=1)
+    return {tuple(r) for r in e}
+
+
+def check_valid(tri):
+    T, N = tri.triangles, tri.neighbours
+    assert np.all(tri.orientation() > 0)
+    # adjacency is symmetric and neighbours share the right edge
+    for t in range(T.shape[0]):
+        for k in range(3):
+            u = N[t, k]
+            if u < 0:
+                continue
+            assert t in N[u]
+            e = {T[t, (k + 1) % 3], T[t, (k + 2) % 3]}
+            assert e <= set(T[u])
+    # Euler: triangles = 2n - 2 - hull vertices
+    nh = np.count_nonzero(N < 0)
+    assert T.shape[0] == 2 * tri.npoints - 2 - nh
+
+
+def test_random_matches_qhull():
+    rng = np.random.default_rng(0)
+    p = rng.random((500, 2))
+    tri = Triangulation(p)
+    check_valid(tri)
+    assert tri.is_delaunay()
+    assert edge_set(tri.triangles) == edge_set(Delaunay(p).simplices)
+
+
+def test_structured_grid_is_delaunay():
+    x, y = np.meshgrid(np.linspace(0, 1, 9), np.linspace(0, 2, 7))
+    p = np.c_[x.ravel(), y.ravel()]
+    tri = Triangulation(p)
+    check_valid(tri)
+    assert tri.is_delaunay()
+    assert tri.ntriangles == 2 * 8 * 6
+
+
+def test_collinear_hull_runs():
+    # many nodes on each side of the square: collinear hull runs
+    s = np.linspace(0, 1, 21)
+    p = np.r_[np.c_[s, 0 * s], np.c_[s, 1 + 0 * s], np.c_[0 * s[1:-1], s[1:-1]],
+              np.c_[1 + 0 * s[1:-1], s[1:-1]], [[0.5, 0.5], [0.3, 0.6]]]
+    tri = Triangulation(p)
+    check_valid(tri)
+    assert tri.is_delaunay()
+    assert len(tri.hull_edges) == 80
+
+
+def test_lawson_repairs_any_triangulation():
+    # start from a valid but non-Delaunay triangulation: a grid triangulation
+    # whose nodes were jittered (connectivity kept), no inverted triangles
+    rng = np.random.default_rng(1)
+    n = 15
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    p = np.c_[x.ravel(), y.ravel()]
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    T = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+    interior = (p[:, 0] > 0) & (p[:, 0] < 1) & (p[:, 1] > 0) & (p[:, 1] < 1)
+    p[interior] += 0.3 / n * (rng.random((interior.sum(), 2)) - 0.5)
+    tri = Triangulation.from_triangles(p, T, make_delaunay=False)
+    check_valid(tri)
+    assert not tri.is_delaunay()
+    flips = tri.make_delaunay()
+    assert flips > 0
+    check_valid(tri)
+    assert tri.is_delaunay()
+    assert edge_set(tri.triangles) == edge_set(Delaunay(p).simplices)
+
+
+def test_locate_and_cavity():
+    rng = np.random.default_rng(2)
+    p = rng.random((300, 2))
+    tri = Triangulation(p)
+    q = 0.05 + 0.9 * rng.random((200, 2))
+    t = tri.locate(q)
+    assert np.all(t >= 0)
+    for qi, ti in zip(q, t):
+        a, b, c = p[tri.triangles[ti]]
+        # barycentric coordinates all >= 0
+        M = np.c_[b - a, c - a]
+        lam = np.linalg.solve(M, qi - a)
+        assert lam.min() >= -1e-12 and lam.sum() <= 1 + 1e-12
+    # outside
+    assert np.all(tri.locate(np.array([[2.0, 2.0], [-1, 0.5]])) == -1)
+    # cavity = brute-force set of triangles whose circumcircle contains the point
+    x = q[0]
+    cav = tri.cavity(x)
+    brute = [s for s in range(tri.ntriangles) if tri.incircle(s, x) > 0]
+    assert list(cav) == brute
+    assert tri.cavity(p[5]).size == 0
+    with pytest.raises(ValueError, match="outside"):
+        tri.cavity([3.0, 3.0])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(4, 60),
+       st.sampled_from(["uniform", "clustered", "nearly_collinear", "grid"]))
+def test_hypothesis_delaunay(seed, n, kind):
+    rng = np.random.default_rng(seed)
+    if kind == "uniform":
+        p = rng.random((n, 2))
+    elif kind == "clustered":
+        p = np.r_[rng.random((n, 2)), 0.5 + 1e-7 * rng.random((n, 2))]
+    elif kind == "nearly_collinear":
+        t = rng.random(n)
+        p = np.c_[t, 0.3 * t + 1e-9 * rng.standard_normal(n)]
+        p = np.r_[p, [[0.5, 0.4]]]
+    else:
+        k = max(2, int(np.sqrt(n)))
+        x, y = np.meshgrid(np.arange(k), np.arange(k + 1))
+        p = np.c_[x.ravel(), y.ravel()].astype(float)
+        p = p @ np.array([[1.0, 0.0], [0.5, 1.0]]) if seed % 2 else p
+    tri = Triangulation(p)
+    check_valid(tri)
+    assert tri.is_delaunay()
+
+
+@pytest.mark.parametrize("bad, match", [
+    (np.array([[0, 0], [1, 0], [np.nan, 1]]), r"nodes\[2\]"),
+    (np.array([[0, 0], [1, 0], [0, np.inf], [1, 1]]), r"nodes\[2\]"),
+    (np.array([[0, 0], [1, 0]]), "at least 3"),
+    (np.array([[0, 0], [1, 1], [2, 2], [3, 3]]), "collinear"),
+    (np.array([[0, 0], [1, 0], [0, 1], [1, 0]]), r"nodes\[3\] coincides with nodes\[1\]"),
+    (np.zeros((3, 3)), "shape"),
+])
+def test_bad_nodes(bad, match):
+    before = bad.copy()
+    with pytest.raises(ValueError, match=match):
+        Triangulation(bad)
+    np.testing.assert_array_equal(bad, before)
+
+
+def test_near_duplicate_named():
+    p = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0.5, 0.5], [0.5, 0.5 + 1e-17]])
+    # 0.5 + 1e-17 == 0.5 in double: an exact duplicate
+    with pytest.raises(ValueError, match=r"nodes\[5\] coincides with nodes\[4\]"):
+        Triangulation(p)
+
+
+def test_caller_arrays_untouched():
+    rng = np.random.default_rng(3)
+    p = rng.random((50, 2))
+    before = p.copy()
+    tri = Triangulation(p)
+    np.testing.assert_array_equal(p, before)
+    assert not tri.nodes.flags.writeable

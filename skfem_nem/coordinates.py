@@ -79,7 +79,7 @@ def _circumcentre_rel(ax, ay, bx, by, d):
 
 @njit(cache=True)
 def _query(P, T, N, C, qx, qy, t0, kind, want_grad, cap,
-           cav, be_b, be_t, be_u, nn, vx, vy, ox, oy, area, gax, gay,
+           cav, cnb, rej, be_b, be_t, be_u, nn, vx, vy, ox, oy, area, gax, gay,
            out_i, out_v, out_gx, out_gy):
     """Natural-neighbour coordinates of one point.
 
@@ -98,11 +98,11 @@ def _query(P, T, N, C, qx, qy, t0, kind, want_grad, cap,
             out_gx[0] = np.nan
             out_gy[0] = np.nan
             return 1, AT_NODE, t
-    ncav = _grow_cavity(P, T, N, qx, qy, t, cav, cap)
+    ncav = _grow_cavity(P, T, N, qx, qy, t, cav, cnb, rej)
     if ncav < 0:
         return 0, OVERFLOW, t
     # boundary of the cavity, a counter-clockwise cycle nn[0..nb-1] around x
-    nb = _cavity_boundary(T, N, cav, ncav, nn, be_b, be_t, be_u)
+    nb = _cavity_boundary(T, N, cav, cnb, ncav, nn, be_b, be_t, be_u)
     if nb < 0:
         return 0, OVERFLOW, t
     for j in range(nb):
@@ -154,30 +154,16 @@ def _query(P, T, N, C, qx, qy, t0, kind, want_grad, cap,
             acc = 0.0
             x0 = vx[i]
             y0 = vy[i]
-            tc = be_t[i]
+            ci = be_t[i]
             for _ in range(ncav):
-                ci = 0
-                for j in range(ncav):
-                    if cav[j] == tc:
-                        ci = j
-                        break
                 acc += x0 * oy[ci] - y0 * ox[ci]
                 x0 = ox[ci]
                 y0 = oy[ci]
-                jp = 0
-                for j in range(3):
-                    if T[tc, j] == p:
-                        jp = j
-                u = N[tc, (jp + 1) % 3]
-                found = False
-                if u >= 0:
-                    for j in range(ncav):
-                        if cav[j] == u:
-                            found = True
-                            break
-                if not found:
+                tc = cav[ci]
+                jp = 0 if T[tc, 0] == p else (1 if T[tc, 1] == p else 2)
+                ci = cnb[ci, (jp + 1) % 3]
+                if ci < 0:
                     break
-                tc = u
             acc += x0 * vy[im] - y0 * vx[im]
             acc += vx[im] * vy[i] - vy[im] * vx[i]
             area[i] = 0.5 * acc
@@ -261,6 +247,8 @@ def _query_batch(P, T, N, C, Q, start, kind, want_grad, cap, nblocks,
         lo = blk * m // nblocks
         hi = (blk + 1) * m // nblocks
         cav = np.empty(cap, np.int64)
+        cnb = np.empty((cap, 3), np.int64)
+        rej = np.empty(cap + 4, np.int64)
         be_u = np.empty(cap + 2, np.int64)
         be_b = np.empty(cap + 2, np.int64)
         be_t = np.empty(cap + 2, np.int64)
@@ -294,7 +282,7 @@ def _query_batch(P, T, N, C, Q, start, kind, want_grad, cap, nblocks,
             elif t0 < 0:
                 t0 = 0
             cnt, st, t = _query(P, T, N, C, Q[q, 0], Q[q, 1], t0, kind, want_grad, cap,
-                                cav, be_b, be_t, be_u, nn, vx, vy, ox, oy, area,
+                                cav, cnb, rej, be_b, be_t, be_u, nn, vx, vy, ox, oy, area,
                                 gax, gay, oi, ov, ogx, ogy)
             if cnt > cap:
                 st = OVERFLOW
@@ -343,7 +331,7 @@ def natural_neighbour_coordinates(
     gradient: bool = False,
     kind: Literal["sibson", "laplace"] = "sibson",
     undefined: Literal["raise", "nan"] = "raise",
-    chunk: int = 1 << 17,
+    chunk: int = 1 << 15,
     return_triangles: bool = False,
     hint=None,
     hull_tol: float = 1e-13,
@@ -414,11 +402,12 @@ def natural_neighbour_coordinates(
     tri_out = np.empty(m, dtype=np.int64)
     nthreads = _threads()
     blocks = []
+    buffers = _buffers(min(m, chunk), _CAP, gradient)
     for c0 in range(0, m, chunk):
         c1 = min(m, c0 + chunk)
         Qc = q[c0:c1]
         mats, status, tloc = _run_chunk(P, T, N, C, Qc, start_all[c0:c1], ikind, gradient,
-                                        _CAP, nthreads)
+                                        _CAP, nthreads, buffers)
         # points outside by round-off only: move them onto the hull and redo
         redo = _snap_to_hull(tri, Qc, np.flatnonzero(status == OUTSIDE), hull_tol)
         # rare: more natural neighbours than the buffer holds (co-circular
@@ -453,7 +442,7 @@ def natural_neighbour_coordinates(
     return result
 
 
-_CAP = 16
+_CAP = 24
 
 
 def _snap_to_hull(tri, q, rows, hull_tol):
@@ -487,14 +476,20 @@ def _snap_to_hull(tri, q, rows, hull_tol):
     return np.array(moved, dtype=np.int64)
 
 
-def _run_chunk(P, T, N, C, Qc, start, ikind, gradient, cap, nthreads):
+def _buffers(mc, cap, gradient):
+    """Padded per-chunk output rows, reused across chunks (no page faults)."""
+    return (np.empty((mc, cap), np.int64), np.empty((mc, cap)),
+            np.empty((mc, cap) if gradient else (1, 1)),
+            np.empty((mc, cap) if gradient else (1, 1)))
+
+
+def _run_chunk(P, T, N, C, Qc, start, ikind, gradient, cap, nthreads, buffers=None):
     """Run the query kernel on one chunk; returns ([Phi, (dx, dy)], status, tri)."""
     mc = Qc.shape[0]
     n = P.shape[0]
-    out_i = np.empty((mc, cap), np.int64)
-    out_v = np.empty((mc, cap))
-    out_gx = np.empty((mc, cap) if gradient else (1, 1))
-    out_gy = np.empty((mc, cap) if gradient else (1, 1))
+    if buffers is None:
+        buffers = _buffers(mc, cap, gradient)
+    out_i, out_v, out_gx, out_gy = buffers
     count = np.empty(mc, np.int64)
     status = np.empty(mc, np.int64)
     tloc = np.empty(mc, np.int64)

@@ -127,65 +127,78 @@ def _in_cavity(P, T, t, qx, qy):
 
 
 @njit(cache=True)
-def _grow_cavity(P, T, N, qx, qy, t0, cav, cap):
+def _grow_cavity(P, T, N, qx, qy, t0, cav, cnb, rej):
     """Collect the triangles whose circumcircle strictly contains (qx, qy).
 
-    ``t0`` must contain the point and the point must not be a node.  Fills
-    ``cav[:count]`` and returns ``count``, or ``-1`` if more than ``cap``
-    triangles are in the cavity.
+    ``t0`` must contain the point and the point must not be a node. Fills
+    ``cav[:count]`` and the local adjacency ``cnb[c, k]`` (index in ``cav`` of
+    the neighbour across edge k of ``cav[c]``, or -1 if that neighbour is not
+    in the cavity); ``rej`` is scratch for the rejected neighbours (each is
+    tested once). Returns ``count``, or ``-1`` if the buffers are too small.
     """
+    cap = cav.shape[0]
+    rcap = rej.shape[0]
     cav[0] = t0
     count = 1
+    nrej = 0
     head = 0
     while head < count:
         t = cav[head]
-        head += 1
         for k in range(3):
             u = N[t, k]
+            cnb[head, k] = -1
             if u < 0:
                 continue
-            seen = False
+            found = False
             for j in range(count):
                 if cav[j] == u:
-                    seen = True
+                    cnb[head, k] = j
+                    found = True
                     break
-            if seen:
+            if found:
+                continue
+            for j in range(nrej):
+                if rej[j] == u:
+                    found = True
+                    break
+            if found:
                 continue
             if _in_cavity(P, T, u, qx, qy):
                 if count == cap:
                     return -1
                 cav[count] = u
+                cnb[head, k] = count
                 count += 1
+            else:
+                if nrej == rcap:
+                    return -1
+                rej[nrej] = u
+                nrej += 1
+        head += 1
     return count
 
 
 @njit(cache=True)
-def _cavity_boundary(T, N, cav, ncav, be_a, be_b, be_t, be_u):
+def _cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_c, be_u):
     """Boundary edges of a cavity, ordered into a counter-clockwise cycle.
 
     Edge j runs from ``be_a[j]`` to ``be_b[j]``, lies in cavity triangle
-    ``be_t[j]`` and has the triangle ``be_u[j]`` (or -1) outside; ``be_b[j] ==
-    be_a[j + 1]``. Returns the number of edges, or -1 if they do not fit.
+    ``cav[be_c[j]]`` and has the triangle ``be_u[j]`` (or -1) outside;
+    ``be_b[j] == be_a[j + 1]``. Returns the number of edges, or -1 if they do
+    not fit.
     """
     cap = be_a.shape[0]
     nb = 0
     for c in range(ncav):
         tc = cav[c]
         for kk in range(3):
-            u = N[tc, kk]
-            inside = False
-            if u >= 0:
-                for j in range(ncav):
-                    if cav[j] == u:
-                        inside = True
-                        break
-            if not inside:
+            if cnb[c, kk] < 0:
                 if nb == cap:
                     return -1
                 be_a[nb] = T[tc, (kk + 1) % 3]
                 be_b[nb] = T[tc, (kk + 2) % 3]
-                be_t[nb] = tc
-                be_u[nb] = u
+                be_c[nb] = c
+                be_u[nb] = N[tc, kk]
                 nb += 1
     for i in range(nb - 1):
         want = be_b[i]
@@ -194,14 +207,14 @@ def _cavity_boundary(T, N, cav, ncav, be_a, be_b, be_t, be_u):
                 if j != i + 1:
                     be_a[i + 1], be_a[j] = be_a[j], be_a[i + 1]
                     be_b[i + 1], be_b[j] = be_b[j], be_b[i + 1]
-                    be_t[i + 1], be_t[j] = be_t[j], be_t[i + 1]
+                    be_c[i + 1], be_c[j] = be_c[j], be_c[i + 1]
                     be_u[i + 1], be_u[j] = be_u[j], be_u[i + 1]
                 break
     return nb
 
 
 @njit(cache=True)
-def _insert(P, T, N, nt, i, t0, cav, be_a, be_b, be_t, be_u, newt):
+def _insert(P, T, N, nt, i, t0, cav, cnb, rej, be_a, be_b, be_t, be_u, newt):
     """Bowyer--Watson insertion of node i (inside the hull or on its boundary).
 
     ``T`` and ``N`` must have room for two more triangles after ``nt``.
@@ -217,10 +230,10 @@ def _insert(P, T, N, nt, i, t0, cav, be_a, be_b, be_t, be_u, newt):
         a = T[t, j]
         if P[a, 0] == qx and P[a, 1] == qy:
             return -2
-    ncav = _grow_cavity(P, T, N, qx, qy, t, cav, cav.shape[0])
+    ncav = _grow_cavity(P, T, N, qx, qy, t, cav, cnb, rej)
     if ncav < 0:
         return -3
-    nb = _cavity_boundary(T, N, cav, ncav, be_a, be_b, be_t, be_u)
+    nb = _cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_t, be_u)
     if nb < 0 or nb > ncav + 2:
         return -3
     # skip a hull edge the node lies on (it would give a flat triangle)
@@ -650,7 +663,8 @@ class Triangulation:
         while True:
             cav = np.empty(cap, dtype=np.int64)
             cnt = _grow_cavity(self.nodes, self.triangles, self.neighbours,
-                               q[0], q[1], t, cav, cap)
+                               q[0], q[1], t, cav, np.empty((cap, 3), np.int64),
+                               np.empty(cap + 4, np.int64))
             if cnt >= 0:
                 return np.sort(cav[:cnt])
             cap *= 4
@@ -696,8 +710,10 @@ class Triangulation:
             i = int(i)
             while True:
                 cav = np.empty(cap, np.int64)
+                cnb = np.empty((cap, 3), np.int64)
+                rej = np.empty(cap + 4, np.int64)
                 be = [np.empty(cap + 2, np.int64) for _ in range(5)]
-                r = _insert(P, T, N, nt, i, int(start), cav, *be)
+                r = _insert(P, T, N, nt, i, int(start), cav, cnb, rej, *be)
                 if r != -3:
                     break
                 cap *= 4

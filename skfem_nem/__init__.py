@@ -1,8 +1,11 @@
 """skfem-nem: the Natural Element Method (Braun & Sambridge, Nature 1995) for scikit-fem.
 
 Layers (bottom to top): geometry (:mod:`~skfem_nem.predicates`,
-:mod:`~skfem_nem.triangulation`), coordinates (:mod:`~skfem_nem.coordinates`).
+:mod:`~skfem_nem.triangulation`), coordinates (:mod:`~skfem_nem.coordinates`),
+basis (:mod:`~skfem_nem.basis`: NEM trial functions inside scikit-fem's assembly).
 """
+from .basis import (ElementNaturalNeighbour, NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
+                    delaunay_mesh)
 from .coordinates import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
 from .triangulation import Triangulation
 
@@ -10,6 +13,10 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Triangulation",
+    "ElementNaturalNeighbour",
+    "NaturalNeighbourBasis",
+    "NaturalNeighbourFacetBasis",
+    "delaunay_mesh",
     "sibson_coordinates",
     "laplace_coordinates",
     "natural_neighbour_coordinates",

@@ -1,0 +1,134 @@
+"""Teach scikit-fem's forms to assemble over natural-neighbour bases.
+
+A :class:`~skfem_nem.NaturalNeighbourBasis` is a set of groups of triangles
+with equal stencil size; each group is an ordinary scikit-fem basis. The
+wrappers installed here make ``BilinearForm``, ``LinearForm`` and
+``Functional`` (and therefore ``asm``) loop over those groups and concatenate
+their COO contributions, so user code is unchanged. Forms on ordinary bases
+take scikit-fem's own code path untouched.
+
+Keyword arguments are split with the groups: dof vectors are interpolated by
+each group, arrays and ``DiscreteField`` objects defined over all elements
+(shape ``(..., nelems, nq)``) are restricted to the group's elements.
+"""
+from __future__ import annotations
+
+import numpy as np
+from skfem.assembly import CellBasis
+from skfem.assembly.form import BilinearForm, Functional, LinearForm
+from skfem.element import DiscreteField
+
+_INSTALLED = False
+
+
+def _is_nn(basis) -> bool:
+    return getattr(basis, "groups", None) is not None and hasattr(basis, "stencil_sizes")
+
+
+def _split_value(v, idx, nelems):
+    if isinstance(v, tuple):
+        return tuple(_split_value(x, idx, nelems) for x in v)
+    if isinstance(v, DiscreteField):
+        if v.ndim >= 2 and v.shape[-2] == nelems:
+            return DiscreteField(*[None if a is None else np.asarray(a)[..., idx, :]
+                                   for a in v.astuple])
+        return v
+    if isinstance(v, np.ndarray) and v.ndim >= 2 and v.shape[-2] == nelems:
+        return v[..., idx, :]
+    return v
+
+
+def _split_kwargs(kwargs, idx, nelems):
+    return {k: _split_value(v, idx, nelems) for k, v in kwargs.items()}
+
+
+def _partner(basis, nn, idx, key):
+    """``basis`` restricted to the elements ``idx`` of the NEM basis ``nn``."""
+    if _is_nn(basis):
+        return basis._restricted(idx, key)
+    if isinstance(basis, CellBasis):
+        if basis.tind is not None or basis.nelems != nn.nelems:
+            raise ValueError("a CellBasis mixed with a natural-neighbour basis must live "
+                             "on all elements of the same mesh")
+        if basis.X.shape[-1] != nn.X.shape[-1] or not np.allclose(basis.X, nn.X):
+            raise ValueError("quadrature mismatch: build the CellBasis with "
+                             "quadrature=nn_basis.quadrature")
+        cache = nn.__dict__.setdefault("_partners", {})
+        k = (id(basis), key)
+        if k not in cache:
+            cache[k] = (basis, basis.with_elements(idx))
+        return cache[k][1]
+    raise TypeError(f"cannot mix {type(basis).__name__} with a natural-neighbour basis")
+
+
+def _pairs(ubasis, vbasis):
+    """Yield (element indices, u group, v group) covering all elements."""
+    nn = ubasis if _is_nn(ubasis) else vbasis
+    if _is_nn(ubasis) and _is_nn(vbasis) and ubasis is not vbasis:
+        if ubasis.nelems != vbasis.nelems:
+            raise ValueError("trial and test natural-neighbour bases live on different "
+                             "element sets")
+        key = ubasis.stencil_sizes.astype(np.int64) * 100000 + vbasis.stencil_sizes
+        order = np.argsort(key, kind="stable")
+        bounds = np.flatnonzero(np.diff(key[order])) + 1
+        for idx in np.split(order, bounds):
+            k = int(key[idx[0]])
+            yield idx, ubasis._restricted(idx, ("pair", k)), vbasis._restricted(idx, ("pair", k))
+        return
+    for g in nn.groups:
+        idx = g.tind
+        u = g if ubasis is nn else _partner(ubasis, nn, idx, ("group", len(g.basis)))
+        v = g if vbasis is nn else _partner(vbasis, nn, idx, ("group", len(g.basis)))
+        yield idx, u, v
+
+
+def install():
+    """Install the group-wise assembly wrappers (idempotent)."""
+    global _INSTALLED
+    if _INSTALLED:
+        return
+    _INSTALLED = True
+
+    bil = BilinearForm._assemble
+    lin = LinearForm._assemble
+    fel = Functional.elemental
+
+    def bilinear_assemble(self, ubasis, vbasis=None, **kwargs):
+        if vbasis is None:
+            vbasis = ubasis
+        if not (_is_nn(ubasis) or _is_nn(vbasis)):
+            return bil(self, ubasis, vbasis, **kwargs)
+        nelems = (ubasis if _is_nn(ubasis) else vbasis).nelems
+        rows, data = [], []
+        shape = None
+        for idx, u, v in _pairs(ubasis, vbasis):
+            ind, d, shape, _ = bil(self, u, v, **_split_kwargs(kwargs, idx, nelems))
+            rows.append(ind)
+            data.append(d)
+        return np.concatenate(rows, axis=1), np.concatenate(data), shape, None
+
+    def linear_assemble(self, ubasis, vbasis=None, **kwargs):
+        if not _is_nn(ubasis):
+            return lin(self, ubasis, vbasis, **kwargs)
+        rows, data = [], []
+        shape = None
+        for g in ubasis.groups:
+            ind, d, shape, _ = lin(self, g, **_split_kwargs(kwargs, g.tind, ubasis.nelems))
+            rows.append(ind)
+            data.append(d)
+        return np.concatenate(rows, axis=1), np.concatenate(data), shape, None
+
+    def functional_elemental(self, v, **kwargs):
+        if not _is_nn(v):
+            return fel(self, v, **kwargs)
+        out = None
+        for g in v.groups:
+            r = fel(self, g, **_split_kwargs(kwargs, g.tind, v.nelems))
+            if out is None:
+                out = np.zeros((v.nelems,) + np.shape(r)[1:], dtype=np.asarray(r).dtype)
+            out[g.tind] = r
+        return out
+
+    BilinearForm._assemble = bilinear_assemble
+    LinearForm._assemble = linear_assemble
+    Functional.elemental = functional_elemental

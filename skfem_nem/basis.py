@@ -1,0 +1,592 @@
+"""Natural-neighbour trial functions inside scikit-fem's assembly.
+
+:class:`NaturalNeighbourBasis` evaluates Sibson (or Laplace) natural-neighbour
+coordinates and their gradients at the quadrature points of a Delaunay
+``MeshTri`` and presents them to scikit-fem's ``BilinearForm``,
+``LinearForm`` and ``Functional`` exactly like a ``CellBasis`` does for P1.
+
+Stencils
+--------
+In the natural element method the trial functions that are non-zero in a
+triangle are not its three vertices but the natural neighbours of its
+quadrature points: the triangle's *stencil*. Its size varies (mean about 8,
+tails above 30 near the hull), while a scikit-fem basis has one number of
+local functions for all its elements. The basis therefore splits the
+triangles into groups of equal stencil size; each group is an ordinary
+basis with a fixed ``Nbfun``, and assembly sums the groups' contributions
+(see :mod:`skfem_nem._assembly`). Cost scales with the sum over triangles of
+the stencil size squared, not with the largest stencil.
+"""
+from __future__ import annotations
+
+import warnings
+from typing import Optional, Tuple
+
+import numpy as np
+from numba import njit
+from numpy import ndarray
+from skfem import MeshTri
+from skfem.assembly.basis import AbstractBasis, FacetBasis
+from skfem.element import DiscreteField, Element, ElementTriP1, ElementVector
+from skfem.quadrature import get_quadrature
+from skfem.refdom import RefTri
+
+from . import _assembly
+from .coordinates import natural_neighbour_coordinates
+from .triangulation import Triangulation, _count_non_delaunay
+
+__all__ = ["ElementNaturalNeighbour", "NaturalNeighbourBasis",
+           "NaturalNeighbourFacetBasis", "delaunay_mesh", "QUADRATURE_POINTS"]
+
+_assembly.install()
+
+#: number of quadrature points -> scikit-fem integration order on triangles
+QUADRATURE_POINTS = {3: 2, 4: 3, 6: 4, 7: 5, 12: 6, 13: 7}
+
+
+class ElementNaturalNeighbour(Element):
+    """Degrees of freedom of natural-neighbour trial functions: one per node.
+
+    Only a numbering: the functions themselves are evaluated by
+    :class:`NaturalNeighbourBasis` (they are not polynomials on the
+    triangles). Wrap it in ``ElementVector`` for vector fields.
+    """
+
+    nodal_dofs = 1
+    maxdeg = 1  # default integration order 2: the 3-point rule (the paper's)
+    dofnames = ["u"]
+    doflocs = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    refdom = RefTri
+
+    def gbasis(self, mapping, X, i, tind=None):
+        raise NotImplementedError(
+            "natural-neighbour functions are not defined triangle by triangle: "
+            "use skfem_nem.NaturalNeighbourBasis(mesh, ...) instead of Basis/CellBasis")
+
+    def lbasis(self, X, i):
+        raise NotImplementedError(
+            "natural-neighbour functions have no reference-element basis: "
+            "use skfem_nem.NaturalNeighbourBasis")
+
+
+def delaunay_mesh(points) -> MeshTri:
+    """A ``MeshTri`` of the Delaunay triangulation of (n, 2) points.
+
+    Node i of the mesh is ``points[i]`` (nothing is reordered or dropped).
+    Raises ``ValueError`` for bad points (see :class:`~skfem_nem.Triangulation`).
+    """
+    tri = Triangulation(points)
+    return MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T))
+
+
+def triangulation_of(mesh: MeshTri) -> Triangulation:
+    """The :class:`~skfem_nem.Triangulation` of a ``MeshTri`` (same triangle
+    order), after checking that it is Delaunay."""
+    cached = getattr(mesh, "_skfem_nem_triangulation", None)
+    if cached is not None:
+        return cached
+    if not isinstance(mesh, MeshTri):
+        raise TypeError(f"natural-neighbour bases need a MeshTri, got {type(mesh).__name__}")
+    p, t = mesh.p.T, mesh.t.T
+    used = np.zeros(p.shape[0], dtype=bool)
+    used[t.ravel()] = True
+    if not used.all():
+        i = int(np.flatnonzero(~used)[0])
+        raise ValueError(
+            f"mesh node {i} at {p[i].tolist()} belongs to no triangle, so no trial function "
+            f"would be defined there ({np.count_nonzero(~used)} such node(s)); build the mesh "
+            f"with skfem_nem.delaunay_mesh(points)")
+    tri = Triangulation.from_triangles(p, t, make_delaunay=False)
+    bad = _count_non_delaunay(tri.nodes, tri.triangles, tri.neighbours)
+    if bad:
+        raise ValueError(
+            f"the mesh is not a Delaunay triangulation ({bad} edge(s) fail the in-circle "
+            f"test); natural-neighbour trial functions need one: build the mesh with "
+            f"skfem_nem.delaunay_mesh(points)")
+    he = tri.hull_edges
+    # convex boundary? each boundary vertex must turn left (or go straight)
+    nxt = {int(a): int(b) for a, b in he}
+    P = tri.nodes
+    a = he[:, 0]
+    b = he[:, 1]
+    c = np.array([nxt.get(int(v), -1) for v in b])
+    if (c < 0).any():
+        warnings.warn("the mesh boundary is not a single closed curve; natural-neighbour "
+                      "coordinates assume the domain is the convex hull of the nodes",
+                      stacklevel=3)
+    else:
+        turn = ((P[b, 0] - P[a, 0]) * (P[c, 1] - P[a, 1])
+                - (P[b, 1] - P[a, 1]) * (P[c, 0] - P[a, 0]))
+        if (turn < -1e-12 * np.ptp(P, axis=0).max() ** 2).any():
+            v = int(b[np.argmin(turn)])
+            warnings.warn(
+                f"the mesh boundary is not convex (e.g. at node {v}); Sibson/Laplace "
+                f"functions are then not interpolating along the concave part of the "
+                f"boundary (a known NEM limitation)", stacklevel=3)
+    mesh._skfem_nem_triangulation = tri
+    return tri
+
+
+def _quadrature(npoints, intorder, quadrature):
+    if quadrature is not None:
+        X, W = quadrature
+        return np.asarray(X, dtype=float), np.asarray(W, dtype=float)
+    if npoints is not None:
+        if npoints == 1:
+            return np.array([[1.0 / 3.0], [1.0 / 3.0]]), np.array([0.5])
+        if npoints not in QUADRATURE_POINTS:
+            raise ValueError(f"npoints must be one of 1, {', '.join(map(str, QUADRATURE_POINTS))}; "
+                             f"got {npoints}")
+        return get_quadrature(RefTri, QUADRATURE_POINTS[npoints])
+    return get_quadrature(RefTri, 2 if intorder is None else intorder)
+
+
+# ---------------------------------------------------------------------------
+# stencils and groups
+# ---------------------------------------------------------------------------
+
+@njit(cache=True)
+def _stencils(indptr, indices, nq, ne):
+    """Union of the column indices of rows e*nq .. e*nq+nq-1 of a CSR matrix.
+
+    Returns (ptr, sten): element e's stencil is sten[ptr[e]:ptr[e+1]], sorted.
+    """
+    ptr = np.zeros(ne + 1, np.int64)
+    sten = np.empty(indptr[ne * nq], np.int64)
+    pos = 0
+    for e in range(ne):
+        start = pos
+        for r in range(e * nq, e * nq + nq):
+            for k in range(indptr[r], indptr[r + 1]):
+                c = indices[k]
+                # insert c into the sorted run sten[start:pos] if absent
+                j = pos
+                while j > start and sten[j - 1] > c:
+                    j -= 1
+                if j > start and sten[j - 1] == c:
+                    continue
+                for m in range(pos, j, -1):
+                    sten[m] = sten[m - 1]
+                sten[j] = c
+                pos += 1
+        ptr[e + 1] = pos
+    return ptr, sten[:pos]
+
+
+@njit(cache=True)
+def _fill(elems, ptr, sten, indptr, indices, data, gx, gy, nq, V, GX, GY):
+    """Dense (S, ne_g, nq) values and gradients of a group of equal-size stencils."""
+    for k in range(elems.shape[0]):
+        e = elems[k]
+        s0 = ptr[e]
+        S = ptr[e + 1] - s0
+        for q in range(nq):
+            r = e * nq + q
+            for kk in range(indptr[r], indptr[r + 1]):
+                c = indices[kk]
+                lo = 0
+                hi = S - 1
+                while lo < hi:  # binary search in the sorted stencil
+                    mid = (lo + hi) // 2
+                    if sten[s0 + mid] < c:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                V[lo, k, q] = data[kk]
+                GX[lo, k, q] = gx[kk]
+                GY[lo, k, q] = gy[kk]
+
+
+class _GroupBasis(AbstractBasis):
+    """The triangles of one stencil size: an ordinary basis with fixed Nbfun.
+
+    Built by :class:`NaturalNeighbourBasis`; users never see it, scikit-fem's
+    form kernels do.
+    """
+
+    def __init__(self, parent, elems, stencils, V, GX, GY):
+        self.parent = parent
+        self.mesh = parent.mesh
+        self.elem = parent.elem
+        self.mapping = parent.mapping
+        self.dofs = parent.dofs
+        self.X, self.W = parent.X, parent.W
+        self.tind = elems
+        self.nelems = elems.shape[0]
+        self.dx = parent.dx[elems]
+        S = stencils.shape[0]
+        vec = isinstance(self.elem, ElementVector)
+        if vec:
+            dim = self.elem.dim
+            nd = self.dofs.nodal_dofs
+            self._element_dofs = np.empty((dim * S, self.nelems), dtype=np.int64)
+            basis = []
+            for j in range(S):
+                for c in range(dim):
+                    self._element_dofs[dim * j + c] = nd[c, stencils[j]]
+                    val = np.zeros((dim,) + V.shape[1:])
+                    val[c] = V[j]
+                    grad = np.zeros((dim, dim) + V.shape[1:])
+                    grad[c, 0] = GX[j]
+                    grad[c, 1] = GY[j]
+                    basis.append((DiscreteField(val, grad),))
+        else:
+            self._element_dofs = self.dofs.nodal_dofs[0][stencils]
+            basis = [(DiscreteField(V[j], np.stack([GX[j], GY[j]])),) for j in range(S)]
+        self.basis = basis
+        self.Nbfun = len(basis)
+
+    @property
+    def element_dofs(self):
+        return self._element_dofs
+
+    def default_parameters(self):
+        x = self.parent.global_coordinates()
+        h = self.parent.mesh_parameters()
+        return {"x": _take(x, self.tind), "h": _take(h, self.tind)}
+
+    def global_coordinates(self):
+        return _take(self.parent.global_coordinates(), self.tind)
+
+
+def _take(f, idx):
+    """Restrict a DiscreteField (or tuple of them) over elements to ``idx``."""
+    if isinstance(f, tuple):
+        return tuple(_take(g, idx) for g in f)
+    if isinstance(f, DiscreteField):
+        return DiscreteField(*[None if a is None else np.asarray(a)[..., idx, :]
+                               for a in f.astuple])
+    return f
+
+
+class _NaturalNeighbourBasisBase(AbstractBasis):
+    """Shared machinery of the cell and facet bases: stencils and groups."""
+
+    coordinates: str
+    triangulation: Triangulation
+
+    def _build(self, x, hint):
+        """Coordinates at the (dim, ne, nq) points x and their stencil groups."""
+        ne, nq = x.shape[1], x.shape[2]
+        pts = np.ascontiguousarray(x.transpose(1, 2, 0).reshape(-1, 2))
+        Phi, (DX, DY) = natural_neighbour_coordinates(
+            self.triangulation, pts, gradient=True, kind=self.coordinates,
+            hint=np.repeat(hint, nq), undefined="nan")
+        if DX.nnz and not (np.isfinite(DX.data).all() and np.isfinite(DY.data).all()):
+            Phi, DX, DY = self._fix_undefined(pts, Phi, DX, DY)
+        self._Phi, self._DX, self._DY = Phi, DX, DY
+        ptr, sten = _stencils(Phi.indptr.astype(np.int64), Phi.indices.astype(np.int64), nq, ne)
+        self.stencil_ptr, self.stencil_nodes = ptr, sten
+        sizes = np.diff(ptr)
+        self.stencil_sizes = sizes
+        order = np.argsort(sizes, kind="stable")
+        bounds = np.flatnonzero(np.diff(sizes[order])) + 1
+        self.groups = [self._make_group(elems) for elems in np.split(order, bounds)
+                       if elems.size]
+
+    def _make_group(self, elems):
+        """The basis of the elements ``elems`` (all of one stencil size)."""
+        ptr, sten = self.stencil_ptr, self.stencil_nodes
+        S = int(ptr[elems[0] + 1] - ptr[elems[0]])
+        nq = self.dx.shape[1]
+        V = np.zeros((S, elems.size, nq))
+        GX = np.zeros_like(V)
+        GY = np.zeros_like(V)
+        Phi, DX, DY = self._Phi, self._DX, self._DY
+        _fill(elems, ptr, sten, Phi.indptr, Phi.indices, Phi.data, DX.data, DY.data,
+              nq, V, GX, GY)
+        stencils = sten[ptr[elems][None, :] + np.arange(S)[:, None]]
+        return self._group(elems, stencils, V, GX, GY)
+
+    def _restricted(self, idx, key=None):
+        """A group basis on the elements ``idx`` (equal stencil sizes), cached."""
+        cache = self.__dict__.setdefault("_restrict_cache", {})
+        k = (idx.size, hash(np.ascontiguousarray(idx).tobytes()))
+        if k not in cache:
+            cache[k] = self._make_group(np.asarray(idx))
+        return cache[k]
+
+    def _fix_undefined(self, pts, Phi, DX, DY):
+        raise ValueError("quadrature points at nodes or on convex-hull edges: gradients of "
+                         "natural-neighbour functions are undefined there; use a quadrature "
+                         "rule with interior points")
+
+    def _group(self, elems, stencils, V, GX, GY):
+        return _GroupBasis(self, elems, stencils, V, GX, GY)
+
+    # -- what assembly and users read ----------------------------------------
+    @property
+    def Nbfun(self):
+        raise AttributeError(
+            "a natural-neighbour basis has no single number of local functions; its "
+            "groups do (basis.groups[k].Nbfun)")
+
+    @Nbfun.setter
+    def Nbfun(self, value):
+        pass
+
+    @property
+    def element_dofs(self):
+        raise AttributeError(
+            "natural-neighbour stencils vary between triangles: see basis.stencil_nodes, "
+            "basis.stencil_ptr, or basis.groups[k].element_dofs")
+
+    def default_parameters(self):
+        return {"x": self.global_coordinates(), "h": self.mesh_parameters()}
+
+    def interpolate(self, w: ndarray) -> DiscreteField:
+        """Values and gradients of the dof vector ``w`` (N,) at the quadrature
+        points: a DiscreteField with value (ne, nq) and grad (2, ne, nq), or
+        (2, ne, nq) and (2, 2, ne, nq) for a vector basis."""
+        w = np.asarray(w)
+        if w.shape[0] != self.N:
+            raise ValueError(f"dof vector has {w.shape[0]} entries, the basis {self.N}")
+        sh = self.dx.shape
+        if isinstance(self.elem, ElementVector):
+            nd = self.dofs.nodal_dofs
+            comps = [w[nd[c]] for c in range(self.elem.dim)]
+            val = np.stack([(self._Phi @ u).reshape(sh) for u in comps])
+            grad = np.stack([np.stack([(self._DX @ u).reshape(sh), (self._DY @ u).reshape(sh)])
+                             for u in comps])
+            return DiscreteField(val, grad)
+        u = w[self.dofs.nodal_dofs[0]]
+        return DiscreteField((self._Phi @ u).reshape(sh),
+                             np.stack([(self._DX @ u).reshape(sh), (self._DY @ u).reshape(sh)]))
+
+    def zeros(self, dtype=None):
+        return np.zeros(self.N, dtype=dtype)
+
+    @property
+    def nstencil_entries(self) -> int:
+        """Sum over elements of the stencil size squared (assembly work)."""
+        return int((self.stencil_sizes.astype(np.int64) ** 2).sum())
+
+
+class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
+    """Natural-neighbour (Sibson or Laplace) trial functions on a Delaunay MeshTri.
+
+    Parameters
+    ----------
+    mesh
+        A ``MeshTri`` whose triangles are Delaunay (build it with
+        :func:`delaunay_mesh`). Checked; a ``ValueError`` says how to fix it.
+    elem
+        ``ElementNaturalNeighbour()`` (default) or
+        ``ElementVector(ElementNaturalNeighbour())``; dofs are numbered as
+        scikit-fem numbers them for these elements (node i's dofs for the
+        vector case are ``2 i, 2 i + 1``, named ``u^1``, ``u^2``).
+    intorder, npoints, quadrature
+        Quadrature per triangle: scikit-fem's integration order, or the number
+        of points (1, 3, 4, 6, 7, 12, 13; 4 and 13 have a negative weight), or
+        an explicit ``(X, W)`` pair on the reference triangle. Default: the
+        3-point rule (the paper's choice).
+    coordinates
+        ``"sibson"`` (default) or ``"laplace"``.
+
+    Everything a ``CellBasis`` offers for assembly works: forms, ``asm``,
+    ``get_dofs``, ``interpolate``, ``project``, ``probes``, ``plot``. Trial
+    and test bases may be mixed with scikit-fem ``CellBasis`` objects on the
+    same mesh and quadrature.
+    """
+
+    def __init__(self, mesh: MeshTri, elem: Optional[Element] = None,
+                 intorder: Optional[int] = None, quadrature: Optional[Tuple[ndarray, ndarray]] = None,
+                 npoints: Optional[int] = None, coordinates: str = "sibson"):
+        elem = ElementNaturalNeighbour() if elem is None else elem
+        base = elem.elem if isinstance(elem, ElementVector) else elem
+        if not isinstance(base, ElementNaturalNeighbour):
+            raise TypeError(f"NaturalNeighbourBasis needs ElementNaturalNeighbour() or "
+                            f"ElementVector(ElementNaturalNeighbour()), got {type(elem).__name__}")
+        if coordinates not in ("sibson", "laplace"):
+            raise ValueError(f"coordinates must be 'sibson' or 'laplace', got {coordinates!r}")
+        self.triangulation = triangulation_of(mesh)
+        self.coordinates = coordinates
+        super().__init__(mesh, elem, None, None, _quadrature(npoints, intorder, quadrature),
+                         mesh.refdom)
+        self.tind = None
+        self.nelems = mesh.nelements
+        self.dx = np.abs(self.mapping.detDF(self.X)) * np.broadcast_to(
+            self.W, (self.nelems, self.W.shape[-1]))
+        self._build(self.mapping.F(self.X), np.arange(self.nelems))
+
+    def global_coordinates(self) -> DiscreteField:
+        if self._global_coordinates is None:
+            self._global_coordinates = DiscreteField(self.mapping.F(self.X))
+        return self._global_coordinates
+
+    def mesh_parameters(self) -> DiscreteField:
+        if self._mesh_parameters is None:
+            self._mesh_parameters = DiscreteField(
+                np.abs(self.mapping.detDF(self.X)) ** (1.0 / self.mesh.dim()))
+        return self._mesh_parameters
+
+    def with_element(self, elem: Element) -> "NaturalNeighbourBasis":
+        """The same mesh and quadrature with another (natural-neighbour) element."""
+        return type(self)(self.mesh, elem, quadrature=self.quadrature,
+                          coordinates=self.coordinates)
+
+    def split_bases(self):
+        if isinstance(self.elem, ElementVector):
+            return [self.with_element(self.elem.elem) for _ in range(self.elem.dim)]
+        return [self]
+
+    # -- evaluation at arbitrary points ----------------------------------------
+    def probes(self, x: ndarray):
+        """Sparse matrix mapping a dof vector to its values at points x (2, m).
+
+        Scalar: shape (m, N). Vector: (dim * m, N), component-major rows, as
+        scikit-fem's ``CellBasis.probes``.
+        """
+        x = np.asarray(x, dtype=float)
+        Phi = natural_neighbour_coordinates(self.triangulation, x.T, kind=self.coordinates)
+        if isinstance(self.elem, ElementVector):
+            import scipy.sparse as sp
+            nd = self.dofs.nodal_dofs
+            blocks = []
+            for c in range(self.elem.dim):
+                S = sp.csr_matrix((np.ones(nd.shape[1]), (np.arange(nd.shape[1]), nd[c])),
+                                  shape=(nd.shape[1], self.N))
+                blocks.append(Phi @ S)
+            return sp.vstack(blocks, format="csr")
+        import scipy.sparse as sp
+        S = sp.csr_matrix((np.ones(self.N), (np.arange(self.N), self.dofs.nodal_dofs[0])),
+                          shape=(self.N, self.N))
+        return Phi @ S
+
+    def interpolator(self, y: ndarray):
+        """A function x (2, ...) -> values of the dof vector y at x."""
+        def f(x):
+            x = np.asarray(x, dtype=float)
+            shape = x.shape[1:]
+            out = self.probes(x.reshape(2, -1)) @ y
+            if isinstance(self.elem, ElementVector):
+                return out.reshape((self.elem.dim,) + shape)
+            return out.reshape(shape)
+        return f
+
+    def point_source(self, x: ndarray) -> ndarray:
+        return self.probes(np.asarray(x, dtype=float)[:, None]).toarray()[0]
+
+    def project(self, interp, **kwargs) -> ndarray:
+        """L2 projection of ``interp`` (callable of x, DiscreteField or array
+        at the quadrature points) onto the basis; returns a dof vector."""
+        from skfem.utils import solve
+        M, f = self._projection(interp, **kwargs)
+        return solve(M, f)
+
+    def refinterp(self, y: ndarray, nrefs: int = 2):
+        """A refined MeshTri and the values of y at its nodes (for plotting)."""
+        ref = MeshTri.init_refdom().refined(nrefs)
+        x = self.mapping.F(ref.p)  # (2, ne, npts)
+        ne, npt = x.shape[1], x.shape[2]
+        pts = x.transpose(1, 2, 0).reshape(-1, 2)
+        vals = self.probes(pts.T) @ y
+        t = (ref.t[:, None, :] + npt * np.arange(ne)[None, :, None]).reshape(3, -1)
+        return MeshTri(pts.T.copy(), t, sort_t=False), vals
+
+    def plot(self, y, ax=None, nrefs: int = 2, colorbar: bool = True, **kwargs):
+        """Plot a scalar dof vector as the natural-neighbour field it defines."""
+        from skfem.visuals.matplotlib import plot
+        if isinstance(self.elem, ElementVector):
+            raise NotImplementedError("plot one component: basis.split(y)")
+        M, v = self.refinterp(np.asarray(y), nrefs)
+        return plot(M, v, ax=ax, shading="gouraud", colorbar=colorbar, **kwargs)
+
+
+class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
+    """Natural-neighbour trial functions at quadrature points on facets.
+
+    For Neumann loads, tractions, fluxes and Nitsche terms; ``w.n`` (outward
+    normal), ``w.h`` and ``w.x`` are available in forms as with scikit-fem's
+    ``FacetBasis``. On convex-hull facets the values reduce to the linear 1D
+    weights of the facet's nodes; gradients there are the one-sided limits
+    from inside, evaluated a relative distance ``1e-7`` (of the facet length)
+    inside the domain.
+    """
+
+    def __init__(self, mesh: MeshTri, elem: Optional[Element] = None, facets=None,
+                 intorder: Optional[int] = None, quadrature=None, coordinates: str = "sibson",
+                 side: int = 0):
+        elem = ElementNaturalNeighbour() if elem is None else elem
+        base = elem.elem if isinstance(elem, ElementVector) else elem
+        if not isinstance(base, ElementNaturalNeighbour):
+            raise TypeError(f"NaturalNeighbourFacetBasis needs ElementNaturalNeighbour(), got "
+                            f"{type(elem).__name__}")
+        self.triangulation = triangulation_of(mesh)
+        self.coordinates = coordinates
+        geom = FacetBasis(mesh, ElementTriP1(), facets=facets, intorder=intorder,
+                          quadrature=quadrature, side=side)
+        self._geom = geom
+        AbstractBasis.__init__(self, mesh, elem, geom.mapping, None, geom.quadrature,
+                               mesh.refdom.brefdom)
+        self.find = geom.find
+        self.tind = None
+        self.nelems = geom.nelems
+        self.dx = geom.dx
+        self.normals = geom.normals
+        self._build(np.asarray(geom.global_coordinates()), geom.tind)
+
+    def _fix_undefined(self, pts, Phi, DX, DY):
+        # gradients on hull edges: one-sided limit, evaluated just inside
+        bad = np.flatnonzero(~np.isfinite(DX.sum(axis=1).A.ravel()) |
+                             ~np.isfinite(DY.sum(axis=1).A.ravel()))
+        nq = self.dx.shape[1]
+        n = np.asarray(self.normals)  # (2, nf, nq)
+        nrm = n.transpose(1, 2, 0).reshape(-1, 2)[bad]
+        h = np.asarray(self.mesh_parameters()).reshape(-1)[bad]
+        inner = pts[bad] - 1e-7 * h[:, None] * nrm
+        _, (dx2, dy2) = natural_neighbour_coordinates(
+            self.triangulation, inner, gradient=True, kind=self.coordinates,
+            hint=np.repeat(self._geom.tind, nq)[bad])
+        import scipy.sparse as sp
+        keep = np.ones(Phi.shape[0])
+        keep[bad] = 0.0
+        E = sp.csr_matrix((np.ones(bad.size), (bad, np.arange(bad.size))),
+                          shape=(Phi.shape[0], bad.size))
+        DX = sp.diags(keep) @ DX
+        DY = sp.diags(keep) @ DY
+        DX.data[~np.isfinite(DX.data)] = 0.0
+        DY.data[~np.isfinite(DY.data)] = 0.0
+        DX = DX + E @ dx2
+        DY = DY + E @ dy2
+        # one sparsity pattern for values and gradients: the union of the
+        # neighbours of the point and of the point just inside
+        pattern = (abs(Phi) + abs(DX) + abs(DY)).tocsr()
+        pattern.data[:] = 1.0
+        pattern.sort_indices()
+        return tuple(_on_pattern(A, pattern) for A in (Phi, DX, DY))
+
+    def _build(self, x, hint):
+        super()._build(x, hint)
+
+    def default_parameters(self):
+        return {"x": self.global_coordinates(), "h": self.mesh_parameters(), "n": self.normals}
+
+    def global_coordinates(self) -> DiscreteField:
+        return self._geom.global_coordinates()
+
+    def mesh_parameters(self) -> DiscreteField:
+        return self._geom.mesh_parameters()
+
+    def _group(self, elems, stencils, V, GX, GY):
+        g = _GroupBasis(self, elems, stencils, V, GX, GY)
+        g.default_parameters = lambda: {
+            "x": _take(self.global_coordinates(), elems),
+            "h": _take(self.mesh_parameters(), elems),
+            "n": _take(self.normals, elems)}
+        return g
+
+
+def _on_pattern(A, pattern):
+    """A's values on the (superset) sparsity pattern of ``pattern``, same index order."""
+    A = A.tocsr()
+    A.sort_indices()
+    out = pattern.copy()
+    out.data = np.zeros(out.nnz)
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    # position of each entry of A inside the pattern (both sorted row-major)
+    key_p = np.repeat(np.arange(out.shape[0]), np.diff(out.indptr)) * out.shape[1] + out.indices
+    key_a = rows * A.shape[1] + A.indices
+    pos = np.searchsorted(key_p, key_a)
+    out.data[pos] = A.data
+    return out

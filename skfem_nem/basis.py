@@ -331,6 +331,23 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
             "natural-neighbour stencils vary between triangles: see basis.stencil_nodes, "
             "basis.stencil_ptr, or basis.groups[k].element_dofs")
 
+    @property
+    def basis(self):
+        """The local functions of the first group (a representative: assembly
+        uses ``groups``; scikit-fem reads only their number of components)."""
+        return self.groups[0].basis
+
+    @basis.setter
+    def basis(self, value):
+        pass
+
+    def __repr__(self):
+        return (f"<skfem_nem {type(self).__name__}({type(self.mesh).__name__}, "
+                f"{type(self.elem).__name__})>\n  Number of elements: {self.nelems}\n"
+                f"  Number of DOFs: {self.N}\n  Stencil sizes: mean "
+                f"{self.stencil_sizes.mean():.2f}, max {self.stencil_sizes.max()} "
+                f"({len(self.groups)} groups)")
+
     def default_parameters(self):
         return {"x": self.global_coordinates(), "h": self.mesh_parameters()}
 
@@ -470,9 +487,17 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     def project(self, interp, **kwargs) -> ndarray:
         """L2 projection of ``interp`` (callable of x, DiscreteField or array
         at the quadrature points) onto the basis; returns a dof vector."""
+        from skfem.assembly import BilinearForm, LinearForm
+        from skfem.helpers import inner
         from skfem.utils import solve
-        M, f = self._projection(interp, **kwargs)
-        return solve(M, f)
+        if callable(interp):
+            interp = interp(self.global_coordinates())
+        if isinstance(interp, tuple):
+            interp = np.stack([np.asarray(c) for c in interp])
+        f = np.asarray(interp, dtype=float) + np.zeros(self.dx.shape)
+        M = BilinearForm(lambda u, v, w: inner(u, v)).assemble(self)
+        b = LinearForm(lambda v, w: inner(w["f"], v)).assemble(self, f=DiscreteField(f))
+        return solve(M, b)
 
     def refinterp(self, y: ndarray, nrefs: int = 2):
         """A refined MeshTri and the values of y at its nodes (for plotting)."""
@@ -490,7 +515,9 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         if isinstance(self.elem, ElementVector):
             raise NotImplementedError("plot one component: basis.split(y)")
         M, v = self.refinterp(np.asarray(y), nrefs)
-        return plot(M, v, ax=ax, shading="gouraud", colorbar=colorbar, **kwargs)
+        if ax is not None:
+            kwargs["ax"] = ax
+        return plot(M, v, shading="gouraud", colorbar=colorbar, **kwargs)
 
 
 class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):

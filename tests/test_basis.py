@@ -1,0 +1,296 @@
+"""NaturalNeighbourBasis inside scikit-fem: everything a P1 user does works."""
+import warnings
+
+import numpy as np
+import pytest
+from skfem import (Basis, BilinearForm, ElementTriP1, ElementTriP2, ElementVector, Functional,
+                   LinearForm, MeshTri, asm, condense, enforce, solve)
+from skfem.helpers import dot, grad
+from skfem.models.elasticity import lame_parameters, linear_elasticity
+
+from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
+                       delaunay_mesh, sibson_coordinates)
+
+
+def square_nodes(n=300, nb=12, seed=0):
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0, 1, nb + 1)[1:-1]
+    return np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], np.c_[s, 0 * s], np.c_[s, 1 + 0 * s],
+                 np.c_[0 * s, s], np.c_[1 + 0 * s, s], rng.random((n, 2))]
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return delaunay_mesh(square_nodes())
+
+
+@pytest.fixture(scope="module")
+def basis(mesh):
+    return NaturalNeighbourBasis(mesh)
+
+
+@pytest.fixture(scope="module")
+def vbasis(mesh):
+    return NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()))
+
+
+@BilinearForm
+def laplace(u, v, w):
+    return dot(grad(u), grad(v))
+
+
+@BilinearForm
+def mass(u, v, w):
+    return u * v
+
+
+def test_stencils_and_groups(mesh, basis):
+    sizes = basis.stencil_sizes
+    assert sizes.shape == (mesh.nelements,)
+    assert sizes.min() >= 3 and 5 < sizes.mean() < 12
+    # each triangle's own vertices are in its stencil
+    for e in range(0, mesh.nelements, 37):
+        st = basis.stencil_nodes[basis.stencil_ptr[e]:basis.stencil_ptr[e + 1]]
+        assert set(mesh.t[:, e]) <= set(st)
+    # groups partition the elements, one stencil size each
+    idx = np.sort(np.concatenate([g.tind for g in basis.groups]))
+    np.testing.assert_array_equal(idx, np.arange(mesh.nelements))
+    for g in basis.groups:
+        assert g.Nbfun == sizes[g.tind[0]] and np.all(sizes[g.tind] == g.Nbfun)
+    assert basis.nstencil_entries == int((sizes ** 2).sum())
+
+
+def test_stiffness_exact_on_linear_fields(mesh, basis):
+    A = laplace.assemble(basis)
+    assert abs(A - A.T).max() < 1e-12
+    np.testing.assert_allclose(A @ np.ones(basis.N), 0, atol=1e-12)
+    # gradients of the interpolant of a linear field are exact at every point,
+    # so the energy is exact whatever the quadrature: u^T A u = area |g|^2
+    g = np.array([0.3, -1.7])
+    u = g @ mesh.p
+    assert abs(u @ A @ u - g @ g) < 1e-11
+    M = mass.assemble(basis)
+    one = np.ones(basis.N)
+    assert abs(one @ M @ one - 1.0) < 1e-12
+    assert abs(mesh.p[0] @ M @ one - 0.5) < 1e-12
+
+
+def test_poisson_one_line_switch(mesh, basis):
+    @LinearForm
+    def load(v, w):
+        x, y = w.x
+        return 2 * np.pi ** 2 * np.sin(np.pi * x) * np.sin(np.pi * y) * v
+
+    @Functional
+    def l2(w):
+        x, y = w.x
+        return (w["u"] - np.sin(np.pi * x) * np.sin(np.pi * y)) ** 2
+
+    errs = {}
+    for name, b in [("nem", basis), ("p1", Basis(mesh, ElementTriP1()))]:
+        A, f = laplace.assemble(b), load.assemble(b)
+        u = solve(*condense(A, f, D=b.get_dofs()))
+        errs[name] = np.sqrt(l2.assemble(b, u=u))
+        # also with asm() and a DiscreteField keyword
+        assert abs(np.sqrt(asm(l2, b, u=b.interpolate(u))) - errs[name]) < 1e-14
+    assert errs["nem"] < 0.01
+    assert errs["nem"] < 1.5 * errs["p1"]
+
+
+def test_mixed_nem_and_p1(mesh, basis):
+    p1 = Basis(mesh, ElementTriP1(), quadrature=basis.quadrature)
+    A = laplace.assemble(basis)
+    B = laplace.assemble(p1, basis)  # P1 trial, NEM test
+    C = laplace.assemble(basis, p1)  # NEM trial, P1 test
+    assert B.shape == (basis.N, p1.N) and C.shape == (p1.N, basis.N)
+    u = np.array([0.7, 2.0]) @ mesh.p + 0.1  # linear: both spaces reproduce it
+    np.testing.assert_allclose(B @ u, A @ u, atol=1e-12)
+    np.testing.assert_allclose(C @ u, laplace.assemble(p1) @ u, atol=1e-12)
+    with pytest.raises(ValueError, match="quadrature"):
+        laplace.assemble(Basis(mesh, ElementTriP1(), intorder=4), basis)
+
+
+def test_vector_basis_elasticity(mesh, vbasis):
+    assert vbasis.N == 2 * mesh.nvertices
+    K = linear_elasticity(*lame_parameters(1.0, 0.3)).assemble(vbasis)
+    assert abs(K - K.T).max() < 1e-12
+    x, y = mesh.p
+    dofs = vbasis.dofs.nodal_dofs
+    for field in ([np.ones_like(x), 0 * x], [0 * x, np.ones_like(x)], [-y, x]):
+        r = np.zeros(vbasis.N)
+        r[dofs[0]], r[dofs[1]] = field
+        np.testing.assert_allclose(K @ r, 0, atol=1e-12)  # rigid motions: no force
+    D = vbasis.get_dofs()
+    assert set(D.nodal.keys()) == {"u^1", "u^2"}
+    left = vbasis.get_dofs(lambda x: np.isclose(x[0], 0.0))
+    assert np.all(np.isclose(x[left.nodal["u^1"] // 2], 0.0))
+    np.testing.assert_array_equal(left.nodal["u^1"] % 2, 0)
+    np.testing.assert_array_equal(vbasis.get_dofs(lambda x: np.isclose(x[0], 0.0), skip=["u^2"]).flatten(),
+                                  left.nodal["u^1"])
+    # patch test: linear displacement imposed on the boundary
+    lin = np.zeros(vbasis.N)
+    lin[dofs[0]] = 0.01 * x + 0.02 * y
+    lin[dofs[1]] = -0.03 * x + 0.005 * y
+    u = solve(*condense(K, np.zeros(vbasis.N), x=lin, D=D))
+    assert np.abs(u - lin).max() < 1e-3
+
+
+def test_named_boundaries_and_enforce():
+    m = delaunay_mesh(square_nodes(100, 8)).with_boundaries(
+        {"left": lambda x: np.isclose(x[0], 0), "top": lambda x: np.isclose(x[1], 1)})
+    b = NaturalNeighbourBasis(m)
+    left = b.get_dofs("left").flatten()
+    np.testing.assert_array_equal(np.sort(left), np.flatnonzero(np.isclose(m.p[0], 0)))
+    A = laplace.assemble(b)
+    f = np.zeros(b.N)
+    D = b.get_dofs(["left", "top"]).flatten()
+    x = b.zeros()
+    x[D] = 1.0
+    A2, f2 = enforce(A, f, x=x, D=D)
+    u = solve(A2, f2)
+    np.testing.assert_allclose(u[D], 1.0)
+
+
+def test_interpolate_probes_project(mesh, basis, vbasis):
+    u = 2 * mesh.p[0] - mesh.p[1] + 0.5
+    f = basis.interpolate(u)
+    X = basis.global_coordinates()
+    np.testing.assert_allclose(f, 2 * X[0] - X[1] + 0.5, atol=1e-13)
+    np.testing.assert_allclose(f.grad[0], 2, atol=1e-12)
+    np.testing.assert_allclose(f.grad[1], -1, atol=1e-12)
+    rng = np.random.default_rng(3)
+    pts = rng.random((2, 50))
+    val = basis.probes(pts) @ np.sin(mesh.p[0])
+    np.testing.assert_allclose(val, sibson_coordinates(mesh.p.T, pts.T) @ np.sin(mesh.p[0]), atol=1e-14)
+    np.testing.assert_allclose(basis.interpolator(u)(pts), 2 * pts[0] - pts[1] + 0.5, atol=1e-13)
+    # L2 projection of a function in the space returns it
+    p = basis.project(lambda x: 2 * x[0] - x[1] + 0.5)
+    np.testing.assert_allclose(p, u, atol=1e-10)
+    # vector: interpolate and probes follow the ElementVector dof numbering
+    w = np.zeros(vbasis.N)
+    w[vbasis.dofs.nodal_dofs[0]] = mesh.p[1]
+    w[vbasis.dofs.nodal_dofs[1]] = 3.0
+    F = vbasis.interpolate(w)
+    np.testing.assert_allclose(F[0], X[1], atol=1e-13)
+    np.testing.assert_allclose(F.grad[0, 1], 1.0, atol=1e-12)
+    np.testing.assert_allclose(F[1], 3.0, atol=1e-13)
+    P = vbasis.probes(pts) @ w
+    np.testing.assert_allclose(P[:50], pts[1], atol=1e-13)
+    np.testing.assert_allclose(P[50:], 3.0, atol=1e-13)
+
+
+def test_functional_parameters(mesh, basis):
+    @Functional
+    def area(w):
+        return 1.0 + 0 * w.x[0]
+
+    @Functional
+    def hsum(w):
+        return w.h ** 2
+
+    assert abs(area.assemble(basis) - 1.0) < 1e-13
+    p1 = Basis(mesh, ElementTriP1(), quadrature=basis.quadrature)
+    assert abs(hsum.assemble(basis) - hsum.assemble(p1)) < 1e-13
+    el = area.elemental(basis)
+    assert el.shape == (mesh.nelements,)
+    np.testing.assert_allclose(el, area.elemental(p1), atol=1e-15)
+
+
+def test_facet_basis(mesh, basis):
+    fb = NaturalNeighbourFacetBasis(mesh, facets=mesh.boundary_facets())
+
+    @LinearForm
+    def one(v, w):
+        return v
+
+    assert abs(one.assemble(fb).sum() - 4.0) < 1e-13
+
+    @Functional
+    def flux(w):
+        return dot(w["u"].grad, w.n)
+
+    # the gradient of the interpolant of x is (1, 0) up to the hull: net flux 0
+    assert abs(flux.assemble(fb, u=mesh.p[0])) < 1e-8
+    # Green: for linear u, the cell integral of grad u . grad v equals the
+    # boundary integral of (grad u . n) v up to the cell quadrature error,
+    # which falls as the rule gets richer (the paper's open question)
+    g = np.array([1.0, 0.5])
+
+    @LinearForm
+    def neumann(v, w):
+        return (g[0] * w.n[0] + g[1] * w.n[1]) * v
+
+    b = neumann.assemble(fb)
+    u = g @ mesh.p
+    errs = {}
+    for npts in (1, 3, 7, 13):
+        A = laplace.assemble(NaturalNeighbourBasis(mesh, npoints=npts))
+        errs[npts] = np.abs(A @ u - b).max()
+    assert errs[13] < errs[3] < errs[1]
+    assert errs[13] < 0.5 * errs[1]
+
+
+def test_quadrature_choices(mesh):
+    for npts in (1, 3, 4, 6, 7, 12, 13):
+        b = NaturalNeighbourBasis(mesh, npoints=npts)
+        assert b.X.shape == (2, npts) and abs(b.W.sum() - 0.5) < 1e-14
+        assert abs(mass.assemble(b).sum() - 1.0) < 1e-12
+    X = np.array([[1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+    b = NaturalNeighbourBasis(mesh, quadrature=(X, np.full(3, 1 / 6)))
+    assert b.X.shape == (2, 3)
+    with pytest.raises(ValueError, match="npoints"):
+        NaturalNeighbourBasis(mesh, npoints=5)
+
+
+def test_laplace_coordinates_basis(mesh):
+    b = NaturalNeighbourBasis(mesh, coordinates="laplace")
+    A = laplace.assemble(b)
+    np.testing.assert_allclose(A @ np.ones(b.N), 0, atol=1e-12)
+    u = np.array([1.0, 2.0]) @ mesh.p
+    assert abs(u @ A @ u - 5.0) < 1e-11
+
+
+def test_bad_meshes_and_elements():
+    p = square_nodes(50, 4)
+    m = delaunay_mesh(p)
+    # flip one interior edge: still a valid mesh, no longer Delaunay
+    from skfem_nem import Triangulation
+    tri = Triangulation(p)
+    from skfem_nem.triangulation import _flip
+    T, N = tri.triangles.copy(), tri.neighbours.copy()
+    t, k = np.argwhere(N >= 0)[0]
+    _flip(T, N, t, k)
+    bad = MeshTri(p.T, T.T)
+    with pytest.raises(ValueError, match="delaunay_mesh"):
+        NaturalNeighbourBasis(bad)
+    with pytest.raises(ValueError, match=f"node {len(p)} at .* belongs to no triangle"):
+        NaturalNeighbourBasis(MeshTri(np.c_[p.T, [[0.5], [0.5]]], m.t))
+    with pytest.raises(TypeError, match="ElementNaturalNeighbour"):
+        NaturalNeighbourBasis(m, ElementTriP1())
+    with pytest.raises(NotImplementedError, match="NaturalNeighbourBasis"):
+        Basis(m, ElementNaturalNeighbour())
+    # non-convex domain: warn
+    L = MeshTri.init_lshaped().refined(2)
+    with pytest.warns(UserWarning, match="not convex"):
+        NaturalNeighbourBasis(L)
+
+
+def test_save_and_plot(mesh, basis, tmp_path):
+    import meshio
+    u = np.sin(3 * mesh.p[0]) * mesh.p[1]
+    path = tmp_path / "u.vtu"
+    mesh.save(str(path), point_data={"u": u})
+    back = meshio.read(path)
+    np.testing.assert_allclose(back.point_data["u"], u)
+    import matplotlib
+    matplotlib.use("Agg")
+    ax = basis.plot(u, nrefs=1)
+    ax.figure.savefig(tmp_path / "u.png")
+    assert (tmp_path / "u.png").stat().st_size > 5000
+
+
+def test_p2_on_same_mesh_for_comparison(mesh):
+    # scikit-fem P2 on the NEM mesh: the comparison baseline works unchanged
+    b2 = Basis(mesh, ElementTriP2())
+    A = laplace.assemble(b2)
+    np.testing.assert_allclose(A @ np.ones(b2.N), 0, atol=1e-11)

@@ -1,0 +1,36 @@
+import numpy as np
+import pytest
+
+from skfem_nem.cli import main
+
+
+def test_interpolate_csv(tmp_path):
+    rng = np.random.default_rng(0)
+    p = np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], rng.random((50, 2))]
+    f = 2 * p[:, 0] - p[:, 1] + 1
+    np.savetxt(tmp_path / "nodes.csv", np.c_[p, f, 3 * f], delimiter=",", header="x,y,f,g",
+               comments="")
+    q = 0.1 + 0.8 * rng.random((20, 2))
+    np.savetxt(tmp_path / "q.csv", q, delimiter=",")
+    out = tmp_path / "out.csv"
+    assert main(["interpolate", str(tmp_path / "nodes.csv"), str(tmp_path / "q.csv"),
+                 "-o", str(out), "--gradient"]) == 0
+    r = np.loadtxt(out, delimiter=",", skiprows=1)
+    lin = 2 * q[:, 0] - q[:, 1] + 1
+    np.testing.assert_allclose(r[:, 2], lin, atol=1e-12)   # linear precision
+    np.testing.assert_allclose(r[:, 3], 3 * lin, atol=1e-12)
+    np.testing.assert_allclose(r[:, 4], 2, atol=1e-10)     # df/dx
+    np.testing.assert_allclose(r[:, 7], -3, atol=1e-10)    # dg/dy
+
+
+def test_interpolate_errors(tmp_path, capsys):
+    (tmp_path / "n.csv").write_text("x,y,f\n0,0,1\n1,0,1\n0,1,1\n")
+    (tmp_path / "q.csv").write_text("2,2\n")
+    with pytest.raises(SystemExit, match=r"outside the convex hull.*x\[0\]"):
+        main(["interpolate", str(tmp_path / "n.csv"), str(tmp_path / "q.csv"), "-o",
+              str(tmp_path / "o.csv")])
+    (tmp_path / "bad.csv").write_text("x,y,f\n0,0,1\n1,zero,1\n")
+    with pytest.raises(SystemExit, match="line 2 is not numeric"):
+        main(["interpolate", str(tmp_path / "bad.csv"), str(tmp_path / "q.csv")])
+    with pytest.raises(SystemExit, match="cannot read nodes"):
+        main(["interpolate", str(tmp_path / "missing.csv"), str(tmp_path / "q.csv")])

@@ -7,6 +7,7 @@ basis (:mod:`~skfem_nem.basis`: NEM trial functions inside scikit-fem's assembly
 from .basis import (ElementNaturalNeighbour, NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
                     delaunay_mesh)
 from .coordinates import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
+from .evolution import LagrangianMesh
 from .triangulation import Triangulation
 
 __version__ = "0.1.0"
@@ -17,6 +18,7 @@ __all__ = [
     "NaturalNeighbourBasis",
     "NaturalNeighbourFacetBasis",
     "delaunay_mesh",
+    "LagrangianMesh",
     "sibson_coordinates",
     "laplace_coordinates",
     "natural_neighbour_coordinates",

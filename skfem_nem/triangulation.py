@@ -214,12 +214,13 @@ def _cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_c, be_u):
 
 
 @njit(cache=True)
-def _insert(P, T, N, nt, i, t0, cav, cnb, rej, be_a, be_b, be_t, be_u, newt):
+def _insert(P, T, N, nt, i, t0, cav, cnb, rej, be_a, be_b, be_t, be_u, newt, extra):
     """Bowyer--Watson insertion of node i (inside the hull or on its boundary).
 
-    ``T`` and ``N`` must have room for two more triangles after ``nt``.
-    Returns the new triangle count, or a negative code: -1 outside the hull,
-    -2 the node coincides with a vertex, -3 buffers too small.
+    The (up to) two triangles the insertion adds go to the slots ``extra[0]``,
+    ``extra[1]`` (normally ``nt`` and ``nt + 1``). Returns how many extra slots
+    were used, or a negative code: -1 outside the hull, -2 the node coincides
+    with a vertex, -3 buffers too small.
     """
     qx = P[i, 0]
     qy = P[i, 1]
@@ -250,7 +251,7 @@ def _insert(P, T, N, nt, i, t0, cav, cnb, rej, be_a, be_b, be_t, be_u, newt):
         if j == skip:
             newt[j] = -1
             continue
-        newt[j] = cav[m] if m < ncav else nt + (m - ncav)
+        newt[j] = cav[m] if m < ncav else extra[m - ncav]
         m += 1
     for j in range(nb):
         s = newt[j]
@@ -269,7 +270,7 @@ def _insert(P, T, N, nt, i, t0, cav, cnb, rej, be_a, be_b, be_t, be_u, newt):
             for jj in range(3):
                 if T[u, jj] != be_a[j] and T[u, jj] != be_b[j]:
                     N[u, jj] = s
-    return nt + max(0, m - ncav)
+    return max(0, m - ncav)
 
 
 @njit(cache=True)
@@ -336,28 +337,49 @@ def _edge_violates(P, T, N, t, k):
 
 
 @njit(cache=True)
-def _lawson(P, T, N, stack, nstack, max_flips):
+def _lawson(P, T, N, stack, nstack, max_flips, log):
     """Lawson's algorithm: flip non-Delaunay edges until none is left.
 
-    ``stack[:nstack]`` holds the triangles to check (the stack must have room
-    for ``nstack + 2 * max_flips`` entries). Returns the number of flips, or
-    ``-1`` if ``max_flips`` was exceeded.
+    ``stack[:nstack]`` holds the triangles to check. Each flip is recorded in
+    ``log`` (if it has rows) as ``(t, u, k, l, a, b, c, d)``: triangle
+    t = (a, b, c) (a at position k) was flipped across its edge b-c with
+    triangle u = (d, c, b) (d at position l); afterwards t = (a, b, d) and
+    u = (a, d, c). Returns
+    ``(flips, done)``; ``done`` is False if the stack, the log or
+    ``max_flips`` ran out first (the flips made so far are valid and logged;
+    check all triangles again to finish).
     """
     flips = 0
+    cap = stack.shape[0]
+    logcap = log.shape[0]
     while nstack > 0:
         nstack -= 1
         t = stack[nstack]
         for k in range(3):
             if _edge_violates(P, T, N, t, k):
-                if flips == max_flips:
-                    return -1
-                u = _flip(T, N, t, k)
+                if flips == max_flips or nstack + 2 > cap or (logcap > 0 and flips == logcap):
+                    return flips, False
+                u = N[t, k]
+                if logcap > 0:
+                    l = 0
+                    for j in range(3):
+                        if N[u, j] == t:
+                            l = j
+                    log[flips, 0] = t
+                    log[flips, 1] = u
+                    log[flips, 2] = k
+                    log[flips, 3] = l
+                    log[flips, 4] = T[t, k]
+                    log[flips, 5] = T[t, (k + 1) % 3]
+                    log[flips, 6] = T[t, (k + 2) % 3]
+                    log[flips, 7] = T[u, l]
+                _flip(T, N, t, k)
                 flips += 1
                 stack[nstack] = t
                 stack[nstack + 1] = u
                 nstack += 2
                 break
-    return flips
+    return flips, True
 
 
 @njit(cache=True)
@@ -410,6 +432,51 @@ def _orientations(P, T, out):
 # ---------------------------------------------------------------------------
 # adjacency from a triangle list
 # ---------------------------------------------------------------------------
+
+@njit(cache=True)
+def _first_fold(T, N):
+    """First triangle whose neighbour lists their shared edge in the same
+    direction (a fold, for counter-clockwise triangles), or -1."""
+    for t in range(T.shape[0]):
+        for k in range(3):
+            u = N[t, k]
+            if u < 0:
+                continue
+            b = T[t, (k + 1) % 3]
+            c = T[t, (k + 2) % 3]
+            ok = False
+            for j in range(3):
+                if T[u, j] == c and T[u, (j + 1) % 3] == b:
+                    ok = True
+            if not ok:
+                return t
+    return -1
+
+
+@njit(cache=True)
+def _exact_hull(P, order):
+    """Convex-hull vertices (no collinear ones) by Andrew's monotone chain
+    with the exact orientation predicate; ``order`` sorts P by x, then y."""
+    n = order.shape[0]
+    h = np.empty(2 * n + 1, np.int64)
+    k = 0
+    for ii in range(n):
+        i = order[ii]
+        while k >= 2 and orient2d_sign(P[h[k - 2], 0], P[h[k - 2], 1], P[h[k - 1], 0],
+                                       P[h[k - 1], 1], P[i, 0], P[i, 1]) <= 0.0:
+            k -= 1
+        h[k] = i
+        k += 1
+    lower = k + 1
+    for ii in range(n - 2, -1, -1):
+        i = order[ii]
+        while k >= lower and orient2d_sign(P[h[k - 2], 0], P[h[k - 2], 1], P[h[k - 1], 0],
+                                           P[h[k - 1], 1], P[i, 0], P[i, 1]) <= 0.0:
+            k -= 1
+        h[k] = i
+        k += 1
+    return h[:k - 1].copy()
+
 
 def _adjacency(triangles: np.ndarray, n: int) -> np.ndarray:
     """Neighbour array for (nt, 3) triangles; raises on non-manifold edges."""
@@ -533,8 +600,20 @@ class Triangulation:
             raise ValueError(f"Qhull failed to triangulate the nodes: {err}") from None
         # nodes Qhull dropped as "coplanar" (closer to another node than its
         # tolerance) are inserted afterwards with exact predicates
-        T = np.ascontiguousarray(d.simplices, dtype=np.int64)
-        N = np.ascontiguousarray(d.neighbors, dtype=np.int64)
+        T, N = Triangulation._checked(p, d.simplices, d.neighbors)
+        if T is None:
+            # Qhull folded triangles in a cluster of nearly coincident nodes:
+            # triangulate a thinned node set (all hull vertices kept), insert
+            # the rest exactly
+            T, N = Triangulation._thinned(p)
+        return T, N
+
+    @staticmethod
+    def _checked(p, simplices, neighbors):
+        """Orient Qhull's triangles CCW, drop flat hull triangles, and check
+        that the result is a valid (fold-free) triangulation; (None, None) if not."""
+        T = np.ascontiguousarray(simplices, dtype=np.int64)
+        N = np.ascontiguousarray(neighbors, dtype=np.int64)
         orient = np.empty(T.shape[0])
         _orientations(p, T, orient)
         keep = orient != 0.0
@@ -545,8 +624,37 @@ class Triangulation:
             # Qhull can leave flat triangles along collinear hull runs: drop them
             # and rebuild the adjacency
             T = np.ascontiguousarray(T[keep])
-            N = _adjacency(T, p.shape[0])
+            try:
+                N = _adjacency(T, p.shape[0])
+            except ValueError:
+                return None, None
+        if _first_fold(T, N) >= 0:
+            return None, None
         return T, N
+
+    @staticmethod
+    def _thinned(p):
+        from scipy.spatial import cKDTree
+        n = p.shape[0]
+        on_hull = np.zeros(n, dtype=bool)
+        on_hull[_exact_hull(p, np.lexsort((p[:, 1], p[:, 0])))] = True
+        delta = 1e-6 * np.hypot(*np.ptp(p, axis=0))
+        drop = np.zeros(n, dtype=bool)
+        for i, j in cKDTree(p).query_pairs(delta, output_type="ndarray"):
+            if drop[i] or drop[j]:
+                continue
+            if not on_hull[j]:
+                drop[j] = True
+            elif not on_hull[i]:
+                drop[i] = True
+        kept = np.flatnonzero(~drop)
+        ctr = p[kept].mean(axis=0)
+        d = Delaunay(p[kept] - ctr)
+        T, N = Triangulation._checked(p[kept], d.simplices, d.neighbors)
+        if T is None:
+            raise ValueError("Qhull could not triangulate the nodes even after thinning "
+                             "clusters of nearly coincident nodes")
+        return np.ascontiguousarray(kept[T]), N
 
     @classmethod
     def from_triangles(cls, nodes, triangles, make_delaunay: bool = True) -> "Triangulation":
@@ -713,7 +821,8 @@ class Triangulation:
                 cnb = np.empty((cap, 3), np.int64)
                 rej = np.empty(cap + 4, np.int64)
                 be = [np.empty(cap + 2, np.int64) for _ in range(5)]
-                r = _insert(P, T, N, nt, i, int(start), cav, cnb, rej, *be)
+                r = _insert(P, T, N, nt, i, int(start), cav, cnb, rej, *be,
+                            np.array([nt, nt + 1], dtype=np.int64))
                 if r != -3:
                     break
                 cap *= 4
@@ -722,13 +831,14 @@ class Triangulation:
                                  f"and cannot be inserted")
             if r == -2:
                 raise ValueError(f"node {i} at {P[i].tolist()} coincides with an existing node")
-            nt = r
+            nt += r
         self.triangles = np.ascontiguousarray(T[:nt])
         self.neighbours = np.ascontiguousarray(N[:nt])
         self._changed()
 
     # -- Delaunay maintenance -------------------------------------------------
-    def make_delaunay(self, triangles=None, max_flips: int | None = None) -> int:
+    def make_delaunay(self, triangles=None, max_flips: int | None = None,
+                      on_flips=None) -> int:
         """Lawson flips until every interior edge passes the in-circle test.
 
         Parameters
@@ -738,6 +848,13 @@ class Triangulation:
             local change); all triangles by default.
         max_flips
             Safety cap; default ``10 * nt + 100``.
+        on_flips
+            Optional callback ``on_flips(log)`` receiving, in order, batches of
+            flips as an (k, 8) int array of rows ``(t, u, k, l, a, b, c, d)``:
+            triangle t = (a, b, c) (a at position k) was flipped across edge
+            b-c with u = (d, c, b) (d at position l); afterwards t holds
+            ``(a, b, d)`` and u ``(a, d, c)``. Used to remap data stored per
+            triangle.
 
         Returns the number of flips performed.
         """
@@ -746,14 +863,23 @@ class Triangulation:
                  else np.unique(np.asarray(triangles, dtype=np.int64)))
         if max_flips is None:
             max_flips = 10 * nt + 100
-        stack = np.empty(start.size + 2 * max_flips + 2, dtype=np.int64)
-        stack[:start.size] = start
-        flips = _lawson(self.nodes, self.triangles, self.neighbours, stack, start.size, max_flips)
-        if flips < 0:
-            raise RuntimeError(f"Lawson flips did not terminate within {max_flips} flips")
-        if flips:
-            self._changed()
-        return int(flips)
+        total = 0
+        while True:
+            stack = np.empty(start.size + 2 * min(max_flips, nt // 4 + 1024), dtype=np.int64)
+            stack[:start.size] = start
+            log = np.empty((min(max_flips, nt // 4 + 1024) if on_flips else 0, 8), np.int64)
+            flips, done = _lawson(self.nodes, self.triangles, self.neighbours, stack,
+                                  start.size, max_flips - total, log)
+            total += flips
+            if flips:
+                self._changed()
+                if on_flips is not None:
+                    on_flips(log[:flips])
+            if done:
+                return int(total)
+            if total >= max_flips:
+                raise RuntimeError(f"Lawson flips did not terminate within {max_flips} flips")
+            start = np.arange(nt, dtype=np.int64)
 
     def is_delaunay(self) -> bool:
         """True if every interior edge passes the exact in-circle test and all

@@ -157,3 +157,18 @@ def test_caller_arrays_untouched():
     tri = Triangulation(p)
     np.testing.assert_array_equal(p, before)
     assert not tri.nodes.flags.writeable
+
+
+@pytest.mark.parametrize("scale", [1e-7, 1e-9, 1e-12])
+def test_clusters_of_nearly_coincident_nodes(scale):
+    # Qhull drops or folds such clusters; every node must still be a vertex
+    # of a valid Delaunay triangulation
+    rng = np.random.default_rng(39)
+    p = np.r_[rng.random((38, 2)), 0.5 + scale * rng.random((38, 2)),
+              [[0.2, 0.3]] + scale * rng.random((5, 2))]
+    tri = Triangulation(p)
+    check_valid(tri)
+    assert tri.is_delaunay()
+    used = np.zeros(p.shape[0], bool)
+    used[tri.triangles.ravel()] = True
+    assert used.all()

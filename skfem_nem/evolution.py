@@ -1,0 +1,757 @@
+"""The Lagrangian evolving mesh: nodes move with the flow, the triangulation
+is repaired by local flips, never regridded.
+
+:class:`LagrangianMesh` owns a 2D Delaunay :class:`~skfem_nem.Triangulation`,
+named fields carried by the nodes (material id, viscosity, initial position,
+...) and named fields stored at each triangle's quadrature points (stress
+tensors: the paper's "tensorial memory"). Each :meth:`~LagrangianMesh.advance`
+
+1. moves the nodes with a velocity field by an iterative predictor-corrector
+   (trapezoidal) update, walls kept exact;
+2. repairs the triangulation by Lawson flips, remapping the integration-point
+   fields of the two triangles of every flip onto the two new ones;
+3. if the move would invert a triangle (flips cannot repair that), splits the
+   step into substeps until none inverts;
+4. optionally injects nodes where the mesh has thinned out.
+
+Remap rules for the 3-point rule (points near the vertices), per flip of the
+quadrilateral (a, b, d, c) from diagonal b-c to a-d:
+
+``"average"`` (the paper's Fig. 5)
+    a new point near a vertex that belonged to one old triangle copies that
+    triangle's value (splitting); one near a vertex of both old triangles
+    gets the mean of their two values (averaging).
+``"conservative"``
+    the three values of each old triangle define its linear field; each new
+    triangle gets the L2 projection onto linear fields of the old piecewise
+    linear field over the two sub-triangles (of the four cut by both
+    diagonals) that it covers. Integrals of every component are conserved
+    exactly, linear fields are kept exactly.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from typing import Callable, Dict, Optional
+
+import numpy as np
+from numba import njit
+
+from .coordinates import sibson_coordinates
+from .predicates import incircle, orient2d
+from .triangulation import Triangulation, _insert
+
+__all__ = ["LagrangianMesh"]
+
+# the 3-point rule of scikit-fem (intorder <= 2): point k near vertex k
+_X3 = np.array([[1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+_W3 = np.full(3, 1 / 6)
+_A3 = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+
+
+# ---------------------------------------------------------------------------
+# remap kernels
+# ---------------------------------------------------------------------------
+
+@njit(cache=True)
+def _remap_average(log, F):
+    """The paper's averaging-and-splitting rule for a batch of flips."""
+    for r in range(log.shape[0]):
+        t, u, k, l = log[r, 0], log[r, 1], log[r, 2], log[r, 3]
+        ta = F[t, k].copy()
+        tb = F[t, (k + 1) % 3].copy()
+        tc = F[t, (k + 2) % 3].copy()
+        ud = F[u, l].copy()
+        uc = F[u, (l + 1) % 3].copy()
+        ub = F[u, (l + 2) % 3].copy()
+        # new t = (a, b, d), new u = (a, d, c)
+        F[t, 0] = ta
+        F[t, 1] = 0.5 * (tb + ub)
+        F[t, 2] = ud
+        F[u, 0] = ta
+        F[u, 1] = ud
+        F[u, 2] = 0.5 * (tc + uc)
+
+
+@njit(cache=True)
+def _vertex_values(f):
+    """Vertex values of the linear field with values f at the 3-point rule's points."""
+    s = f[0] + f[1] + f[2]
+    return 2.0 * f[0] - s / 3.0, 2.0 * f[1] - s / 3.0, 2.0 * f[2] - s / 3.0
+
+
+@njit(cache=True)
+def _bary(px, py, ax, ay, bx, by, cx, cy):
+    d = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+    l1 = ((px - ax) * (cy - ay) - (py - ay) * (cx - ax)) / d
+    l2 = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / d
+    return 1.0 - l1 - l2, l1, l2
+
+
+@njit(cache=True)
+def _remap_conservative(P, log, F):
+    """L2-projection remap over the four sub-triangles, for a batch of flips.
+
+    Log rows ``(t, u, k, l, a, b, c, d)`` as written by the Lawson kernel.
+    """
+    ncomp = F.shape[2]
+    for r in range(log.shape[0]):
+        t, u = log[r, 0], log[r, 1]
+        a = log[r, 4]
+        b = log[r, 5]
+        c = log[r, 6]
+        d = log[r, 7]
+        k, l = log[r, 2], log[r, 3]
+        ax, ay = P[a, 0], P[a, 1]
+        bx, by = P[b, 0], P[b, 1]
+        cx, cy = P[c, 0], P[c, 1]
+        dx, dy = P[d, 0], P[d, 1]
+        # intersection O of the diagonals a-d and b-c
+        den = (dx - ax) * (cy - by) - (dy - ay) * (cx - bx)
+        s = ((bx - ax) * (cy - by) - (by - ay) * (cx - bx)) / den
+        ox = ax + s * (dx - ax)
+        oy = ay + s * (dy - ay)
+        for m in range(ncomp):
+            # old vertex values: t = (a, b, c) from position k, u = (d, c, b) from l
+            fa, fb, fc = _vertex_values(np.array([F[t, k, m], F[t, (k + 1) % 3, m],
+                                                  F[t, (k + 2) % 3, m]]))
+            gd, gc, gb = _vertex_values(np.array([F[u, l, m], F[u, (l + 1) % 3, m],
+                                                  F[u, (l + 2) % 3, m]]))
+            # old field at O, from either side (they differ: the field jumps)
+            la, lb, lc = _bary(ox, oy, ax, ay, bx, by, cx, cy)
+            fo_t = la * fa + lb * fb + lc * fc
+            ld, lc2, lb2 = _bary(ox, oy, dx, dy, cx, cy, bx, by)
+            fo_u = ld * gd + lc2 * gc + lb2 * gb
+            # new t = (a, b, d) covers sub-triangles (a, b, O) [old t] and (b, d, O) [old u]
+            # new u = (a, d, c) covers (d, c, O) [old u] and (c, a, O) [old t]
+            for which in range(2):
+                if which == 0:
+                    v0x, v0y, v1x, v1y, v2x, v2y = ax, ay, bx, by, dx, dy
+                    subs = ((ax, ay, fa, bx, by, fb, fo_t),
+                            (bx, by, gb, dx, dy, gd, fo_u))
+                else:
+                    v0x, v0y, v1x, v1y, v2x, v2y = ax, ay, dx, dy, cx, cy
+                    subs = ((dx, dy, gd, cx, cy, gc, fo_u),
+                            (cx, cy, fc, ax, ay, fa, fo_t))
+                area = 0.5 * ((v1x - v0x) * (v2y - v0y) - (v1y - v0y) * (v2x - v0x))
+                rhs = np.zeros(3)
+                for (p1x, p1y, f1, p2x, p2y, f2, fo) in subs:
+                    sa = 0.5 * abs((p2x - p1x) * (oy - p1y) - (p2y - p1y) * (ox - p1x))
+                    # int over the sub-triangle (p1, p2, O) of f * lambda_j:
+                    # (|S| / 12) (sum_i f_i lam_ji + (sum_i f_i)(sum_i lam_ji))
+                    l1 = _bary(p1x, p1y, v0x, v0y, v1x, v1y, v2x, v2y)
+                    l2 = _bary(p2x, p2y, v0x, v0y, v1x, v1y, v2x, v2y)
+                    l3 = _bary(ox, oy, v0x, v0y, v1x, v1y, v2x, v2y)
+                    fs = f1 + f2 + fo
+                    for j in range(3):
+                        lj = l1[j] * f1 + l2[j] * f2 + l3[j] * fo
+                        rhs[j] += sa / 12.0 * (lj + fs * (l1[j] + l2[j] + l3[j]))
+                # P1 mass matrix (|T| / 12)(I + 1 1^T): inverse (12/|T|)(I - 1 1^T / 4)
+                tot = rhs[0] + rhs[1] + rhs[2]
+                nv = np.empty(3)
+                for j in range(3):
+                    nv[j] = 12.0 / area * (rhs[j] - tot / 4.0)
+                s3 = nv[0] + nv[1] + nv[2]
+                tgt = t if which == 0 else u
+                for j in range(3):
+                    F[tgt, j, m] = 0.5 * nv[j] + s3 / 6.0
+
+
+@njit(cache=True)
+def _min_angles(P, T, out):
+    for t in range(T.shape[0]):
+        best = np.pi
+        for k in range(3):
+            a = T[t, k]
+            b = T[t, (k + 1) % 3]
+            c = T[t, (k + 2) % 3]
+            ux = P[b, 0] - P[a, 0]
+            uy = P[b, 1] - P[a, 1]
+            vx = P[c, 0] - P[a, 0]
+            vy = P[c, 1] - P[a, 1]
+            ang = np.arctan2(abs(ux * vy - uy * vx), ux * vx + uy * vy)
+            best = min(best, ang)
+        out[t] = best
+
+
+@njit(cache=True)
+def _inverted(P, T):
+    n = 0
+    for t in range(T.shape[0]):
+        a = T[t, 0]
+        b = T[t, 1]
+        c = T[t, 2]
+        if orient2d(P[a, 0], P[a, 1], P[b, 0], P[b, 1], P[c, 0], P[c, 1]) <= 0.0:
+            n += 1
+    return n
+
+
+def _cross(u, v):
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+# ---------------------------------------------------------------------------
+# the evolving mesh
+# ---------------------------------------------------------------------------
+
+class LagrangianMesh:
+    """A 2D node set carried by a flow, kept Delaunay by local flips.
+
+    Parameters
+    ----------
+    nodes
+        (n, 2) initial node positions.
+    node_fields
+        Named arrays with one row per node, shape (n, ...): carried with the
+        nodes, interpolated with Sibson coordinates for injected nodes.
+    ip_fields
+        Named arrays with shape (nt, 3, ...) -- or (3, ...) to broadcast --
+        values at the 3 quadrature points of each triangle (in
+        ``triangles`` order), remapped on every flip.
+    remap
+        ``"conservative"`` (default: conserves integrals exactly, keeps linear
+        fields; see the module docs and docs/evolution.md for the measured
+        diffusion) or ``"average"`` (the paper's rule).
+    walls
+        ``"box"`` (default): nodes on the bounding box of the initial nodes
+        keep their wall coordinate exactly (free slip: only the tangential
+        velocity moves them); ``None``: no constraint.
+
+    Attributes
+    ----------
+    triangulation, time, step, node_fields, ip_fields, history (a list of
+    per-step dicts: dt, substeps, flips, injected, iterations, min_angle,
+    changed triangles).
+    """
+
+    def __init__(self, nodes, node_fields: Optional[Dict[str, np.ndarray]] = None,
+                 ip_fields: Optional[Dict[str, np.ndarray]] = None,
+                 remap: str = "conservative", walls: Optional[str] = "box"):
+        self.triangulation = Triangulation(nodes)
+        n, nt = self.triangulation.npoints, self.triangulation.ntriangles
+        if remap not in ("conservative", "average"):
+            raise ValueError(f"remap must be 'conservative' or 'average', got {remap!r}")
+        if walls not in ("box", None):
+            raise ValueError(f"walls must be 'box' or None, got {walls!r}")
+        self.remap = remap
+        self.walls = walls
+        self.node_fields = {}
+        for name, a in (node_fields or {}).items():
+            a = np.array(a, dtype=float, copy=True)
+            if a.shape[:1] != (n,):
+                raise ValueError(f"node field {name!r} has shape {a.shape}, expected ({n}, ...)")
+            if not np.isfinite(a).all():
+                raise ValueError(f"node field {name!r} has non-finite values "
+                                 f"(first at node {np.argwhere(~np.isfinite(a))[0][0]})")
+            self.node_fields[name] = a
+        self.ip_fields = {}
+        for name, a in (ip_fields or {}).items():
+            a = np.array(a, dtype=float, copy=True)
+            if a.shape[:1] == (3,):
+                a = np.broadcast_to(a, (nt,) + a.shape).copy()
+            if a.shape[:2] != (nt, 3):
+                raise ValueError(f"integration-point field {name!r} has shape {a.shape}, "
+                                 f"expected ({nt}, 3, ...)")
+            self.ip_fields[name] = a
+        P = self.triangulation.nodes
+        lo, hi = P.min(axis=0), P.max(axis=0)
+        self._box = (lo, hi)
+        self._on_wall = np.zeros((n, 2), dtype=bool)
+        if walls == "box":
+            self._on_wall = (P == lo) | (P == hi)
+        self._ref_area = self.node_areas()
+        self.time = 0.0
+        self.step = 0
+        self.history = []
+        self._version = 0
+        self._cache = {}
+
+    # -- views ----------------------------------------------------------------
+    @property
+    def nodes(self) -> np.ndarray:
+        return self.triangulation.nodes
+
+    @property
+    def triangles(self) -> np.ndarray:
+        return self.triangulation.triangles
+
+    @property
+    def mesh(self):
+        """The current scikit-fem ``MeshTri`` (vertex order as ``triangles``,
+        so quadrature point k of element t is the ip field's slot k)."""
+        if "mesh" not in self._cache:
+            from skfem import MeshTri
+            self._cache["mesh"] = MeshTri(np.ascontiguousarray(self.nodes.T),
+                                          np.ascontiguousarray(self.triangles.T), sort_t=False)
+        return self._cache["mesh"]
+
+    def basis(self, elem=None):
+        """A :class:`~skfem_nem.NaturalNeighbourBasis` on the current mesh with
+        the 3-point rule (cached until the mesh changes)."""
+        from .basis import NaturalNeighbourBasis
+        key = ("basis", None if elem is None else repr(elem))
+        if key not in self._cache:
+            self._cache[key] = NaturalNeighbourBasis(self.mesh, elem, quadrature=(_X3, _W3))
+        return self._cache[key]
+
+    def node_areas(self) -> np.ndarray:
+        """(n,) a third of the area of the triangles around each node."""
+        P, T = self.nodes, self.triangles
+        a = 0.5 * np.abs(_cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
+        return np.bincount(T.ravel(), weights=np.repeat(a / 3.0, 3), minlength=P.shape[0])
+
+    def min_angle(self) -> float:
+        """The smallest triangle angle, degrees."""
+        out = np.empty(self.triangles.shape[0])
+        _min_angles(self.nodes, self.triangles, out)
+        return float(np.degrees(out.min()))
+
+    def ip_integral(self, name: str) -> np.ndarray:
+        """Integral over the domain of an integration-point field (3-point rule)."""
+        P, T = self.nodes, self.triangles
+        a = 0.5 * np.abs(_cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
+        return np.einsum("t,tk...->...", a / 3.0, self.ip_fields[name])
+
+    # -- time step control -----------------------------------------------------
+    def max_dt(self, velocity_values: np.ndarray, fraction: float = 0.1) -> float:
+        """Largest dt keeping each node's displacement below ``fraction`` of its
+        local spacing (the shortest edge at the node), for nodal velocities
+        (n, 2)."""
+        P, T = self.nodes, self.triangles
+        e = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+        L = np.hypot(*(P[e[:, 0]] - P[e[:, 1]]).T)
+        h = np.full(P.shape[0], np.inf)
+        np.minimum.at(h, e[:, 0], L)
+        np.minimum.at(h, e[:, 1], L)
+        speed = np.hypot(*np.asarray(velocity_values).T)
+        with np.errstate(divide="ignore"):
+            dt = fraction * h / speed
+        return float(dt.min())
+
+    # -- advection -------------------------------------------------------------
+    def _velocity(self, velocity, x):
+        v = velocity(x.copy())
+        v = np.asarray(v, dtype=float)
+        if v.shape != x.shape:
+            raise ValueError(f"velocity returned shape {v.shape}, expected {x.shape}")
+        bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
+        if bad.size:
+            raise ValueError(f"velocity returned non-finite values at {bad.size} node(s), "
+                             f"first node {bad[0]} at {x[bad[0]].tolist()}")
+        if self.walls == "box":
+            v = np.where(self._on_wall, 0.0, v)
+        return v
+
+    def advance(self, velocity: Callable[[np.ndarray], np.ndarray], dt: float,
+                tol: float = 1e-10, maxiter: int = 10, max_substeps: int = 8,
+                inject: Optional[float] = None) -> dict:
+        """Move the nodes by one time step and repair the triangulation.
+
+        Parameters
+        ----------
+        velocity
+            ``velocity(x)`` -> (n, 2) nodal velocities at node positions x (n, 2).
+        dt
+            Time step.
+        tol, maxiter
+            Predictor-corrector: iterate x = x0 + dt/2 (v(x0) + v(x)) until the
+            largest change is below ``tol`` times the domain size, at most
+            ``maxiter`` corrections.
+        max_substeps
+            If the move would invert a triangle, it is redone in this many
+            substeps, and nodes still passing through each other in a substep
+            are taken out and re-inserted (reported as ``relocated``).
+        inject
+            If given, inject nodes where a node's area has grown past
+            ``inject`` times its initial area (see :meth:`inject_nodes`).
+
+        Returns the step's report (also appended to ``history``). On any error
+        the mesh is left exactly as it was before the step.
+        """
+        if not np.isfinite(dt) or dt <= 0:
+            raise ValueError(f"dt must be positive and finite, got {dt}")
+        x0 = self.nodes.copy()
+        size = float(np.ptp(x0, axis=0).max())
+        v0 = self._velocity(velocity, x0)
+        x = x0 + dt * v0
+        it = 0
+        for it in range(1, maxiter + 1):
+            xn = x0 + 0.5 * dt * (v0 + self._velocity(velocity, x))
+            change = np.abs(xn - x).max()
+            x = xn
+            if change <= tol * size:
+                break
+        if self.walls == "box":
+            x = np.where(self._on_wall, x0, x)
+            lo, hi = self._box
+            out = np.flatnonzero(((x < lo) | (x > hi)).any(axis=1))
+            if out.size:
+                raise ValueError(f"{out.size} node(s) would leave the box, first node {out[0]} "
+                                 f"to {x[out[0]].tolist()}: reduce dt")
+        state = self._state()
+        try:
+            flips, substeps, relocated = self._move(x0, x, max_substeps)
+        except BaseException:
+            self._restore(state)
+            raise
+        self._invalidate()
+        report = {"step": self.step + 1, "time": self.time + dt, "dt": dt,
+                  "iterations": it, "substeps": substeps, "flips": flips,
+                  "relocated": relocated}
+        self.time += dt
+        self.step += 1
+        report["injected"] = self.inject_nodes(inject) if inject else 0
+        report["min_angle"] = self.min_angle()
+        self.history.append(report)
+        return report
+
+    def _state(self):
+        tri = self.triangulation
+        return (tri.nodes, tri.triangles.copy(), tri.neighbours.copy(),
+                {k: v.copy() for k, v in self.ip_fields.items()})
+
+    def _restore(self, state):
+        tri = self.triangulation
+        tri.nodes, tri.triangles, tri.neighbours = state[0], state[1].copy(), state[2].copy()
+        tri._changed()
+        self.ip_fields = {k: v.copy() for k, v in state[3].items()}
+
+    def _set_positions(self, x):
+        x = np.ascontiguousarray(x)
+        x.flags.writeable = False
+        self.triangulation.nodes = x
+        self.triangulation._changed()
+
+    def _move(self, x0, x1, max_substeps):
+        """Move the nodes from x0 to x1, flipping (and remapping) after the
+        move. If a triangle would invert (flips cannot repair that), redo the
+        step in substeps; where a substep still inverts triangles (nodes
+        passing very close to each other), remove their vertices before the
+        substep and re-insert them after it (Bowyer--Watson), remapping the
+        integration-point fields of the triangles involved by evaluating the
+        old linear fields. Returns (flips, substeps, relocated nodes)."""
+        self._set_positions(x1)
+        if not _inverted(self.nodes, self.triangles):
+            return self.triangulation.make_delaunay(on_flips=self._on_flips), 1, 0
+        self._set_positions(x0)
+        nsub = max(1, min(max_substeps, 8))
+        flips = relocated = 0
+        xa = x0
+        for s in range(1, nsub + 1):
+            xb = x0 + (s / nsub) * (x1 - x0)
+            self._set_positions(xb)
+            if _inverted(self.nodes, self.triangles):
+                relocated += self._relocate(xa, xb)
+            flips += self.triangulation.make_delaunay(on_flips=self._on_flips)
+            xa = xb
+        return flips, nsub, relocated
+
+    def _relocate(self, xa, xb):
+        """The triangulation is valid at positions xa and inverts at xb: take
+        out the vertices of inverted triangles (at xa), move, flip, put them
+        back (at xb). Returns how many vertices were relocated."""
+        removed = []
+        while True:
+            self._set_positions(xb)
+            T = self.triangles
+            inv = np.flatnonzero(self.triangulation.orientation() <= 0)
+            if not inv.size:
+                break
+            cand = [v for v in np.unique(T[inv]) if not self._on_wall[v].any()
+                    and v not in removed]
+            if not cand:
+                raise ValueError(f"triangle {inv[0]} ({T[inv[0]].tolist()}) inverts and none of "
+                                 f"its vertices can be relocated: reduce dt")
+            self._set_positions(xa)
+            for v in cand:
+                self._remove_vertex(int(v))
+                removed.append(int(v))
+        self.triangulation.make_delaunay(on_flips=self._on_flips)
+        for v in removed:
+            self._reinsert_vertex(v)
+        return len(removed)
+
+    # -- local surgery (rare: relocation of colliding nodes) ---------------------
+    def _snapshot(self, tris):
+        """Geometry and linear ip fields of triangles ``tris`` (for re-evaluation)."""
+        X = self.nodes[self.triangles[tris]].copy()
+        vals = {k: 2.0 * F[tris].reshape(len(tris), 3, -1)
+                - F[tris].reshape(len(tris), 3, -1).sum(axis=1, keepdims=True) / 3.0
+                for k, F in self.ip_fields.items()}
+        return X, vals
+
+    def _fill_from(self, snap, tris):
+        """Set the ip fields of ``tris`` by evaluating the snapshot's linear
+        fields at their quadrature points (the most-inside old triangle)."""
+        if not self.ip_fields:
+            return
+        X, vals = snap
+        Y = self.nodes[self.triangles[tris]]
+        pts = np.einsum("kj,tjd->tkd", _A3, Y).reshape(-1, 2)
+        a, b, c = X[:, 0], X[:, 1], X[:, 2]
+        d = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+        rx = pts[:, None, 0] - a[None, :, 0]
+        ry = pts[:, None, 1] - a[None, :, 1]
+        l1 = (rx * (c[None, :, 1] - a[None, :, 1]) - ry * (c[None, :, 0] - a[None, :, 0])) / d
+        l2 = ((b[None, :, 0] - a[None, :, 0]) * ry - (b[None, :, 1] - a[None, :, 1]) * rx) / d
+        lam = np.stack([1 - l1 - l2, l1, l2], -1)  # (m, k, 3)
+        best = np.argmax(lam.min(axis=2), axis=1)
+        lb = lam[np.arange(pts.shape[0]), best]  # (m, 3)
+        for k, F in self.ip_fields.items():
+            v = np.einsum("mj,mjc->mc", lb, vals[k][best])
+            flat = F.reshape(F.shape[0], 3, -1)
+            flat[tris] = v.reshape(len(tris), 3, -1)
+
+    def _remove_vertex(self, v):
+        tri = self.triangulation
+        T, N, P = tri.triangles, tri.neighbours, tri.nodes
+        t0 = int(np.flatnonzero((T == v).any(axis=1))[0])
+        star, link, outer = [], [], []
+        t = t0
+        while True:
+            j = int(np.flatnonzero(T[t] == v)[0])
+            star.append(t)
+            link.append(int(T[t, (j + 1) % 3]))
+            outer.append(int(N[t, j]))
+            t = int(N[t, (j + 1) % 3])
+            if t < 0:
+                raise ValueError(f"node {v} is on the hull and cannot be relocated: reduce dt")
+            if t == t0:
+                break
+        snap = self._snapshot(np.array(star))
+        m = len(link)
+        poly = list(range(m))
+        new = []
+        while len(poly) > 3:
+            for idx in range(len(poly)):
+                i0, i1, i2 = poly[idx - 1], poly[idx], poly[(idx + 1) % len(poly)]
+                p, q, r = link[i0], link[i1], link[i2]
+                if orient2d(*P[p], *P[q], *P[r]) <= 0:
+                    continue
+                if any(incircle(*P[p], *P[q], *P[r], *P[link[s]]) > 0
+                       for s in poly if s not in (i0, i1, i2)):
+                    continue
+                new.append((p, q, r))
+                poly.pop(idx)
+                break
+            else:
+                raise RuntimeError(f"no Delaunay ear in the star of node {v}")
+        new.append(tuple(link[i] for i in poly))
+        slots = star[:m - 2]
+        polyedge = {(link[i], link[(i + 1) % m]): outer[i] for i in range(m)}
+        diag = {}
+        for s_, (p, q, r) in zip(slots, new):
+            T[s_] = (p, q, r)
+        for s_ in slots:
+            for k in range(3):
+                e1, e2 = int(T[s_, (k + 1) % 3]), int(T[s_, (k + 2) % 3])
+                if (e1, e2) in polyedge:
+                    nb = polyedge[(e1, e2)]
+                    N[s_, k] = nb
+                    if nb >= 0:
+                        N[nb, (T[nb] != e1) & (T[nb] != e2)] = s_
+                else:
+                    key = (min(e1, e2), max(e1, e2))
+                    if key in diag:
+                        o, ko = diag[key]
+                        N[s_, k] = o
+                        N[o, ko] = s_
+                    else:
+                        diag[key] = (s_, k)
+        self._fill_from(snap, np.array(slots))
+        self._delete_triangles(sorted(star[m - 2:], reverse=True))
+
+    def _delete_triangles(self, dead):
+        """Remove dead triangle slots (descending), moving the last rows in."""
+        tri = self.triangulation
+        T, N = tri.triangles, tri.neighbours
+        fields = {k: F for k, F in self.ip_fields.items()}
+        nt = T.shape[0]
+        for d in dead:
+            last = nt - 1
+            if d != last:
+                T[d] = T[last]
+                N[d] = N[last]
+                for nb in N[d]:
+                    if nb >= 0:
+                        N[nb][N[nb] == last] = d
+                for F in fields.values():
+                    F[d] = F[last]
+            nt -= 1
+        tri.triangles = np.ascontiguousarray(T[:nt])
+        tri.neighbours = np.ascontiguousarray(N[:nt])
+        for k, F in fields.items():
+            self.ip_fields[k] = np.ascontiguousarray(F[:nt])
+        tri._changed()
+
+    def _reinsert_vertex(self, v):
+        tri = self.triangulation
+        x = tri.nodes[v]
+        cav = tri.cavity(x)
+        snap = self._snapshot(cav)
+        nt = tri.ntriangles
+        T = np.vstack([tri.triangles, np.zeros((2, 3), np.int64)])
+        N = np.vstack([tri.neighbours, np.zeros((2, 3), np.int64)])
+        cap = max(64, 4 * cav.size)
+        be = [np.empty(cap + 2, np.int64) for _ in range(5)]
+        r = _insert(tri.nodes, T, N, nt, v, int(cav[0]), np.empty(cap, np.int64),
+                    np.empty((cap, 3), np.int64), np.empty(cap + 4, np.int64), *be,
+                    np.array([nt, nt + 1], dtype=np.int64))
+        if r < 0:
+            raise ValueError(f"node {v} could not be re-inserted at {x.tolist()} (code {r})")
+        tri.triangles = np.ascontiguousarray(T[:nt + r])
+        tri.neighbours = np.ascontiguousarray(N[:nt + r])
+        tri._changed()
+        for k, F in self.ip_fields.items():
+            self.ip_fields[k] = np.concatenate([F, np.zeros((r,) + F.shape[1:])])
+        self._fill_from(snap, np.r_[cav, np.arange(nt, nt + r)])
+
+    def _on_flips(self, log):
+        if not self.ip_fields:
+            return
+        for name, F in self.ip_fields.items():
+            flat = F.reshape(F.shape[0], 3, -1)
+            if self.remap == "average":
+                _remap_average(log, flat)
+            else:
+                _remap_conservative(self.nodes, log, flat)
+            self.ip_fields[name] = flat.reshape(F.shape)
+
+    def _invalidate(self):
+        self._cache = {}
+        self._version += 1
+
+    # -- node injection ----------------------------------------------------------
+    def inject_nodes(self, factor: float = 2.0) -> int:
+        """Insert a node at the centroid of the largest triangle around every
+        node whose area (a third of its triangles' area) exceeds ``factor``
+        times its initial area. Only local changes: the triangle is split in
+        three (integration-point fields evaluated from its linear field, which
+        conserves their integrals), then Lawson flips with the remap. Node
+        fields of new nodes come from Sibson interpolation. Returns the number
+        of nodes inserted."""
+        if factor <= 1:
+            raise ValueError(f"the injection factor must exceed 1, got {factor}")
+        area = self.node_areas()
+        grown = np.flatnonzero(area > factor * self._ref_area)
+        if not grown.size:
+            return 0
+        P, T = self.nodes, self.triangles
+        tri_area = 0.5 * np.abs(_cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
+        best = np.full(P.shape[0], -1)
+        order = np.argsort(tri_area)
+        for k in range(3):
+            best[T[order, k]] = order  # the largest incident triangle wins
+        targets = np.unique(best[grown])
+        x_new = P[T[targets]].mean(axis=1)
+        fields = {}
+        if self.node_fields:
+            Phi = sibson_coordinates(self.triangulation, x_new)
+            fields = {k: Phi @ v.reshape(v.shape[0], -1) for k, v in self.node_fields.items()}
+        for t, x in zip(targets, x_new):
+            self._split(int(t), x)
+        n_new = x_new.shape[0]
+        for k, v in self.node_fields.items():
+            self.node_fields[k] = np.concatenate([v, fields[k].reshape((n_new,) + v.shape[1:])])
+        self._on_wall = np.concatenate([self._on_wall, np.zeros((n_new, 2), dtype=bool)])
+        self.triangulation.make_delaunay(on_flips=self._on_flips)
+        area = self.node_areas()
+        self._ref_area = np.concatenate([self._ref_area, area[-n_new:]])
+        self._invalidate()
+        return n_new
+
+    def _split(self, t, x):
+        """Split triangle t into three at the interior point x (appended as a node)."""
+        tri = self.triangulation
+        P = np.vstack([tri.nodes, x[None]])
+        i = P.shape[0] - 1
+        T, N = tri.triangles, tri.neighbours
+        a, b, c = T[t]
+        na, nb, nc = N[t]
+        nt = T.shape[0]
+        t1, t2 = nt, nt + 1
+        T = np.vstack([T, [[i, c, a], [i, a, b]]])
+        N = np.vstack([N, [[nb, t2, t], [nc, t, t1]]])
+        T[t] = (i, b, c)
+        N[t] = (na, t1, t2)
+        for nbr, new in ((nb, t1), (nc, t2)):
+            if nbr >= 0:
+                N[nbr][N[nbr] == t] = new
+        # ip fields: evaluate the parent's linear field at the children's points
+        for name, F in self.ip_fields.items():
+            flat = F.reshape(F.shape[0], 3, -1)
+            Fv = 2.0 * flat[t] - flat[t].sum(axis=0) / 3.0  # values at vertices a, b, c
+            M = np.array([[P[a, 0], P[b, 0], P[c, 0]], [P[a, 1], P[b, 1], P[c, 1]], [1, 1, 1]])
+
+            def at(y):
+                return np.linalg.solve(M, np.array([y[0], y[1], 1.0])) @ Fv
+
+            new = np.empty((3, 3, flat.shape[2]))
+            for r, tri_v in enumerate(((i, b, c), (i, c, a), (i, a, b))):
+                q = P[list(tri_v)]
+                for k in range(3):
+                    new[r, k] = at((2 / 3) * q[k] + (1 / 6) * (q[(k + 1) % 3] + q[(k + 2) % 3]))
+            flat = np.concatenate([flat, new[1:]])
+            flat[t] = new[0]
+            self.ip_fields[name] = flat.reshape((flat.shape[0],) + F.shape[1:])
+        P.flags.writeable = False
+        tri.nodes, tri.triangles, tri.neighbours = P, T, N
+        tri._changed()
+
+    # -- checkpoints -------------------------------------------------------------
+    def save(self, path) -> None:
+        """Write the whole state to ``path`` (.npz), atomically (temporary file
+        in the same folder, then rename)."""
+        path = os.fspath(path)
+        meta = {"time": self.time, "step": self.step, "remap": self.remap, "walls": self.walls,
+                "node_fields": list(self.node_fields), "ip_fields": list(self.ip_fields),
+                "history": self.history, "format": 1}
+        arrays = {"nodes": self.nodes, "triangles": self.triangles,
+                  "neighbours": self.triangulation.neighbours, "ref_area": self._ref_area,
+                  "on_wall": self._on_wall, "box_lo": self._box[0], "box_hi": self._box[1],
+                  "meta": np.array(json.dumps(meta))}
+        arrays.update({f"node__{k}": v for k, v in self.node_fields.items()})
+        arrays.update({f"ip__{k}": v for k, v in self.ip_fields.items()})
+        folder = os.path.dirname(os.path.abspath(path))
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **arrays)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+            raise
+
+    @classmethod
+    def load(cls, path) -> "LagrangianMesh":
+        """Restore a mesh written by :meth:`save`; continuing from it gives
+        bit-identical results to a run that never stopped."""
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            self = cls.__new__(cls)
+            tri = Triangulation.__new__(Triangulation)
+            nodes = z["nodes"].copy()
+            nodes.flags.writeable = False
+            tri.nodes = nodes
+            tri.triangles = z["triangles"].copy()
+            tri.neighbours = z["neighbours"].copy()
+            tri.last_flips = 0
+            tri._changed()
+            self.triangulation = tri
+            self.remap = meta["remap"]
+            self.walls = meta["walls"]
+            self.node_fields = {k: z[f"node__{k}"].copy() for k in meta["node_fields"]}
+            self.ip_fields = {k: z[f"ip__{k}"].copy() for k in meta["ip_fields"]}
+            self._ref_area = z["ref_area"].copy()
+            self._on_wall = z["on_wall"].copy()
+            self._box = (z["box_lo"].copy(), z["box_hi"].copy())
+            self.time = meta["time"]
+            self.step = meta["step"]
+            self.history = meta["history"]
+            self._version = 0
+            self._cache = {}
+        return self

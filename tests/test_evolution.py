@@ -1,0 +1,196 @@
+"""The Lagrangian evolving mesh: moves, flips, remaps, injection, checkpoints."""
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from skfem_nem import LagrangianMesh
+
+A3 = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+
+
+def box_nodes(n=600, seed=0, k=16):
+    rng = np.random.default_rng(seed)
+    s = (np.arange(1, k) + 0.3 * rng.random(k - 1)) / k
+    return np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], np.c_[s, 0 * s], np.c_[s, 1 + 0 * s],
+                 np.c_[0 * s, s], np.c_[1 + 0 * s, s], 0.01 + 0.98 * rng.random((n, 2))]
+
+
+def ip_points(lm):
+    X = lm.nodes[lm.triangles]  # (nt, 3, 2)
+    return np.einsum("kj,tjd->tkd", A3, X)
+
+
+def edge_set(T):
+    e = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    e.sort(axis=1)
+    return {tuple(r) for r in e}
+
+
+def check_mesh(lm, n):
+    tri = lm.triangulation
+    assert tri.npoints == n
+    assert np.all(tri.orientation() > 0)
+    assert tri.is_delaunay()
+    used = np.zeros(n, bool)
+    used[tri.triangles.ravel()] = True
+    assert used.all()  # no node lost
+    # same edges as Qhull on the same nodes (random nodes: no co-circular quads)
+    assert edge_set(tri.triangles) == edge_set(Delaunay(tri.nodes).simplices)
+
+
+def vortex(x):
+    X, Y = x[:, 0], x[:, 1]
+    return np.c_[np.sin(np.pi * X) ** 2 * np.sin(2 * np.pi * Y),
+                 -np.sin(np.pi * Y) ** 2 * np.sin(2 * np.pi * X)]
+
+
+@pytest.mark.parametrize("jitter", [0.01, 0.05, 0.1, 0.3])
+def test_random_jitter(jitter):
+    p = box_nodes()
+    lm = LagrangianMesh(p)
+    h = 1 / np.sqrt(p.shape[0])
+    rng = np.random.default_rng(1)
+    d = jitter * h * (rng.random(p.shape) - 0.5)
+    r = lm.advance(lambda x: d, 1.0)
+    check_mesh(lm, p.shape[0])
+    # walls kept exactly
+    on = (p == 0) | (p == 1)
+    np.testing.assert_array_equal(lm.nodes[on], p[on])
+    if jitter >= 0.1:
+        assert r["flips"] > 0
+
+
+def test_shear_and_vortex_many_steps():
+    p = box_nodes(400)
+    lm = LagrangianMesh(p, node_fields={"x0": p})
+    for _ in range(5):
+        lm.advance(lambda x: np.c_[0.6 * np.sin(np.pi * x[:, 0]) * (x[:, 1] - 0.5), 0 * x[:, 1]], 0.05)
+    check_mesh(lm, p.shape[0])
+    for _ in range(20):
+        lm.advance(vortex, 0.02)
+    check_mesh(lm, p.shape[0])
+    assert sum(h["flips"] for h in lm.history) > 100
+    # node fields follow their nodes
+    np.testing.assert_array_equal(lm.node_fields["x0"], p)
+
+
+def test_rigid_motion_causes_no_flip():
+    p = box_nodes(300)
+    lm = LagrangianMesh(p, walls=None)
+    T0 = lm.triangles.copy()
+    r = lm.advance(lambda x: np.ones_like(x) * [0.25, -0.5], 1.0)
+    assert r["flips"] == 0
+    c = np.array([0.5, 0.5])
+    for _ in range(4):
+        r = lm.advance(lambda x: np.c_[-(x[:, 1] - c[1]), x[:, 0] - c[0]], 0.1)
+        assert r["flips"] == 0
+    np.testing.assert_array_equal(lm.triangles, T0)
+
+
+@pytest.mark.parametrize("remap", ["conservative", "average"])
+def test_remap_on_flips(remap):
+    p = box_nodes(500)
+    lm = LagrangianMesh(p, remap=remap)
+    rng = np.random.default_rng(2)
+    # move the nodes without repairing, then repair at fixed positions
+    d = 0.1 / np.sqrt(p.shape[0]) * (rng.random(p.shape) - 0.5)
+    on = (p == 0) | (p == 1)
+    for scale in (1.0, 0.5, 0.3, 0.2, 0.1):
+        lm._set_positions(np.where(on, p, p + scale * d))
+        if np.all(lm.triangulation.orientation() > 0):  # flips can repair this
+            break
+    assert not lm.triangulation.is_delaunay()
+    xq = ip_points(lm)
+    f1 = rng.random(xq.shape[:2])
+    lm.ip_fields["s"] = np.stack([f1, 3 * f1 + 2, xq[..., 0] + 2 * xq[..., 1]], -1)
+    before = lm.ip_integral("s")
+    flips = lm.triangulation.make_delaunay(on_flips=lm._on_flips)
+    assert flips > 10
+    after = lm.ip_integral("s")
+    s = lm.ip_fields["s"]
+    # linear relations between components survive both rules
+    np.testing.assert_allclose(s[..., 1], 3 * s[..., 0] + 2, atol=1e-12)
+    if remap == "conservative":
+        np.testing.assert_allclose(after, before, rtol=0, atol=1e-12)
+        # a linear field is kept exactly
+        xq = ip_points(lm)
+        np.testing.assert_allclose(s[..., 2], xq[..., 0] + 2 * xq[..., 1], atol=1e-12)
+    else:
+        assert np.abs(after[:2] - before[:2]).max() > 1e-12  # not conservative
+
+
+def test_injection_keeps_delaunay():
+    p = box_nodes(300)
+    lm = LagrangianMesh(p, node_fields={"rho": 1 + p[:, 0]}, ip_fields={"s": np.ones(3)})
+    I0 = lm.ip_integral("s")
+    # strong divergent flow from the centre thins the middle
+    def spread(x):
+        X, Y = x[:, 0], x[:, 1]
+        return -0.3 * np.c_[np.sin(2 * np.pi * X) * np.sin(np.pi * Y),
+                            np.sin(2 * np.pi * Y) * np.sin(np.pi * X)]
+    inj = 0
+    for _ in range(10):
+        r = lm.advance(spread, 0.1, inject=1.5)
+        inj += r["injected"]
+    assert inj > 0
+    n = lm.triangulation.npoints
+    assert n == p.shape[0] + inj
+    check_mesh(lm, n)
+    assert lm.node_fields["rho"].shape == (n,)
+    # injected nodes get interpolated values (the field is linear in the initial x)
+    assert np.all((lm.node_fields["rho"] >= 1) & (lm.node_fields["rho"] <= 2))
+    # the constant ip field keeps its integral (= area) through splits and flips
+    np.testing.assert_allclose(lm.ip_integral("s"), I0, atol=1e-12)
+
+
+def test_restart_is_bit_identical(tmp_path):
+    p = box_nodes(300)
+    a = LagrangianMesh(p, node_fields={"x0": p}, ip_fields={"s": np.arange(3.0)})
+    for _ in range(3):
+        a.advance(vortex, 0.03)
+    a.save(tmp_path / "ck.npz")
+    b = LagrangianMesh.load(tmp_path / "ck.npz")
+    for _ in range(4):
+        a.advance(vortex, 0.03, inject=1.3)
+        b.advance(vortex, 0.03, inject=1.3)
+    np.testing.assert_array_equal(a.nodes, b.nodes)
+    np.testing.assert_array_equal(a.triangles, b.triangles)
+    np.testing.assert_array_equal(a.ip_fields["s"], b.ip_fields["s"])
+    np.testing.assert_array_equal(a.node_fields["x0"], b.node_fields["x0"])
+    assert a.time == b.time and a.step == b.step and a.history == b.history
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+@pytest.mark.parametrize("bad, match", [
+    (lambda x: np.full_like(x, np.nan), "non-finite values at .* node"),
+    (lambda x: np.zeros((3, 2)), "shape"),
+    (lambda x: 100 * np.ones_like(x), "leave the box"),
+])
+def test_bad_velocity_leaves_mesh_unchanged(bad, match):
+    p = box_nodes(200)
+    lm = LagrangianMesh(p, ip_fields={"s": np.arange(3.0)})
+    lm.advance(vortex, 0.02)
+    state = (lm.nodes.copy(), lm.triangles.copy(), lm.ip_fields["s"].copy(), lm.time, lm.step)
+    with pytest.raises(ValueError, match=match):
+        lm.advance(bad, 0.1)
+    np.testing.assert_array_equal(lm.nodes, state[0])
+    np.testing.assert_array_equal(lm.triangles, state[1])
+    np.testing.assert_array_equal(lm.ip_fields["s"], state[2])
+    assert (lm.time, lm.step) == state[3:]
+    with pytest.raises(ValueError, match="dt"):
+        lm.advance(vortex, -1.0)
+
+
+def test_max_dt_and_basis():
+    p = box_nodes(200)
+    lm = LagrangianMesh(p)
+    v = vortex(p)
+    dt = lm.max_dt(v, 0.1)
+    assert dt > 0
+    r = lm.advance(vortex, dt)
+    assert r["substeps"] == 1
+    b = lm.basis()
+    assert b.nelems == lm.triangles.shape[0]
+    # ip slot k of triangle t is the basis' quadrature point k of element t
+    np.testing.assert_allclose(np.asarray(b.global_coordinates()).transpose(1, 2, 0),
+                               ip_points(lm), atol=1e-14)

@@ -221,8 +221,9 @@ class LagrangianMesh:
     Attributes
     ----------
     triangulation, time, step, node_fields, ip_fields, history (a list of
-    per-step dicts: dt, substeps, flips, injected, iterations, min_angle,
-    changed triangles).
+    per-step dicts: step, time, dt, iterations (predictor-corrector),
+    substeps, flips, relocated, injected, min_angle (degrees),
+    triangles_changed, stencils_affected).
     """
 
     def __init__(self, nodes, node_fields: Optional[Dict[str, np.ndarray]] = None,
@@ -266,6 +267,7 @@ class LagrangianMesh:
         self.history = []
         self._version = 0
         self._cache = {}
+        self._touched = []
 
     # -- views ----------------------------------------------------------------
     @property
@@ -390,6 +392,7 @@ class LagrangianMesh:
                 raise ValueError(f"{out.size} node(s) would leave the box, first node {out[0]} "
                                  f"to {x[out[0]].tolist()}: reduce dt")
         state = self._state()
+        self._touched = []
         try:
             flips, substeps, relocated = self._move(x0, x, max_substeps)
         except BaseException:
@@ -403,6 +406,15 @@ class LagrangianMesh:
         self.step += 1
         report["injected"] = self.inject_nodes(inject) if inject else 0
         report["min_angle"] = self.min_angle()
+        # locality: triangles changed by flips / injection / relocation, and the
+        # stencils (triangles whose quadrature points may have other natural
+        # neighbours now) that a basis update would recompute
+        changed = (np.unique(np.concatenate(self._touched)) if self._touched
+                   else np.zeros(0, np.int64))
+        changed = changed[changed < self.triangles.shape[0]]
+        nb = self.triangulation.neighbours[changed].ravel()
+        report["triangles_changed"] = int(changed.size)
+        report["stencils_affected"] = int(np.union1d(changed, nb[nb >= 0]).size)
         self.history.append(report)
         return report
 
@@ -560,6 +572,7 @@ class LagrangianMesh:
                     else:
                         diag[key] = (s_, k)
         self._fill_from(snap, np.array(slots))
+        self._touched.append(np.array(star, dtype=np.int64))
         self._delete_triangles(sorted(star[m - 2:], reverse=True))
 
     def _delete_triangles(self, dead):
@@ -606,8 +619,10 @@ class LagrangianMesh:
         for k, F in self.ip_fields.items():
             self.ip_fields[k] = np.concatenate([F, np.zeros((r,) + F.shape[1:])])
         self._fill_from(snap, np.r_[cav, np.arange(nt, nt + r)])
+        self._touched.append(np.r_[cav, np.arange(nt, nt + r)].astype(np.int64))
 
     def _on_flips(self, log):
+        self._touched.append(log[:, :2].ravel().copy())
         if not self.ip_fields:
             return
         for name, F in self.ip_fields.items():
@@ -671,6 +686,7 @@ class LagrangianMesh:
         na, nb, nc = N[t]
         nt = T.shape[0]
         t1, t2 = nt, nt + 1
+        self._touched.append(np.array([t, nt, nt + 1], dtype=np.int64))
         T = np.vstack([T, [[i, c, a], [i, a, b]]])
         N = np.vstack([N, [[nb, t2, t], [nc, t, t1]]])
         T[t] = (i, b, c)
@@ -754,4 +770,5 @@ class LagrangianMesh:
             self.history = meta["history"]
             self._version = 0
             self._cache = {}
+            self._touched = []
         return self

@@ -53,6 +53,9 @@ def test_random_jitter(jitter):
     d = jitter * h * (rng.random(p.shape) - 0.5)
     r = lm.advance(lambda x: d, 1.0)
     check_mesh(lm, p.shape[0])
+    # locality: only triangles near flips change
+    assert r["triangles_changed"] <= 2 * r["flips"] + 10 * r["relocated"]
+    assert r["triangles_changed"] <= r["stencils_affected"] <= 4 * r["triangles_changed"]
     # walls kept exactly
     on = (p == 0) | (p == 1)
     np.testing.assert_array_equal(lm.nodes[on], p[on])

@@ -93,16 +93,9 @@ def _locate(P, T, N, qx, qy, start):
                 moved = True
                 break
         if not moved:
-            # the edge back to prev was skipped: confirm it too
-            ok = True
-            for k in range(3):
-                a = T[t, (k + 1) % 3]
-                b = T[t, (k + 2) % 3]
-                if orient2d_sign(P[a, 0], P[a, 1], P[b, 0], P[b, 1], qx, qy) < 0.0:
-                    ok = False
-            if ok:
-                return t, -1
-            prev = -1
+            # the edge back to prev was skipped: the point is strictly on this
+            # side of it (that is why the walk crossed it), so t contains it
+            return t, -1
     # the walk did not terminate (only possible on invalid triangulations):
     # fall back to a scan
     for t in range(nt):

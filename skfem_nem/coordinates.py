@@ -49,8 +49,7 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from .predicates import orient2d
-from .triangulation import (Triangulation, _cavity_boundary, _grow_cavity, _locate,
-                            _locate_many)
+from .triangulation import Triangulation, _cavity_boundary, _grow_cavity, _locate
 
 __all__ = ["sibson_coordinates", "laplace_coordinates", "natural_neighbour_coordinates"]
 
@@ -419,10 +418,11 @@ def natural_neighbour_coordinates(
                                         gradient, cap, 1)
             status[redo] = st2
             done = np.flatnonzero(st2 != OVERFLOW)
-            E = sp.coo_matrix((np.ones(done.size), (redo[done], done)),
-                              shape=(c1 - c0, redo.size)).tocsr()
-            keep = sp.diags((~np.isin(np.arange(c1 - c0), redo[done])).astype(float))
-            mats = [keep @ M + E @ X for M, X in zip(mats, extra)]
+            # splice the recomputed rows in by row selection (sparse products
+            # and sums would drop explicit zeros and break the shared pattern)
+            src = np.arange(c1 - c0)
+            src[redo[done]] = (c1 - c0) + done
+            mats = [sp.vstack([M, X], format="csr")[src] for M, X in zip(mats, extra)]
             tloc[redo[done]] = t2[done]
             redo = redo[st2 == OVERFLOW]
             cap *= 4
@@ -436,6 +436,9 @@ def natural_neighbour_coordinates(
             sp.csr_matrix((m, n))
         M.sort_indices()
         out.append(M)
+    if gradient:
+        for D in out[1:]:
+            assert D.nnz == out[0].nnz and np.array_equal(D.indices, out[0].indices)
     result = (out[0], out[1:]) if gradient else out[0]
     if return_triangles:
         return result, tri_out

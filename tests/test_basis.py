@@ -1,5 +1,4 @@
 """NaturalNeighbourBasis inside scikit-fem: everything a P1 user does works."""
-import warnings
 
 import numpy as np
 import pytest

@@ -365,3 +365,20 @@ def test_roundoff_outside_hull_is_snapped():
     n = np.array([(b - a)[1], -(b - a)[0]])
     with pytest.raises(ValueError, match=r"outside .* x\[0\]"):
         sibson_coordinates(p, (q[3] + 1e-6 * n)[None])
+
+
+def test_shared_pattern_with_exact_zero_gradients():
+    # mirror-symmetric co-circular nodes: more than the first-pass buffer of
+    # natural neighbours, and some gradient entries exactly zero; values and
+    # gradients must still share one sparsity pattern
+    t = 2 * np.pi * np.arange(1, 15) / 30
+    h = np.c_[np.cos(t), np.sin(t)]
+    nodes = np.r_[[[1.0, 0.0]], h, [[-1.0, 0.0]], h[::-1] * [1, -1]]
+    Phi, (Dx, Dy) = sibson_coordinates(Triangulation(nodes), np.array([[0.5, 0.0], [0.1, 0.2]]),
+                                       gradient=True)
+    for D in (Dx, Dy):
+        np.testing.assert_array_equal(D.indptr, Phi.indptr)
+        np.testing.assert_array_equal(D.indices, Phi.indices)
+    assert Phi[0].nnz == 30
+    check_properties(Triangulation(nodes), np.array([[0.5, 0.0], [0.1, 0.2]]), sibson_coordinates,
+                     tol=1e-11)

@@ -1,20 +1,9 @@
 """The examples run and produce what they claim."""
-import importlib
-import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-
-
-def load(name):
-    sys.path.insert(0, str(EXAMPLES))
-    try:
-        return importlib.import_module(name)
-    finally:
-        sys.path.pop(0)
+from conftest import load_example as load
 
 
 def test_ex01_interpolation(tmp_path):

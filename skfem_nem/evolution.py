@@ -298,10 +298,25 @@ class LagrangianMesh:
         return self._cache[key]
 
     def node_areas(self) -> np.ndarray:
-        """(n,) a third of the area of the triangles around each node."""
+        """(n,) Voronoi-cell area of each node, from the cotangent formula.
+
+        For a Delaunay triangulation this is the area of the node's Voronoi
+        cell for interior nodes (and of the cell clipped by the normals through
+        the hull edges' midpoints for hull nodes); unlike the triangle areas it
+        does not jump when an edge flips, since flips happen where the two
+        triangulations give the same cells.
+        """
         P, T = self.nodes, self.triangles
-        a = 0.5 * np.abs(_cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
-        return np.bincount(T.ravel(), weights=np.repeat(a / 3.0, 3), minlength=P.shape[0])
+        out = np.zeros(P.shape[0])
+        for k in range(3):
+            i, j, l = T[:, k], T[:, (k + 1) % 3], T[:, (k + 2) % 3]
+            # angle at l opposite the edge (i, j)
+            u, v = P[i] - P[l], P[j] - P[l]
+            cot = (u * v).sum(1) / np.abs(_cross(u, v))
+            e2 = ((P[i] - P[j]) ** 2).sum(1)
+            np.add.at(out, i, cot * e2 / 8.0)
+            np.add.at(out, j, cot * e2 / 8.0)
+        return out
 
     def min_angle(self) -> float:
         """The smallest triangle angle, degrees."""
@@ -640,8 +655,10 @@ class LagrangianMesh:
     # -- node injection ----------------------------------------------------------
     def inject_nodes(self, factor: float = 2.0) -> int:
         """Insert a node at the centroid of the largest triangle around every
-        node whose area (a third of its triangles' area) exceeds ``factor``
-        times its initial area. Only local changes: the triangle is split in
+        node whose Voronoi area (:meth:`node_areas`) exceeds ``factor``
+        times its reference area (initially its first area; raised to its
+        area after each insertion it triggered), skipping slivers (smallest
+        angle below 15 degrees). Only local changes: the triangle is split in
         three (integration-point fields evaluated from its linear field, which
         conserves their integrals), then Lawson flips with the remap. Node
         fields of new nodes come from Sibson interpolation. Returns the number
@@ -654,10 +671,23 @@ class LagrangianMesh:
             return 0
         P, T = self.nodes, self.triangles
         tri_area = 0.5 * np.abs(_cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
+        ang = np.empty(T.shape[0])
+        _min_angles(P, T, ang)
+        # the largest incident triangle that is not a sliver (a centroid in a
+        # sliver along a wall would stack nodes ever closer to the wall)
+        score = np.where(ang > np.radians(15.0), tri_area, -1.0)
         best = np.full(P.shape[0], -1)
-        order = np.argsort(tri_area)
+        order = np.argsort(score)
         for k in range(3):
-            best[T[order, k]] = order  # the largest incident triangle wins
+            best[T[order, k]] = order  # the best incident triangle wins
+        ok = score[best[grown]] > 0
+        # nodes whose growth triggered an insertion (or could not) restart
+        # their reference from the area they will have now
+        grown_all = grown
+        grown = grown[ok]
+        if not grown.size:
+            self._ref_area[grown_all] = area[grown_all]
+            return 0
         targets = np.unique(best[grown])
         x_new = P[T[targets]].mean(axis=1)
         fields = {}
@@ -673,6 +703,7 @@ class LagrangianMesh:
         self.triangulation.make_delaunay(on_flips=self._on_flips)
         area = self.node_areas()
         self._ref_area = np.concatenate([self._ref_area, area[-n_new:]])
+        self._ref_area[grown_all] = np.maximum(self._ref_area[grown_all], area[grown_all])
         self._invalidate()
         return n_new
 

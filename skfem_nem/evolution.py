@@ -393,12 +393,19 @@ class LagrangianMesh:
         v0 = self._velocity(velocity, x0)
         x = x0 + dt * v0
         it = 0
+        converged = False
         for it in range(1, maxiter + 1):
             xn = x0 + 0.5 * dt * (v0 + self._velocity(velocity, x))
             change = np.abs(xn - x).max()
             x = xn
             if change <= tol * size:
+                converged = True
                 break
+        if not converged:
+            import warnings
+            warnings.warn(f"step {self.step + 1}: the predictor-corrector did not converge in "
+                          f"{maxiter} iterations (last change {change:.3e}, tolerance "
+                          f"{tol * size:.3e}); reduce dt", RuntimeWarning, stacklevel=2)
         if self.walls == "box":
             x = np.where(self._on_wall, x0, x)
             lo, hi = self._box
@@ -415,7 +422,8 @@ class LagrangianMesh:
             raise
         self._invalidate()
         report = {"step": self.step + 1, "time": self.time + dt, "dt": dt,
-                  "iterations": it, "substeps": substeps, "flips": flips,
+                  "iterations": it, "converged": converged, "substeps": substeps,
+                  "flips": flips,
                   "relocated": relocated}
         self.time += dt
         self.step += 1

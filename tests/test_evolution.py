@@ -197,3 +197,13 @@ def test_max_dt_and_basis():
     # ip slot k of triangle t is the basis' quadrature point k of element t
     np.testing.assert_allclose(np.asarray(b.global_coordinates()).transpose(1, 2, 0),
                                ip_points(lm), atol=1e-14)
+
+
+def test_predictor_corrector_warns_when_not_converged():
+    p = box_nodes(200)
+    lm = LagrangianMesh(p)
+    with pytest.warns(RuntimeWarning, match="did not converge"):
+        r = lm.advance(vortex, 0.02, maxiter=1, tol=1e-16)
+    assert not r["converged"]
+    r = lm.advance(vortex, 0.02)
+    assert r["converged"] and r["iterations"] < 10

@@ -16,9 +16,12 @@ from __future__ import annotations
 import numpy as np
 from skfem.assembly import CellBasis
 from skfem.assembly.form import BilinearForm, Functional, LinearForm
+from skfem.assembly.form.form import FormExtraParams
 from skfem.element import DiscreteField
 
 _INSTALLED = False
+#: element-pairs evaluated per form call in the stacked assembly
+STACK_SIZE = 1 << 19
 
 
 def _is_nn(basis) -> bool:
@@ -82,6 +85,70 @@ def _pairs(ubasis, vbasis):
         yield idx, u, v
 
 
+def _tile(v, reps, nelems):
+    """Repeat element-wise data ``reps`` times along the element axis."""
+    if isinstance(v, tuple):
+        return tuple(_tile(x, reps, nelems) for x in v)
+    if isinstance(v, DiscreteField):
+        if v.ndim >= 2 and v.shape[-2] == nelems:
+            return DiscreteField(*[None if x is None else _tile_array(np.asarray(x), reps)
+                                   for x in v.astuple])
+        return v
+    if isinstance(v, np.ndarray) and v.ndim >= 2 and v.shape[-2] == nelems:
+        return _tile_array(v, reps)
+    return v
+
+
+def _tile_array(x, reps):
+    sh = x.shape
+    return np.broadcast_to(x[..., None, :, :], sh[:-2] + (reps,) + sh[-2:]).reshape(
+        sh[:-2] + (reps * sh[-2],) + sh[-1:])
+
+
+def _stackable(b):
+    return hasattr(b, "stacked") and hasattr(b, "_raw")
+
+
+def _stacked_bilinear(form, u, v, kwargs):
+    """All local pairs (j, i) of two group bases in few form calls: the pairs
+    are stacked along the element axis (scikit-fem calls the form once per
+    pair, which for NEM's many small groups is dominated by call overhead)."""
+    ne = u.nelems
+    w = FormExtraParams({**u.default_parameters(), **form._normalize_asm_kwargs(kwargs, u)})
+    nu, nv = u.Nbfun, v.Nbfun
+    jj, ii = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    jj, ii = jj.ravel(), ii.ravel()
+    per = max(1, STACK_SIZE // max(1, ne))
+    data = np.empty((jj.size, ne), dtype=form.dtype)
+    for p0 in range(0, jj.size, per):
+        p1 = min(jj.size, p0 + per)
+        reps = p1 - p0
+        U = u.stacked(jj[p0:p1])
+        V = v.stacked(ii[p0:p1])
+        W = FormExtraParams({k: _tile(x, reps, ne) for k, x in w.items()})
+        dx = _tile_array(u.dx, reps)
+        data[p0:p1] = form._kernel(U, V, W, dx).reshape(reps, ne)
+    rows = v.element_dofs[ii].ravel()
+    cols = u.element_dofs[jj].ravel()
+    return np.array([rows, cols]), data.ravel()
+
+
+def _stacked_linear(form, v, kwargs):
+    ne = v.nelems
+    w = FormExtraParams({**v.default_parameters(), **form._normalize_asm_kwargs(kwargs, v)})
+    n = v.Nbfun
+    idx = np.arange(n)
+    per = max(1, STACK_SIZE // max(1, ne))
+    data = np.empty((n, ne), dtype=form.dtype)
+    for p0 in range(0, n, per):
+        p1 = min(n, p0 + per)
+        reps = p1 - p0
+        V = v.stacked(idx[p0:p1])
+        W = FormExtraParams({k: _tile(x, reps, ne) for k, x in w.items()})
+        data[p0:p1] = form._kernel(V, W, _tile_array(v.dx, reps)).reshape(reps, ne)
+    return np.array([v.element_dofs.ravel()]), data.ravel()
+
+
 def install():
     """Install the group-wise assembly wrappers (idempotent)."""
     global _INSTALLED
@@ -101,8 +168,13 @@ def install():
         nelems = (ubasis if _is_nn(ubasis) else vbasis).nelems
         rows, data = [], []
         shape = None
+        shape = (vbasis.N, ubasis.N)
         for idx, u, v in _pairs(ubasis, vbasis):
-            ind, d, shape, _ = bil(self, u, v, **_split_kwargs(kwargs, idx, nelems))
+            kw = _split_kwargs(kwargs, idx, nelems)
+            if STACK_SIZE > 0 and _stackable(u) and _stackable(v):
+                ind, d = _stacked_bilinear(self, u, v, kw)
+            else:
+                ind, d, _, _ = bil(self, u, v, **kw)
             rows.append(ind)
             data.append(d)
         return np.concatenate(rows, axis=1), np.concatenate(data), shape, None
@@ -112,8 +184,13 @@ def install():
             return lin(self, ubasis, vbasis, **kwargs)
         rows, data = [], []
         shape = None
+        shape = (ubasis.N,)
         for g in ubasis.groups:
-            ind, d, shape, _ = lin(self, g, **_split_kwargs(kwargs, g.tind, ubasis.nelems))
+            kw = _split_kwargs(kwargs, g.tind, ubasis.nelems)
+            if STACK_SIZE > 0:
+                ind, d = _stacked_linear(self, g, kw)
+            else:
+                ind, d, _, _ = lin(self, g, **kw)
             rows.append(ind)
             data.append(d)
         return np.concatenate(rows, axis=1), np.concatenate(data), shape, None

@@ -235,6 +235,26 @@ class _GroupBasis(AbstractBasis):
             basis = [(DiscreteField(V[j], np.stack([GX[j], GY[j]])),) for j in range(S)]
         self.basis = basis
         self.Nbfun = len(basis)
+        self._raw = (V, GX, GY)  # for the stacked assembly in _assembly
+
+    def stacked(self, idx):
+        """Local functions ``idx`` (P,) stacked along the element axis: a
+        one-tuple of DiscreteField over P * nelems elements (pair-major)."""
+        V, GX, GY = self._raw
+        nq = V.shape[2]
+        if isinstance(self.elem, ElementVector):
+            dim = self.elem.dim
+            j, c = idx // dim, idx % dim
+            val = np.zeros((dim, idx.size) + V.shape[1:])
+            grad = np.zeros((dim, dim, idx.size) + V.shape[1:])
+            for comp in range(dim):
+                sel = c == comp
+                val[comp, sel] = V[j[sel]]
+                grad[comp, 0, sel] = GX[j[sel]]
+                grad[comp, 1, sel] = GY[j[sel]]
+            return (DiscreteField(val.reshape(dim, -1, nq), grad.reshape(dim, dim, -1, nq)),)
+        return (DiscreteField(V[idx].reshape(-1, nq),
+                              np.stack([GX[idx].reshape(-1, nq), GY[idx].reshape(-1, nq)])),)
 
     @property
     def element_dofs(self):

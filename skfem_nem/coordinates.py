@@ -496,9 +496,11 @@ def _run_chunk(P, T, N, C, Qc, start, ikind, gradient, cap, nthreads, buffers=No
     count = np.empty(mc, np.int64)
     status = np.empty(mc, np.int64)
     tloc = np.empty(mc, np.int64)
+    # small batches run serially: waking the thread pool costs more than it saves
+    kernel = _query_batch if mc >= _PARALLEL_MIN else _query_batch_serial
     nblocks = max(1, min(mc // 64, 8 * nthreads))
-    _query_batch(P, T, N, C, Qc, start, ikind, gradient, cap, nblocks,
-                 out_i, out_v, out_gx, out_gy, count, status, tloc)
+    kernel(P, T, N, C, Qc, start, ikind, gradient, cap, nblocks,
+           out_i, out_v, out_gx, out_gy, count, status, tloc)
     indptr = np.zeros(mc + 1, dtype=np.int64)
     np.cumsum(count, out=indptr[1:])
     nnz = int(indptr[-1])
@@ -514,6 +516,10 @@ def _run_chunk(P, T, N, C, Qc, start, ikind, gradient, cap, nthreads, buffers=No
         mats.append(sp.csr_matrix((gx, indices.copy(), indptr.copy()), shape=(mc, n)))
         mats.append(sp.csr_matrix((gy, indices.copy(), indptr.copy()), shape=(mc, n)))
     return mats, status, tloc
+
+
+_query_batch_serial = njit(cache=True)(_query_batch.py_func)
+_PARALLEL_MIN = 20000
 
 
 @njit(cache=True)

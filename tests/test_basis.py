@@ -293,3 +293,29 @@ def test_p2_on_same_mesh_for_comparison(mesh):
     b2 = Basis(mesh, ElementTriP2())
     A = laplace.assemble(b2)
     np.testing.assert_allclose(A @ np.ones(b2.N), 0, atol=1e-11)
+
+
+def test_stacked_assembly_equals_pairwise(mesh, basis, vbasis, monkeypatch):
+    """The stacked assembly (few form calls) gives scikit-fem's per-pair result."""
+    import skfem_nem._assembly as assembly
+
+    @BilinearForm
+    def weighted(u, v, w):
+        return (1 + w["k"] ** 2 + w.x[0]) * dot(grad(u), grad(v)) + w["k"].grad[0] * u * v
+
+    @LinearForm
+    def load(v, w):
+        return w["k"] * v + w.h * grad(v)[1]
+
+    k = np.sin(3 * mesh.p[0]) + mesh.p[1]
+    results = []
+    for size in (0, 1 << 19, 7):  # per pair, stacked, stacked in tiny chunks
+        monkeypatch.setattr(assembly, "STACK_SIZE", size)
+        A = weighted.assemble(basis, k=k)
+        B = weighted.assemble(basis, k=basis.interpolate(k))
+        f = load.assemble(basis, k=k)
+        K = linear_elasticity(*lame_parameters(2.0, 0.25)).assemble(vbasis)
+        results.append((A, B, f, K))
+    for r in results[1:]:
+        for x, y in zip(results[0], r):
+            assert abs(x - y).max() < 1e-12 * max(1.0, abs(y).max())

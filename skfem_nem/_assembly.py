@@ -21,7 +21,7 @@ from skfem.element import DiscreteField
 
 _INSTALLED = False
 #: element-pairs evaluated per form call in the stacked assembly
-STACK_SIZE = 1 << 17
+STACK_SIZE = 1 << 16
 
 
 def _is_nn(basis) -> bool:

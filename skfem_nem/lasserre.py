@@ -414,10 +414,12 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
 
 
 @njit(cache=True)
-def _hull_distance(P, S, s, k, x, d, E):
+def _hull_distance(P, S, s, k, x, d, ctr, E, Mn):
     """Signed distance of x from the plane of the hull facet opposite vertex k
-    of simplex s (positive towards the simplex) and the largest distance from
-    x to the facet's vertices."""
+    of simplex s (positive on the side of ``ctr``, the centroid of the nodes,
+    which lies inside the hull; the simplex itself may be flat) and the
+    largest distance from x to the facet's vertices. The distance is +inf
+    for a degenerate facet."""
     f0 = -1
     r = 0
     L = 0.0
@@ -439,8 +441,6 @@ def _hull_distance(P, S, s, k, x, d, E):
     nrm2 = 0.0
     dist = 0.0
     side = 0.0
-    o = S[s, k]
-    Mn = np.empty((d, d))
     for c in range(d):
         for rr in range(d - 1):
             cc = 0
@@ -453,14 +453,16 @@ def _hull_distance(P, S, s, k, x, d, E):
             nc = -nc
         nrm2 += nc * nc
         dist += nc * (x[c] - P[f0, c])
-        side += nc * (P[o, c] - P[f0, c])
+        side += nc * (ctr[c] - P[f0, c])
+    if nrm2 == 0.0:
+        return np.inf, L
     if side < 0.0:
         dist = -dist
     return dist / np.sqrt(nrm2), L
 
 
 @njit(cache=True, error_model="numpy")
-def _locate(P, S, NB, x, s, d, E, rhs, lam, tol, htol):
+def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol):
     """Visibility walk from simplex s to a simplex containing x (barycentric
     coordinates >= -tol). Returns ``(simplex, status)``: OK, OUTSIDE (beyond a
     hull facet by more than the hull tolerance; the simplex is that facet's)
@@ -521,7 +523,7 @@ def _locate(P, S, NB, x, s, d, E, rhs, lam, tol, htol):
             return s, OK
         t = NB[s, k]
         if t < 0:
-            dist, L = _hull_distance(P, S, s, k, x, d, E)
+            dist, L = _hull_distance(P, S, s, k, x, d, ctr, E, Mn)
             if dist >= -htol * L:
                 return s, OK
             return s, OUTSIDE
@@ -579,9 +581,9 @@ def _locate_brute(P, S, x, d, E, rhs, lam, tol):
 
 
 @njit(cache=True, error_model="numpy")
-def _query(P, S, NB, x, hint, d, stamp_q, want_grad, tols, smark, mark,
+def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
            cav, bf, nn, q, Tc, tab, A, B, I, M, act, nact, mrows, cur, tpiv, acc, wm,
-           stamp, sc, G, E, rhs, lam, vol, gv, out_i, out_v, out_g):
+           stamp, sc, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
     """Sibson coordinates of one point x, searched for from simplex ``hint``.
 
     Writes up to ``nn.shape[0]`` entries into ``out_*`` (sorted by node
@@ -593,7 +595,7 @@ def _query(P, S, NB, x, hint, d, stamp_q, want_grad, tols, smark, mark,
                                                   tols[4], tols[5], tols[6])
     ccap = cav.shape[0]
     ncap = nn.shape[0]
-    s0, st = _locate(P, S, NB, x, hint, d, E, rhs, lam, wtol, htol)
+    s0, st = _locate(P, S, NB, x, hint, d, ctr, E, Mn, rhs, lam, wtol, htol)
     if st == OUTSIDE:
         return 0, OUTSIDE, 0
     if st == OVERFLOW:
@@ -625,7 +627,7 @@ def _query(P, S, NB, x, hint, d, stamp_q, want_grad, tols, smark, mark,
         for k in range(d + 1):
             t = NB[s, k]
             if t < 0:
-                dist, L = _hull_distance(P, S, s, k, x, d, E)
+                dist, L = _hull_distance(P, S, s, k, x, d, ctr, E, Mn)
                 if dist < -htol * L:
                     return 0, OUTSIDE, s * (d + 1) + k
                 if dist <= htol * L:
@@ -838,6 +840,12 @@ def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
     n = P.shape[0]
     d = P.shape[1]
     ns = S.shape[0]
+    ctr = np.zeros(d)
+    for v in range(n):
+        for k in range(d):
+            ctr[k] += P[v, k]
+    for k in range(d):
+        ctr[k] /= n
     for blk in prange(nblocks):
         lo = blk * m // nblocks
         hi = (blk + 1) * m // nblocks
@@ -864,6 +872,7 @@ def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
         sc = np.zeros(1, np.int64)
         G = np.empty(d)
         E = np.empty((d, d))
+        Mn = np.empty((d, d))
         rhs = np.empty(d)
         lam = np.empty(d + 1)
         vol = np.empty(ncap)
@@ -872,10 +881,10 @@ def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
         ov = np.empty(ncap)
         og = np.empty((ncap, d))
         for r in range(lo, hi):
-            cnt, st, inf = _query(P, S, NB, Q[r], start[r], d, r + 1, want_grad, tols,
+            cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, tols,
                                   smark, mark, cav, bf, nn, q, Tc, tab, A, B, I, M, act,
-                                  nact, mrows, cur, tpiv, acc, wm, stamp, sc, G, E, rhs,
-                                  lam, vol, gv, oi, ov, og)
+                                  nact, mrows, cur, tpiv, acc, wm, stamp, sc, G, E, Mn,
+                                  rhs, lam, vol, gv, oi, ov, og)
             count[r] = cnt
             status[r] = st
             info[r] = inf

@@ -103,9 +103,9 @@ ON_HULL = 4
 UNBOUNDED = 5
 
 # A reduced (unit) constraint normal shorter than this is parallel to the facet.
-_ZERO_ROW = 1e-9
+_ZERO_ROW = 1e-13
 # Parallel planes closer than this times the local length scale coincide.
-_TIE = 1e-9
+_TIE = 1e-13
 # Relative tolerance of the in-sphere test (tolerant: includes borderline simplices).
 _INSPHERE = 1e-10
 # A simplex counts as flat when its volume determinant is below this times the
@@ -113,10 +113,16 @@ _INSPHERE = 1e-10
 _FLAT = 1e-12
 # A point whose distance to a hull facet's plane is below this times its
 # distance to the facet's nodes is on the hull.
-_HULL = 1e-10
+_HULL = 1e-12
+# A hull facet whose normal (generalised cross product of its edges) is
+# shorter than this times the product of the edge lengths is degenerate.
+_HULL_FLAT = 1e-6
 # Linear precision residual |sum_i V_i (p_i - x)| / (V L) above which a query is
 # recomputed without the combinatorial facet filter (a safety net).
 _LINEAR = 1e-9
+# A vertex of a cell may violate its constraints by this times the local length
+# scale (vertex check of the combinatorial filter in degenerate configurations).
+_VERTEX = 1e-9
 # Barycentric coordinates above -_WALK count as inside a simplex (point location).
 _WALK = 1e-12
 
@@ -129,25 +135,38 @@ _CAPS = {2: (32, 64), 3: (96, 384), 4: (256, 2048)}
 # ---------------------------------------------------------------------------
 
 @njit(cache=True, error_model="numpy")
-def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, stamp, sc,
-          full, want_grad, G, ztol, btol, flag, cell, tab):
+def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
+          gq, rep, gmark, stamp, sc, full, strict, want_grad, G, ztol, btol, flag, cell,
+          tab):
     """Volume of the polytope {u in R^d : A[0, j] . u <= B[0, j], j < m0} by
     Lasserre's recursion, run iteratively with one buffer level per dimension
     (level l holds a system in d - l variables).
 
     Rows must have unit length; ``I[0, j]`` is row j's constraint id (0 for the
     bisector between x and the cell's node, whose facet's first moment
-    ``integral y dS`` goes to ``G`` when ``want_grad``). Unless ``full``, the
-    facets are filtered combinatorially: the face of the cell on the
-    constraints J is only bounded by constraints k such that a simplex in
-    ``Tc[:nT]`` (rows of d constraint ids: the simplices whose circumcentres
-    are the cell's vertices) holds J and k; the other constraints are
-    redundant there and are left out.
+    ``integral y dS`` goes to ``G`` when ``want_grad``).
 
-    The cells of x's neighbours i < j share the face on the bisector between
-    p_i and p_j, with opposite normals: cell ``cell`` stores the area of that
-    face in ``tab[cell, j]`` for j > cell and reuses ``tab[j, cell]`` for
-    j < cell (ids are j + 1).
+    Coincident rows. When a facet's system is built, rows whose planes
+    coincide (within ``ztol`` in direction and ``btol`` in offset) are merged
+    into one, which keeps the smallest id and the union of the ids as its
+    group ``gp[l, gs[l, j]:gs[l, j] + gc[l, j]]``; two rows that coincide
+    facing each other leave a slab of zero width, so the facet has zero
+    volume. (Lattices put many bisectors through the same lines.)
+
+    Combinatorial filter (unless ``full``). The face of the cell on the
+    constraints J is only bounded by constraints k such that a simplex in
+    ``Tc[:nT]`` (rows of d constraint ids: the Delaunay simplices whose
+    circumcentres are the cell's vertices) holds J and k, counting every id
+    of a merged group; the other constraints are redundant there and are
+    left out. This holds for nodes in general position; where more than
+    d + 1 nodes are co-spherical a face can be held by simplices that only
+    share a lower-dimensional coincidence with it, so the ``strict=False``
+    variant only asks for a simplex holding the last constraint of J and k.
+
+    Shared faces. The cells of x's neighbours i < j share the face on the
+    bisector between p_i and p_j, with opposite normals: cell ``cell`` stores
+    the area of that face in ``tab[cell, j]`` for j > cell and reuses
+    ``tab[j, cell]`` for j < cell (ids are j + 1).
 
     (One function without array-passing helpers: numba reference-counts
     array arguments with atomic operations, which dominated the run time.)
@@ -156,6 +175,10 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, stamp
         act[0, s] = s
     nact[0] = nT
     mrows[0] = m0
+    for j in range(m0):
+        gs[0, j] = j
+        gc[0, j] = 1
+        gp[0, j] = I[0, j]
     cur[0] = -1
     acc[0] = 0.0
     wm[0] = False
@@ -232,14 +255,20 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, stamp
         bi = B[l, i]
         nl = l + 1
         if not full:
-            # simplices holding the facet's constraints; mark their ids
+            # the simplices holding (a constraint of the group of) facet i,
+            # and the ids they hold
+            sc[0] += 1
+            gstp = sc[0]
+            for e in range(gs[l, i], gs[l, i] + gc[l, i]):
+                gmark[gp[l, e]] = gstp
             sc[0] += 1
             na = 0
-            for a in range(nact[l]):
-                s = act[l, a]
+            pl = l if strict else 0
+            for a in range(nact[pl]):
+                s = act[pl, a]
                 has = False
                 for k in range(d):
-                    if Tc[s, k] == idc:
+                    if gmark[Tc[s, k]] == gstp:
                         has = True
                         break
                 if has:
@@ -261,9 +290,18 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, stamp
             hi = np.inf
             cnt = 0
         mm = 0
+        pool = 0
         for j in range(mrows[l]):
-            if j == i or (not full and stamp[I[l, j]] != stp):
+            if j == i:
                 continue
+            if not full:
+                cand = False
+                for e in range(gs[l, j], gs[l, j] + gc[l, j]):
+                    if stamp[gp[l, e]] == stp:
+                        cand = True
+                        break
+                if not cand:
+                    continue
             f = A[l, j, t] * inv_ait
             bj = B[l, j] - f * bi
             if n == 2:
@@ -286,8 +324,9 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, stamp
                 if bj < -btol:
                     empty = True      # it cuts the whole facet away
                     break
-                # coincident planes: facing the same way, the smaller id owns
-                # the facet; facing each other, they bound a slab of zero width
+                # coincident planes (not merged above): facing the same way,
+                # the smaller id owns the facet; facing each other, they
+                # bound a slab of zero width
                 dot = 0.0
                 for k in range(n):
                     dot += A[l, j, k] * A[l, i, k]
@@ -309,6 +348,11 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, stamp
                     A[nl, mm, k] *= inv
                 B[nl, mm] = bj * inv
                 I[nl, mm] = I[l, j]
+                gs[nl, mm] = pool
+                gc[nl, mm] = gc[l, j]
+                for e in range(gs[l, j], gs[l, j] + gc[l, j]):
+                    gp[nl, pool] = gp[l, e]
+                    pool += 1
                 mm += 1
         if empty:
             continue
@@ -326,6 +370,53 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, stamp
         if mm == 0:
             flag[0] = 1
             continue
+        # merge coincident rows of the facet's system
+        merged = False
+        for b in range(mm):
+            rep[b] = b
+            for a in range(b):
+                if rep[a] != a:
+                    continue
+                ds = 0.0
+                do = 0.0
+                for k in range(n - 1):
+                    ds = max(ds, abs(A[nl, a, k] - A[nl, b, k]))
+                    do = max(do, abs(A[nl, a, k] + A[nl, b, k]))
+                if ds <= ztol and abs(B[nl, a] - B[nl, b]) <= btol:
+                    rep[b] = a
+                    merged = True
+                    break
+                if do <= ztol and abs(B[nl, a] + B[nl, b]) <= btol:
+                    empty = True  # a slab of zero width: no volume
+                    break
+            if empty:
+                break
+        if empty:
+            continue
+        if merged:
+            w = 0
+            pool = 0
+            for a in range(mm):
+                if rep[a] != a:
+                    continue
+                start = pool
+                idm = I[nl, a]
+                for b in range(a, mm):
+                    if rep[b] == a:
+                        idm = min(idm, I[nl, b])
+                        for e in range(gs[nl, b], gs[nl, b] + gc[nl, b]):
+                            gq[pool] = gp[nl, e]
+                            pool += 1
+                for k in range(n - 1):
+                    A[nl, w, k] = A[nl, a, k]
+                B[nl, w] = B[nl, a]
+                I[nl, w] = idm
+                gs[nl, w] = start
+                gc[nl, w] = pool - start
+                w += 1
+            for e in range(pool):
+                gp[nl, e] = gq[e]
+            mm = w
         mrows[nl] = mm
         cur[nl] = -1
         acc[nl] = 0.0
@@ -361,8 +452,9 @@ def _det_small(E, k):
 
 @njit(cache=True, error_model="numpy")
 def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
-    """Tolerant test: is x inside (or on) the circumsphere of simplex s?
-    Flat simplices count as in conflict."""
+    """Is x inside the circumsphere of simplex s? 2: strictly inside (the
+    circumcentre is a vertex of x's Voronoi cell); 1: on it within the
+    tolerance, or the simplex is flat; 0: outside."""
     v0 = S[s, 0]
     prod = 1.0
     for r in range(d):
@@ -387,14 +479,14 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
             rhs[c], rhs[p] = rhs[p], rhs[c]
         det *= E[c, c]
         if E[c, c] == 0.0:
-            return True
+            return 1
         for r in range(c + 1, d):
             f = E[r, c] / E[c, c]
             for j in range(c, d):
                 E[r, j] -= f * E[c, j]
             rhs[r] -= f * rhs[c]
     if abs(det) <= flat * prod:
-        return True
+        return 1
     for c in range(d - 1, -1, -1):
         acc = rhs[c]
         for j in range(c + 1, d):
@@ -410,7 +502,11 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
         c2 += rhs[k] * rhs[k]
     power = w2 - 2.0 * wc
     wn = np.sqrt(w2)
-    return power < tol * wn * (wn + 2.0 * np.sqrt(c2))
+    if power < 0.0:
+        return 2
+    if power < tol * wn * (wn + 2.0 * np.sqrt(c2)):
+        return 1
+    return 0
 
 
 @njit(cache=True)
@@ -419,10 +515,13 @@ def _hull_distance(P, S, s, k, x, d, ctr, E, Mn):
     of simplex s (positive on the side of ``ctr``, the centroid of the nodes,
     which lies inside the hull; the simplex itself may be flat) and the
     largest distance from x to the facet's vertices. The distance is +inf
-    for a degenerate facet."""
+    for a (nearly) degenerate facet, whose plane is ill-determined: Qhull
+    makes such slivers along hull ridges with collinear nodes, and the
+    well-shaped facets around them decide instead."""
     f0 = -1
     r = 0
     L = 0.0
+    prod = 1.0
     for j in range(d + 1):
         if j == k:
             continue
@@ -434,8 +533,11 @@ def _hull_distance(P, S, s, k, x, d, ctr, E, Mn):
         if f0 < 0:
             f0 = v
         else:
+            e2 = 0.0
             for c in range(d):
                 E[r, c] = P[v, c] - P[f0, c]
+                e2 += E[r, c] * E[r, c]
+            prod *= np.sqrt(e2)
             r += 1
     # normal by the generalised cross product: n_c = (-1)^c det(E without column c)
     nrm2 = 0.0
@@ -454,7 +556,7 @@ def _hull_distance(P, S, s, k, x, d, ctr, E, Mn):
         nrm2 += nc * nc
         dist += nc * (x[c] - P[f0, c])
         side += nc * (ctr[c] - P[f0, c])
-    if nrm2 == 0.0:
+    if not np.sqrt(nrm2) > _HULL_FLAT * prod:
         return np.inf, L
     if side < 0.0:
         dist = -dist
@@ -462,7 +564,54 @@ def _hull_distance(P, S, s, k, x, d, ctr, E, Mn):
 
 
 @njit(cache=True, error_model="numpy")
-def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol):
+def _barycentric(P, S, s, x, d, E, rhs, lam, flat_tol):
+    """Barycentric coordinates of x in simplex s into ``lam``; returns True
+    (and leaves ``lam`` alone) if the simplex is (nearly) flat: its volume
+    determinant is at most ``flat_tol`` times the product of its edge lengths
+    from the first vertex."""
+    v0 = S[s, 0]
+    prod = 1.0
+    for c in range(d):
+        e2 = 0.0
+        for r in range(d):
+            E[r, c] = P[S[s, c + 1], r] - P[v0, r]
+            e2 += E[r, c] * E[r, c]
+        prod *= np.sqrt(e2)
+    for r in range(d):
+        rhs[r] = x[r] - P[v0, r]
+    det = 1.0
+    for c in range(d):
+        p = c
+        for r in range(c + 1, d):
+            if abs(E[r, c]) > abs(E[p, c]):
+                p = r
+        if E[p, c] == 0.0:
+            return True
+        if p != c:
+            for j in range(d):
+                E[c, j], E[p, j] = E[p, j], E[c, j]
+            rhs[c], rhs[p] = rhs[p], rhs[c]
+        det *= E[c, c]
+        for r in range(c + 1, d):
+            f = E[r, c] / E[c, c]
+            for j in range(c, d):
+                E[r, j] -= f * E[c, j]
+            rhs[r] -= f * rhs[c]
+    if not abs(det) > flat_tol * prod:
+        return True
+    tot = 0.0
+    for c in range(d - 1, -1, -1):
+        acc = rhs[c]
+        for j in range(c + 1, d):
+            acc -= E[c, j] * lam[j + 1]
+        lam[c + 1] = acc / E[c, c]
+        tot += lam[c + 1]
+    lam[0] = 1.0 - tot
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol, flat_tol):
     """Visibility walk from simplex s to a simplex containing x (barycentric
     coordinates >= -tol). Returns ``(simplex, status)``: OK, OUTSIDE (beyond a
     hull facet by more than the hull tolerance; the simplex is that facet's)
@@ -472,31 +621,10 @@ def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol):
     ns = S.shape[0]
     prev = -1
     for step in range(ns + 100):
-        v0 = S[s, 0]
-        for r in range(d):
-            for c in range(d):
-                E[r, c] = P[S[s, c + 1], r] - P[v0, r]
-            rhs[r] = x[r] - P[v0, r]
-        flat = False
-        for c in range(d):
-            p = c
-            for r in range(c + 1, d):
-                if abs(E[r, c]) > abs(E[p, c]):
-                    p = r
-            if E[p, c] == 0.0:
-                flat = True
-                break
-            if p != c:
-                for j in range(d):
-                    E[c, j], E[p, j] = E[p, j], E[c, j]
-                rhs[c], rhs[p] = rhs[p], rhs[c]
-            for r in range(c + 1, d):
-                f = E[r, c] / E[c, c]
-                for j in range(c, d):
-                    E[r, j] -= f * E[c, j]
-                rhs[r] -= f * rhs[c]
+        flat = _barycentric(P, S, s, x, d, E, rhs, lam, flat_tol)
         if flat:
-            # a flat simplex (co-spherical nodes): step on to a neighbour
+            # a (nearly) flat simplex, whose barycentric coordinates mean
+            # nothing (co-spherical nodes, slivers on the hull): step on
             k = step % (d + 1)
             for kk in range(d + 1):
                 t = NB[s, (k + kk) % (d + 1)]
@@ -507,14 +635,6 @@ def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol):
             prev = s
             s = t
             continue
-        tot = 0.0
-        for c in range(d - 1, -1, -1):
-            acc = rhs[c]
-            for j in range(c + 1, d):
-                acc -= E[c, j] * lam[j + 1]
-            lam[c + 1] = acc / E[c, c]
-            tot += lam[c + 1]
-        lam[0] = 1.0 - tot
         k = 0
         for j in range(1, d + 1):
             if lam[j] < lam[k]:
@@ -524,6 +644,9 @@ def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol):
         t = NB[s, k]
         if t < 0:
             dist, L = _hull_distance(P, S, s, k, x, d, ctr, E, Mn)
+            if dist == np.inf:
+                # a degenerate hull facet: trust the barycentric coordinate
+                dist = lam[k] * L
             if dist >= -htol * L:
                 return s, OK
             return s, OUTSIDE
@@ -533,44 +656,14 @@ def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol):
 
 
 @njit(cache=True, error_model="numpy")
-def _locate_brute(P, S, x, d, E, rhs, lam, tol):
+def _locate_brute(P, S, x, d, E, rhs, lam, tol, flat_tol):
     """Exhaustive search for a simplex containing x (-1 if none)."""
     best = -1
     bestv = -np.inf
     for s in range(S.shape[0]):
-        v0 = S[s, 0]
-        for r in range(d):
-            for c in range(d):
-                E[r, c] = P[S[s, c + 1], r] - P[v0, r]
-            rhs[r] = x[r] - P[v0, r]
-        flat = False
-        for c in range(d):
-            p = c
-            for r in range(c + 1, d):
-                if abs(E[r, c]) > abs(E[p, c]):
-                    p = r
-            if E[p, c] == 0.0:
-                flat = True
-                break
-            if p != c:
-                for j in range(d):
-                    E[c, j], E[p, j] = E[p, j], E[c, j]
-                rhs[c], rhs[p] = rhs[p], rhs[c]
-            for r in range(c + 1, d):
-                f = E[r, c] / E[c, c]
-                for j in range(c, d):
-                    E[r, j] -= f * E[c, j]
-                rhs[r] -= f * rhs[c]
+        flat = _barycentric(P, S, s, x, d, E, rhs, lam, flat_tol)
         if flat:
             continue
-        tot = 0.0
-        for c in range(d - 1, -1, -1):
-            acc = rhs[c]
-            for j in range(c + 1, d):
-                acc -= E[c, j] * lam[j + 1]
-            lam[c + 1] = acc / E[c, c]
-            tot += lam[c + 1]
-        lam[0] = 1.0 - tot
         mn = lam[0]
         for j in range(1, d + 1):
             mn = min(mn, lam[j])
@@ -582,8 +675,8 @@ def _locate_brute(P, S, x, d, E, rhs, lam, tol):
 
 @njit(cache=True, error_model="numpy")
 def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
-           cav, bf, nn, q, Tc, tab, A, B, I, M, act, nact, mrows, cur, tpiv, acc, wm,
-           stamp, sc, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
+           cav, cst, live, rowof, bf, nn, q, Tc, tab, A, B, I, M, act, nact, mrows, cur, tpiv, acc, wm,
+           gs, gc, gp, gq, rep, gmark, stamp, sc, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
     """Sibson coordinates of one point x, searched for from simplex ``hint``.
 
     Writes up to ``nn.shape[0]`` entries into ``out_*`` (sorted by node
@@ -591,15 +684,17 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
     ``s * (d + 1) + k`` for the hull facet (s, k) of an ON_HULL point.
     ``stamp_q > 0`` must differ between the queries sharing ``smark``.
     """
-    ztol, btol, itol, flat, htol, lintol, wtol = (tols[0], tols[1], tols[2], tols[3],
-                                                  tols[4], tols[5], tols[6])
+    ztol, btol, itol, flat, htol, lintol, wtol, vtol = (tols[0], tols[1], tols[2], tols[3],
+                                                        tols[4], tols[5], tols[6], tols[7])
     ccap = cav.shape[0]
     ncap = nn.shape[0]
-    s0, st = _locate(P, S, NB, x, hint, d, ctr, E, Mn, rhs, lam, wtol, htol)
+    s0, st = _locate(P, S, NB, x, hint, d, ctr, E, Mn, rhs, lam, wtol, htol, flat)
     if st == OUTSIDE:
         return 0, OUTSIDE, 0
     if st == OVERFLOW:
-        s0, _ = _locate_brute(P, S, x, d, E, rhs, lam, wtol)
+        s0, _ = _locate_brute(P, S, x, d, E, rhs, lam, wtol, flat)
+        if s0 < 0:
+            return 0, OUTSIDE, 0
     # at a node: Kronecker delta
     for j in range(d + 1):
         v = S[s0, j]
@@ -618,6 +713,7 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
     IN = 2 * stamp_q
     OUT = IN + 1
     cav[0] = s0
+    cst[0] = max(1, _in_conflict(P, S, s0, x, d, E, rhs, itol, flat))
     smark[s0] = IN
     ncav = 1
     head = 0
@@ -635,15 +731,18 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
                 continue
             if smark[t] == IN or smark[t] == OUT:
                 continue
-            if _in_conflict(P, S, t, x, d, E, rhs, itol, flat):
+            code = _in_conflict(P, S, t, x, d, E, rhs, itol, flat)
+            if code > 0:
                 if ncav == ccap:
                     return 0, OVERFLOW, 0
                 cav[ncav] = t
+                cst[ncav] = code
                 ncav += 1
                 smark[t] = IN
             else:
                 smark[t] = OUT
-    # natural neighbours (local indices through mark)
+    # natural neighbours (local indices through mark); only the nodes of
+    # simplices strictly in conflict have cells of positive volume ("live")
     K = 0
     for c in range(ncav):
         for j in range(d + 1):
@@ -655,7 +754,10 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
                     return 0, OVERFLOW, 0
                 mark[v] = K
                 nn[K] = v
+                live[K] = 0
                 K += 1
+            if cst[c] == 2:
+                live[mark[v]] = 1
     # boundary faces of the conflict region (the new simplices are x + face)
     nbf = 0
     for c in range(ncav):
@@ -674,6 +776,10 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
                     bf[nbf, r] = mark[S[s, j]]
                     r += 1
             nbf += 1
+    degenerate = False
+    for c in range(ncav):
+        if cst[c] != 2:
+            degenerate = True
     # local indices of the conflict simplices, in place of node indices
     for c in range(ncav):
         for j in range(d + 1):
@@ -696,9 +802,21 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
                 out_g[0, k] = np.nan
             return 1, AT_NODE, 0
     flag = np.zeros(1, np.int64)
-    for full in (False, True):
+    for mode in range(3):
+        # strict combinatorial filter, relaxed filter, no filter (safety nets)
+        full = mode == 2
+        strict = mode == 0
         flag[0] = 0
         for i in range(K):
+            if live[i] == 0:
+                # an empty cell (the node is only on simplices whose sphere
+                # passes through x, or flat ones)
+                vol[i] = 0.0
+                for k in range(d):
+                    gv[i, k] = 0.0
+                for j in range(K):
+                    tab[i, j] = 0.0
+                continue
             # the simplices whose circumcentres are vertices of cell i, as rows
             # of constraint ids (0: x, j + 1: neighbour j), after the conflict
             # simplices' local indices in Tc[:ncav]
@@ -766,9 +884,60 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
                     A[0, m, k] /= nrm
                 B[0, m] = 0.5 * bb / nrm
                 I[0, m] = j + 1
+                rowof[j + 1] = m
                 m += 1
+            if not full and degenerate:
+                # Flat or borderline simplices in the conflict region can give
+                # simplices whose circumcentre is no vertex of the cell, and
+                # the filter needs every listed simplex to be one: keep those
+                # whose d planes meet in a point that satisfies all the rows.
+                rowof[0] = 0
+                kept = 0
+                for c in range(nT):
+                    for r in range(d):
+                        row = rowof[Tc[base + c, r]]
+                        for k in range(d):
+                            E[r, k] = A[0, row, k]
+                        rhs[r] = B[0, row]
+                    ok = True
+                    for cc in range(d):
+                        pv = cc
+                        for r in range(cc + 1, d):
+                            if abs(E[r, cc]) > abs(E[pv, cc]):
+                                pv = r
+                        if not abs(E[pv, cc]) > ztol:
+                            ok = False
+                            break
+                        if pv != cc:
+                            for k in range(d):
+                                E[cc, k], E[pv, k] = E[pv, k], E[cc, k]
+                            rhs[cc], rhs[pv] = rhs[pv], rhs[cc]
+                        for r in range(cc + 1, d):
+                            f = E[r, cc] / E[cc, cc]
+                            for k in range(cc, d):
+                                E[r, k] -= f * E[cc, k]
+                            rhs[r] -= f * rhs[cc]
+                    if ok:
+                        for cc in range(d - 1, -1, -1):
+                            acc_ = rhs[cc]
+                            for k in range(cc + 1, d):
+                                acc_ -= E[cc, k] * lam[k]
+                            lam[cc] = acc_ / E[cc, cc]
+                        for r in range(m):
+                            viol = -B[0, r]
+                            for k in range(d):
+                                viol += A[0, r, k] * lam[k]
+                            if viol > vtol * L:
+                                ok = False
+                                break
+                    if ok:
+                        for k in range(d):
+                            Tc[base + kept, k] = Tc[base + c, k]
+                        kept += 1
+                nT = kept
             v = _cell(d, m, A, B, I, M, Tc[base:], nT, act, nact, mrows, cur, tpiv, acc,
-                      wm, stamp, sc, full, want_grad, G, ztol, btol * L, flag, i, tab)
+                      wm, gs, gc, gp, gq, rep, gmark, stamp, sc, full, strict, want_grad, G,
+                      ztol, btol * L, flag, i, tab)
             vol[i] = max(v, 0.0)
             if want_grad:
                 for k in range(d):
@@ -852,6 +1021,9 @@ def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
         smark = np.zeros(ns, np.int64)
         mark = np.full(n, -1, np.int64)
         cav = np.empty(ccap, np.int64)
+        cst = np.empty(ccap, np.int64)
+        live = np.empty(ncap, np.int64)
+        rowof = np.empty(ncap + 1, np.int64)
         bf = np.empty((2 * ccap, d), np.int64)
         nn = np.empty(ncap, np.int64)
         q = np.empty((ncap, d))
@@ -868,6 +1040,12 @@ def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
         tpiv = np.empty(d, np.int64)
         acc = np.empty(d)
         wm = np.zeros(d, np.bool_)
+        gs = np.empty((d, ncap + 1), np.int64)
+        gc = np.empty((d, ncap + 1), np.int64)
+        gp = np.empty((d, ncap + 1), np.int64)
+        gq = np.empty(ncap + 1, np.int64)
+        rep = np.empty(ncap + 1, np.int64)
+        gmark = np.zeros(ncap + 1, np.int64)
         stamp = np.zeros(ncap + 1, np.int64)
         sc = np.zeros(1, np.int64)
         G = np.empty(d)
@@ -882,8 +1060,9 @@ def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
         og = np.empty((ncap, d))
         for r in range(lo, hi):
             cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, tols,
-                                  smark, mark, cav, bf, nn, q, Tc, tab, A, B, I, M, act,
-                                  nact, mrows, cur, tpiv, acc, wm, stamp, sc, G, E, Mn,
+                                  smark, mark, cav, cst, live, rowof, bf, nn, q, Tc, tab, A, B, I, M, act,
+                                  nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq, rep,
+                                  gmark, stamp, sc, G, E, Mn,
                                   rhs, lam, vol, gv, oi, ov, og)
             count[r] = cnt
             status[r] = st
@@ -975,7 +1154,7 @@ def _run(P, S, NB, Q, start, gradient, ncap, ccap):
     count = np.empty(m, np.int64)
     status = np.empty(m, np.int64)
     info = np.empty(m, np.int64)
-    tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, _FLAT, _HULL, _LINEAR, _WALK])
+    tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, _FLAT, _HULL, _LINEAR, _WALK, _VERTEX])
     nblocks = max(1, min(m // 16, 4 * numba.get_num_threads()))
     _query_batch(P, S, NB, Q, start, gradient, ncap, ccap, nblocks, tols,
                  out_i, out_v, out_g, count, status, info)

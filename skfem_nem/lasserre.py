@@ -2,84 +2,113 @@
 
 This is the paper's "method 2": natural-neighbour (Sibson) coordinates from the
 volumes of second-order Voronoi cells, each a convex polytope ``{y : A y <= b}``
-whose volume is computed with Lasserre's recursive formula.
+whose volume is computed with Lasserre's recursive formula. The 2D area method
+is :mod:`skfem_nem.coordinates`; this module works in any of d = 2, 3, 4.
 
 Natural neighbours
     The Delaunay triangulation comes from :class:`scipy.spatial.Delaunay`
-    (Qhull). The natural neighbours of x are the vertices of the simplices
-    whose circumsphere contains x (the conflict region, grown from the
-    simplex ``find_simplex`` returns through ``neighbors``). In-sphere test:
-    the circumcentre ``c`` is solved relative to the simplex's first vertex
-    ``v0`` (Gaussian elimination with partial pivoting) and x is in the
-    sphere when its power ``|w|^2 - 2 w.c`` (``w = x - v0``) is below
-    ``_INSPHERE * |w| (|w| + 2|c|)``, a bound on its round-off. The decision
-    is tolerant on purpose: a simplex whose sphere passes (nearly) through x
-    is included, which only adds valid constraints and neighbours whose
-    volume is zero, while wrongly leaving a simplex out would drop a
-    neighbour. Flat simplices (Qhull's ``Qt`` makes them for co-spherical
-    nodes, e.g. lattices) are included when reached, so that the region stays
-    connected.
+    (Qhull). A query is located by a visibility walk (barycentric
+    coordinates, tolerance ``_WALK``) from a simplex at its nearest node;
+    scipy's ``find_simplex`` is not used: its first call builds barycentric
+    transforms through LAPACK, which with a multithreaded BLAS took 32 s for
+    1.3e5 simplices. The natural neighbours of x are the vertices of the
+    simplices whose circumsphere contains x (the conflict region, grown
+    through ``neighbors``). In-sphere test: the circumcentre ``c`` is solved
+    relative to the simplex's first vertex ``v0`` (Gaussian elimination with
+    partial pivoting); the power ``|w|^2 - 2 w.c`` (``w = x - v0``) is
+    negative strictly inside. Simplices with a power below
+    ``_INSPHERE * |w| (|w| + 2|c|)`` (a generous bound on its round-off),
+    and (nearly) flat ones (Qhull's ``Qt`` makes them for co-spherical
+    nodes, e.g. lattices), join the region too, so that it stays connected
+    and no neighbour is lost; only the nodes of simplices strictly in
+    conflict get cells (the others' cells are empty).
 
 Second-order cells
-    In coordinates centred at x (x = 0), with ``q_j = p_j - x``, the cell of
-    neighbour i is ``q_i . y <= |q_i|^2 / 2`` (row 0: closer to x than to
-    p_i) and ``(q_j - q_i) . y <= (q_j - q_i).(q_j + q_i) / 2`` (closer to p_i
-    than to p_j). Only the neighbours j joined to i by an edge of a conflict
-    simplex are needed: the others give redundant constraints (a face between
-    the old Voronoi cells of i and j meets x's new cell only if one of its
-    vertices, the circumcentre of a simplex holding the edge (i, j), does).
-    ``phi_i = V_i / V`` with ``V = sum_j V_j``.
+    The cell of neighbour i is ``{y : |y - x| <= |y - p_i| <= |y - p_j|}``:
+    row 0 ``q_i . y <= |q_i|^2 / 2`` (closer to x than to p_i, with
+    ``q_j = p_j - x`` and x at the origin) and rows
+    ``(q_j - q_i) . y <= (q_j - q_i).(q_j + q_i) / 2`` (closer to p_i than to
+    p_j). Rows are scaled to unit normals, and the origin of each cell is
+    moved to ``(x + p_i) / 2``, on the plane of row 0: near a node p_k the
+    other cells are slabs of width ~|x - p_k| between nearly parallel
+    planes, and an origin at x would make Lasserre's sum cancel terms of
+    size one down to that width. ``phi_i = V_i / V``, ``V = sum_j V_j``.
 
 Lasserre's recursion
-    ``V_n(A, b) = (1/n) sum_i (b_i / |a_it|) V_{n-1}(facet i)``, where facet i
-    is the system with ``a_i . u = b_i`` used to eliminate the variable t of
-    largest ``|a_it|``. Every row is scaled to unit length, so ``b`` are
-    signed distances. A reduced row whose normal has norm at most
-    ``_ZERO_ROW`` is parallel to facet i: it is dropped if its plane lies
-    beyond the facet (``b' > _TIE * L``), makes the facet empty if it lies
-    before it (``b' < -_TIE * L``), and if the two planes coincide (within
-    ``_TIE * L``, L the distance from x to its farthest natural neighbour)
-    the facet is empty unless the two face the same way and the facet's
-    constraint has the smaller index: each coincident facet is counted
-    exactly once (this matters for lattices, where many bisectors pass
-    through the same edges), and a slab of zero width has zero volume. The
-    base case n = 1 is the length of the feasible interval. Redundant
-    constraints need no special treatment: their facets are empty or
-    lower-dimensional and their recursion returns zero.
+    ``V_n(A, b) = (1/n) sum_i (b_i / |a_it|) V_{n-1}(facet i)``: facet i is
+    the system with ``a_i . u = b_i`` used to eliminate the variable t of
+    largest ``|a_it|``; the base case n = 1 is the length of the feasible
+    interval. It runs iteratively (an explicit stack of one buffer level per
+    dimension, in a numba kernel; numba cannot cache recursive functions).
+
+    - Combinatorial filter: the vertices of cell i are the circumcentres of
+      the conflict simplices holding i and of the new simplices (x + a face
+      of the region's boundary holding i), so the face of the cell on the
+      constraints J is bounded only by constraints k that share such a
+      simplex with J; the others are left out. This makes the recursion
+      about linear in the number of faces (3D: ~21 facet visits and ~50 row
+      reductions per cell instead of thousands). When the region holds flat
+      or borderline simplices, listed simplices whose d planes do not meet
+      in a point satisfying all rows (within ``_VERTEX``) are dropped first.
+      Safety nets: a query whose cells come out unbounded or whose volumes
+      violate linear precision (``sum_i V_i (p_i - x) = 0`` within
+      ``_LINEAR``) is recomputed with a relaxed filter, then with none.
+    - Coincident constraints (lattices put many bisectors through the same
+      lines): when a facet's system is built, rows whose planes coincide
+      (within ``_ZERO_ROW`` in direction, ``_TIE`` times the local length in
+      offset) are merged, keeping the smallest id and the union of the ids
+      for the filter; two that coincide facing each other leave a slab of
+      zero width, so the facet has zero volume. A reduced row parallel to
+      the facet (normal shorter than ``_ZERO_ROW``) is dropped if it lies
+      beyond it, empties it if it lies before it. Redundant constraints need
+      nothing else: their facets are empty or lower-dimensional and give 0.
+    - Consistent vertices: in the last level (polygons) the two ends of
+      each edge are recomputed from the pair of lines that meets there by a
+      formula symmetric in the pair, so that both edges of a vertex use the
+      same point: where two nearly parallel lines meet, independently
+      rounded ends would not cancel in Lasserre's sum. Each facet's origin
+      is likewise moved onto the trace of row 0.
+    - The cells of neighbours i and j share the face on the bisector of
+      p_i and p_j: its area is computed once.
 
 Gradients
     Only row 0 depends on x. Moving x moves the bisector between x and p_i
     with normal speed ``(y - x) . dx / |p_i - x|`` at a point y of it, hence
     ``grad V_i = (1 / |p_i - x|) integral over facet 0 of (y - x) dS``
-    (in 2D this is ``(s_i / h_i) (c_i - x)``: facet length times its
-    midpoint). The first moment of facet 0 comes from the same recursion:
-    for a function homogeneous of degree q,
+    (in 2D ``(s_i / h_i) (c_i - x)``: facet length times midpoint; this is
+    the paper's ``-dV/da_0 - x dV/db_0`` written as a surface integral).
+    The first moment of facet 0 comes from the same recursion: for f
+    homogeneous of degree q,
     ``integral_P f = 1/(n+q) sum_i (b_i / |a_it|) integral_{facet i} f``,
-    so volumes and first moments (q = 1) recurse together. Then
+    so volumes and first moments recurse together. On facet 0 the rows of
+    the planes between x and p_m replace those between p_i and p_m (the same
+    half-spaces there, and at good angles to it). Then
     ``grad phi_i = (grad V_i - phi_i sum_j grad V_j) / V``, with the
-    dominant neighbour's gradient taken from complement sums (as in
-    :mod:`skfem_nem.coordinates`) to avoid cancellation near a node.
+    dominant neighbour's gradient from complement sums (as in
+    :mod:`skfem_nem.coordinates`).
 
 Special points
     At a node: the Kronecker delta (gradients undefined). On the convex hull
-    (within ``_HULL`` times the distance to the nodes of the hull facet):
-    the coordinates are the (d-1)-dimensional Sibson coordinates of the
-    point within the hull plane, with respect to the nodes on that plane
-    (in 2D the linear weights of the hull edge), which is their limit from
-    inside; gradients are not computed there. Points on interior Delaunay
-    faces and edges need nothing special: nothing divides by a quantity that
-    vanishes there. Asking for gradients at nodes or on the hull raises
-    ``ValueError`` (``undefined="raise"``) or gives NaN rows
-    (``undefined="nan"``).
+    (within ``_HULL`` times the distance to the facet's nodes, else outside
+    is an error): the limits from inside, see :func:`_on_hull` -- inside a
+    hull facet the weights ``integral over C_i of (|y - p_i|^2 - |y - x|^2)
+    dy`` over the (d-1)-dimensional second-order cells of the facet's nodes
+    (not their (d-1)-dimensional Sibson coordinates), linear interpolation
+    on hull edges. Points on interior Delaunay faces and edges need nothing
+    special: nothing divides by a quantity that vanishes there. Gradients at
+    nodes or on the hull raise ``ValueError`` (``undefined="raise"``) or
+    give NaN rows (``undefined="nan"``).
 
-Accuracy
-    For nodes in general position, values agree with the 2D area method
-    (:func:`skfem_nem.sibson_coordinates`) to about 1e-15 and gradients to
-    about 1e-13, and in 3D the second-order volumes sum to the first-order
-    Voronoi volume to about 1e-15 relative. Configurations within
-    ``_ZERO_ROW`` of co-spherical (exactly co-spherical ones, like lattices,
-    are fine) lose digits like ``eps / angle``, where angle is how far the
-    nearly coincident planes are from coincidence.
+Accuracy (measured, see tests/test_lasserre.py)
+    Values agree with the 2D area method to ~2e-15 and gradients to ~2e-13
+    relative; in 3D the second-order volumes sum to the Voronoi cell volume
+    (scipy/Qhull) to ~1e-15 relative; partition of unity and linear
+    precision hold to ~5e-16 in 3D and 4D, also on lattices and within
+    1e-12 of a node. Gradients lose digits near a node like ``1e-17 / r``
+    (r the distance to it), as the area method does. Node sets that are
+    nearly but not exactly co-spherical (lattices jittered by 1e-9) get
+    errors of that size: Qhull's triangulation is then not Delaunay to that
+    precision.
 """
 from __future__ import annotations
 
@@ -135,16 +164,18 @@ _CAPS = {2: (32, 64), 3: (96, 384), 4: (256, 2048)}
 # ---------------------------------------------------------------------------
 
 @njit(cache=True, error_model="numpy")
-def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
-          gq, rep, gmark, stamp, sc, full, strict, want_grad, G, ztol, btol, flag, cell,
-          tab):
+def _cell(d, m0, A, B, I, AX, BX, M, W, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
+          gq, rep, gmark, stamp, sc, full, strict, want_grad, want_mom, G, ztol, btol,
+          flag, cell, tab):
     """Volume of the polytope {u in R^d : A[0, j] . u <= B[0, j], j < m0} by
     Lasserre's recursion, run iteratively with one buffer level per dimension
     (level l holds a system in d - l variables).
 
     Rows must have unit length; ``I[0, j]`` is row j's constraint id (0 for the
     bisector between x and the cell's node, whose facet's first moment
-    ``integral y dS`` goes to ``G`` when ``want_grad``).
+    ``integral u dS`` goes to ``G[:d]`` and its area to ``G[d]`` when
+    ``want_grad``). With ``want_mom`` the first moments ``integral u du`` of
+    the cell go to ``M[0, :d]`` (then ``cell`` must be -1: no shared faces).
 
     Coincident rows. When a facet's system is built, rows whose planes
     coincide (within ``ztol`` in direction and ``btol`` in offset) are merged
@@ -168,12 +199,20 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
     the area of that face in ``tab[cell, j]`` for j > cell and reuses
     ``tab[j, cell]`` for j < cell (ids are j + 1).
 
+    Origins. Each facet system below the top is translated by ``W[l]`` so
+    that the trace of row 0 passes through its origin (moments are shifted
+    back); on facet 0 the rows ``AX, BX`` (planes between x and the other
+    neighbours) replace ``A[0], B[0]``. Polygon edges end at points
+    computed symmetrically from the two lines meeting there.
+
     (One function without array-passing helpers: numba reference-counts
     array arguments with atomic operations, which dominated the run time.)
     """
     for s in range(nT):
         act[0, s] = s
     nact[0] = nT
+    for k in range(d):
+        W[0, k] = 0.0
     mrows[0] = m0
     for j in range(m0):
         gs[0, j] = j
@@ -181,9 +220,12 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
         gp[0, j] = I[0, j]
     cur[0] = -1
     acc[0] = 0.0
-    wm[0] = False
-    if want_grad:
+    wm[0] = want_mom
+    if want_mom:
         for k in range(d):
+            M[0, k] = 0.0
+    if want_grad:
+        for k in range(d + 1):
             G[k] = 0.0
     l = 0
     have = False   # a facet volume fv of facet cur[l] waits to be added to level l
@@ -209,7 +251,7 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
                 s_ = 0.0
                 for k in range(n):
                     if k != t:
-                        mk = M[l + 1, c]
+                        mk = M[l + 1, c] + W[l + 1, c] * fv
                         s_ += A[l, i, k] * mk
                         if wm[l]:
                             M[l, k] += coef * mk
@@ -221,6 +263,7 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
                     M[l, t] += coef * mt
                 if top:
                     G[t] = mt / abs(ait)
+                    G[d] = fv / abs(ait)
         n = d - l
         cur[l] += 1
         i = cur[l]
@@ -236,6 +279,8 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
             have = True
             continue
         idc = I[l, i]
+        if B[l, i] == 0.0 and not wm[l] and (l > 0 or (idc == 0 and not want_grad)):
+            continue  # the origin is on this facet's plane: no contribution
         if l == 0 and idc > 0:
             if idc - 1 < cell:
                 # the face shared with an earlier cell: its area is known
@@ -281,6 +326,11 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
             nact[nl] = na
         stp = sc[0]
         child_mom = wm[l] or (l == 0 and want_grad and idc == 0)
+        # On facet 0 (|y - x| = |y - p_i|) "closer to p_i than to p_m" is
+        # "closer to x than to p_m": reduce the rows of the planes x|m
+        # (AX, BX) instead, which meet facet 0 at good angles even where
+        # the planes p_i|p_m are nearly parallel to it (x close to a node).
+        xm = l == 0 and idc == 0
         empty = False
         if n == 2:
             # the facet is a segment: reduce the rows straight to the
@@ -288,6 +338,8 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
             u = 1 - t
             lo = -np.inf
             hi = np.inf
+            jlo = -1
+            jhi = -1
             cnt = 0
         mm = 0
         pool = 0
@@ -302,17 +354,27 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
                         break
                 if not cand:
                     continue
-            f = A[l, j, t] * inv_ait
-            bj = B[l, j] - f * bi
+            if xm:
+                f = AX[j, t] * inv_ait
+                bj = BX[j] - f * bi
+            else:
+                f = A[l, j, t] * inv_ait
+                bj = B[l, j] - f * bi
             if n == 2:
-                a = A[l, j, u] - f * A[l, i, u]
+                if xm:
+                    a = AX[j, u] - f * A[l, i, u]
+                else:
+                    a = A[l, j, u] - f * A[l, i, u]
                 nrm = abs(a)
             else:
                 c = 0
                 nrm2 = 0.0
                 for k in range(n):
                     if k != t:
-                        v = A[l, j, k] - f * A[l, i, k]
+                        if xm:
+                            v = AX[j, k] - f * A[l, i, k]
+                        else:
+                            v = A[l, j, k] - f * A[l, i, k]
                         A[nl, mm, c] = v
                         nrm2 += v * v
                         c += 1
@@ -329,7 +391,10 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
                 # bound a slab of zero width
                 dot = 0.0
                 for k in range(n):
-                    dot += A[l, j, k] * A[l, i, k]
+                    if xm:
+                        dot += AX[j, k] * A[l, i, k]
+                    else:
+                        dot += A[l, j, k] * A[l, i, k]
                 if dot > 0.0 and I[l, j] > idc:
                     continue
                 empty = True
@@ -340,8 +405,10 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
                 if a > 0.0:
                     if r < hi:
                         hi = r
+                        jhi = j
                 elif r > lo:
                     lo = r
+                    jlo = j
             else:
                 inv = 1.0 / nrm
                 for k in range(n - 1):
@@ -362,8 +429,39 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
             if cnt == 0 or lo == -np.inf or hi == np.inf:
                 flag[0] = 1
                 continue
+            # Recompute both ends as the intersection of the two lines by a
+            # formula symmetric in the pair, so that the edge that ends at the
+            # same vertex uses the very same point: at a vertex where two
+            # nearly parallel lines meet, independently rounded ends would
+            # not cancel in Lasserre's sum.
+            for e in range(2):
+                j = jhi if e == 0 else jlo
+                if xm:
+                    # facet 0 of a 2D cell: its ends from the planes x|m
+                    a1x, a1y, b1 = A[0, i, 0], A[0, i, 1], B[0, i]
+                    a2x, a2y, b2 = AX[j, 0], AX[j, 1], BX[j]
+                else:
+                    r1 = i
+                    r2 = j
+                    if I[l, j] < idc:
+                        r1 = j
+                        r2 = i
+                    a1x, a1y, b1 = A[l, r1, 0], A[l, r1, 1], B[l, r1]
+                    a2x, a2y, b2 = A[l, r2, 0], A[l, r2, 1], B[l, r2]
+                det = a1x * a2y - a1y * a2x
+                if u == 0:
+                    w = (b1 * a2y - b2 * a1y) / det
+                else:
+                    w = (a1x * b2 - a2x * b1) / det
+                if e == 0:
+                    hi = w
+                else:
+                    lo = w
+            if not hi > lo:
+                continue
             if child_mom:
                 M[nl, 0] = 0.5 * (hi - lo) * (hi + lo)
+                W[nl, 0] = 0.0
             fv = hi - lo
             have = True
             continue
@@ -417,6 +515,24 @@ def _cell(d, m0, A, B, I, M, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, g
             for e in range(pool):
                 gp[nl, e] = gq[e]
             mm = w
+        # Put the facet's origin on the trace of row 0 (the bisector between
+        # x and the cell's node), as at the top level: near a node the
+        # facets are thin wedges along that plane.
+        r0 = -1
+        for j in range(mm):
+            if I[nl, j] == 0:
+                r0 = j
+        for k in range(n - 1):
+            W[nl, k] = 0.0
+        if r0 >= 0 and B[nl, r0] != 0.0:
+            for k in range(n - 1):
+                W[nl, k] = B[nl, r0] * A[nl, r0, k]
+            for j in range(mm):
+                sh = 0.0
+                for k in range(n - 1):
+                    sh += A[nl, j, k] * W[nl, k]
+                B[nl, j] -= sh
+            B[nl, r0] = 0.0
         mrows[nl] = mm
         cur[nl] = -1
         acc[nl] = 0.0
@@ -674,27 +790,73 @@ def _locate_brute(P, S, x, d, E, rhs, lam, tol, flat_tol):
 
 
 @njit(cache=True, error_model="numpy")
-def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
-           cav, cst, live, rowof, bf, nn, q, Tc, tab, A, B, I, M, act, nact, mrows, cur, tpiv, acc, wm,
-           gs, gc, gp, gq, rep, gmark, stamp, sc, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
-    """Sibson coordinates of one point x, searched for from simplex ``hint``.
+def _vertex_simplices(d, m, A, B, Tc, nT, rowof, E, rhs, lam, ztol, vtol):
+    """Keep the rows of ``Tc[:nT]`` (d constraint ids each) whose d planes meet
+    in a point that satisfies all m rows of ``A[0], B[0]`` within ``vtol``;
+    returns their number."""
+    rowof[0] = 0
+    kept = 0
+    for c in range(nT):
+        for r in range(d):
+            row = rowof[Tc[c, r]]
+            for k in range(d):
+                E[r, k] = A[0, row, k]
+            rhs[r] = B[0, row]
+        ok = True
+        for cc in range(d):
+            pv = cc
+            for r in range(cc + 1, d):
+                if abs(E[r, cc]) > abs(E[pv, cc]):
+                    pv = r
+            if not abs(E[pv, cc]) > ztol:
+                ok = False
+                break
+            if pv != cc:
+                for k in range(d):
+                    E[cc, k], E[pv, k] = E[pv, k], E[cc, k]
+                rhs[cc], rhs[pv] = rhs[pv], rhs[cc]
+            for r in range(cc + 1, d):
+                f = E[r, cc] / E[cc, cc]
+                for k in range(cc, d):
+                    E[r, k] -= f * E[cc, k]
+                rhs[r] -= f * rhs[cc]
+        if ok:
+            for cc in range(d - 1, -1, -1):
+                acc_ = rhs[cc]
+                for k in range(cc + 1, d):
+                    acc_ -= E[cc, k] * lam[k]
+                lam[cc] = acc_ / E[cc, cc]
+            for r in range(m):
+                viol = -B[0, r]
+                for k in range(d):
+                    viol += A[0, r, k] * lam[k]
+                if viol > vtol:
+                    ok = False
+                    break
+        if ok:
+            for k in range(d):
+                Tc[kept, k] = Tc[c, k]
+            kept += 1
+    return kept
 
-    Writes up to ``nn.shape[0]`` entries into ``out_*`` (sorted by node
-    index) and returns ``(count, status, info)``; ``info`` is
-    ``s * (d + 1) + k`` for the hull facet (s, k) of an ON_HULL point.
-    ``stamp_q > 0`` must differ between the queries sharing ``smark``.
-    """
-    ztol, btol, itol, flat, htol, lintol, wtol, vtol = (tols[0], tols[1], tols[2], tols[3],
-                                                        tols[4], tols[5], tols[6], tols[7])
+
+@njit(cache=True, error_model="numpy")
+def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, mark, cav, cst,
+            live, bf, nn, Tc, E, Mn, rhs, lam, out_i, out_v, out_g):
+    """Locate x, grow its conflict region and collect the natural neighbours
+    ``nn[:K]`` (``live`` marks those with cells of positive volume), the
+    boundary faces ``bf[:nbf]`` and the conflict simplices ``Tc[:ncav]`` in
+    local indices. Returns ``(status, info, ncav, K, nbf, degenerate)``; at a
+    node writes the Kronecker delta into ``out_*``."""
     ccap = cav.shape[0]
     ncap = nn.shape[0]
     s0, st = _locate(P, S, NB, x, hint, d, ctr, E, Mn, rhs, lam, wtol, htol, flat)
     if st == OUTSIDE:
-        return 0, OUTSIDE, 0
+        return OUTSIDE, 0, 0, 0, 0, False
     if st == OVERFLOW:
         s0, _ = _locate_brute(P, S, x, d, E, rhs, lam, wtol, flat)
         if s0 < 0:
-            return 0, OUTSIDE, 0
+            return OUTSIDE, 0, 0, 0, 0, False
     # at a node: Kronecker delta
     for j in range(d + 1):
         v = S[s0, j]
@@ -708,7 +870,7 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
             out_v[0] = 1.0
             for k in range(d):
                 out_g[0, k] = np.nan
-            return 1, AT_NODE, 0
+            return AT_NODE, 0, 0, 0, 0, False
     # conflict region by breadth-first search; smark = 2 stamp (in), 2 stamp + 1 (out)
     IN = 2 * stamp_q
     OUT = IN + 1
@@ -725,16 +887,16 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
             if t < 0:
                 dist, L = _hull_distance(P, S, s, k, x, d, ctr, E, Mn)
                 if dist < -htol * L:
-                    return 0, OUTSIDE, s * (d + 1) + k
+                    return OUTSIDE, s * (d + 1) + k, 0, 0, 0, False
                 if dist <= htol * L:
-                    return 0, ON_HULL, s * (d + 1) + k
+                    return ON_HULL, s * (d + 1) + k, 0, 0, 0, False
                 continue
             if smark[t] == IN or smark[t] == OUT:
                 continue
             code = _in_conflict(P, S, t, x, d, E, rhs, itol, flat)
             if code > 0:
                 if ncav == ccap:
-                    return 0, OVERFLOW, 0
+                    return OVERFLOW, 0, 0, 0, 0, False
                 cav[ncav] = t
                 cst[ncav] = code
                 ncav += 1
@@ -751,7 +913,7 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
                 if K == ncap:
                     for jj in range(K):
                         mark[nn[jj]] = -1
-                    return 0, OVERFLOW, 0
+                    return OVERFLOW, 0, 0, 0, 0, False
                 mark[v] = K
                 nn[K] = v
                 live[K] = 0
@@ -769,7 +931,7 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
             if nbf == bf.shape[0]:
                 for jj in range(K):
                     mark[nn[jj]] = -1
-                return 0, OVERFLOW, 0
+                return OVERFLOW, 0, 0, 0, 0, False
             r = 0
             for j in range(d + 1):
                 if j != k:
@@ -786,6 +948,84 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
             Tc[c, j] = mark[S[cav[c], j]]  # scratch: rows 0..ncav-1 of Tc (d + 1 wide)
     for j in range(K):
         mark[nn[j]] = -1
+    return OK, 0, ncav, K, nbf, degenerate
+
+
+@njit(cache=True, error_model="numpy")
+def _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g):
+    """Coordinates (or raw volumes) and gradients of the K neighbours into
+    ``out_*``, sorted by node index; returns ``(count, status, 0)``."""
+    # The dominant neighbour gets its gradient from complement sums,
+    #   grad phi_d = (grad V_d (1 - phi_d) - phi_d sum_{j != d} grad V_j) / V,
+    # which avoids cancelling two large terms close to node d.
+    dom = 0
+    for i in range(1, K):
+        if vol[i] > vol[dom]:
+            dom = i
+    rest = 0.0
+    gc = np.zeros(d)
+    for i in range(K):
+        if i != dom:
+            rest += vol[i]
+            if want_grad:
+                for k in range(d):
+                    gc[k] += gv[i, k]
+    total = vol[dom] + rest
+    if not total > 0.0:
+        return 0, UNBOUNDED, 0
+    cnt = 0
+    for i in range(K):
+        if vol[i] <= 0.0:
+            continue
+        phi = vol[i] / total
+        out_i[cnt] = nn[i]
+        out_v[cnt] = phi
+        if raw:
+            out_v[cnt] = vol[i]
+        if want_grad:
+            for k in range(d):
+                if raw:
+                    out_g[cnt, k] = gv[i, k]
+                elif i == dom:
+                    out_g[cnt, k] = (gv[i, k] * (rest / total) - phi * gc[k]) / total
+                else:
+                    out_g[cnt, k] = (gv[i, k] - phi * (gv[dom, k] + gc[k])) / total
+        j = cnt
+        while j > 0 and out_i[j - 1] > out_i[j]:
+            out_i[j - 1], out_i[j] = out_i[j], out_i[j - 1]
+            out_v[j - 1], out_v[j] = out_v[j], out_v[j - 1]
+            for k in range(d):
+                out_g[j - 1, k], out_g[j, k] = out_g[j, k], out_g[j - 1, k]
+            j -= 1
+        cnt += 1
+    return cnt, OK, 0
+
+
+@njit(cache=True, error_model="numpy")
+def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mark,
+           cav, cst, live, rowof, bf, nn, q, Tc, tab, A, B, I, AX, BX, M, W, act, nact,
+           mrows, cur, tpiv, acc, wm, gs, gc, gp, gq, rep, gmark, stamp, sc, G, E, Mn, rhs,
+           lam, vol, gv, out_i, out_v, out_g):
+    """Sibson coordinates of one point x, searched for from simplex ``hint``.
+
+    Writes up to ``nn.shape[0]`` entries into ``out_*`` (sorted by node
+    index) and returns ``(count, status, info)``. ``kind`` 0: Sibson
+    coordinates; 1: the second-order volumes V_i and their gradients instead;
+    2: coordinates from the hull-facet weights ``integral over the cell of
+    (|y - p_i|^2 - |y - x|^2) dy`` (for a point on a hull facet, in the
+    facet's own coordinates). ``info`` is
+    ``s * (d + 1) + k`` for the hull facet (s, k) of an ON_HULL point.
+    ``stamp_q > 0`` must differ between the queries sharing ``smark``.
+    """
+    ztol, btol, itol, flat, htol, lintol, wtol, vtol = (tols[0], tols[1], tols[2], tols[3],
+                                                        tols[4], tols[5], tols[6], tols[7])
+    raw = kind == 1
+    hullw = kind == 2
+    st, info, ncav, K, nbf, degenerate = _region(
+        P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, mark, cav, cst,
+        live, bf, nn, Tc, E, Mn, rhs, lam, out_i, out_v, out_g)
+    if st != OK:
+        return (1 if st == AT_NODE else 0), st, info
     # coordinates relative to x
     L = 0.0
     for j in range(K):
@@ -859,14 +1099,19 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
                 for c in range(nT):
                     for j in range(d):
                         stamp[Tc[base + c, j]] = sc[0]
-            # row 0: closer to x than to p_i; then closer to p_i than to p_j
+            # Row 0: closer to x than to p_i; then closer to p_i than to p_j.
+            # The origin is the midpoint o = (x + p_i) / 2, on the plane of
+            # row 0: near a node p_k the cells of the other neighbours are
+            # slabs of width ~ |x - p_k| between two nearly parallel planes,
+            # and an origin at x would make Lasserre's sum cancel terms of
+            # size one down to that width.
             h = 0.0
             for k in range(d):
                 h += q[i, k] * q[i, k]
             h = np.sqrt(h)
             for k in range(d):
                 A[0, 0, k] = q[i, k] / h
-            B[0, 0] = 0.5 * h
+            B[0, 0] = 0.0
             I[0, 0] = 0
             m = 1
             for j in range(K):
@@ -878,70 +1123,49 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
                     a = q[j, k] - q[i, k]
                     A[0, m, k] = a
                     nrm2 += a * a
-                    bb += a * (q[j, k] + q[i, k])
+                    bb += a * q[j, k]
                 nrm = np.sqrt(nrm2)
                 for k in range(d):
                     A[0, m, k] /= nrm
                 B[0, m] = 0.5 * bb / nrm
                 I[0, m] = j + 1
                 rowof[j + 1] = m
+                # the plane x|p_j, about the same origin o = q_i / 2
+                hj = 0.0
+                ao = 0.0
+                for k in range(d):
+                    hj += q[j, k] * q[j, k]
+                hj = np.sqrt(hj)
+                for k in range(d):
+                    AX[m, k] = q[j, k] / hj
+                    ao += AX[m, k] * q[i, k]
+                BX[m] = 0.5 * hj - 0.5 * ao
                 m += 1
             if not full and degenerate:
                 # Flat or borderline simplices in the conflict region can give
                 # simplices whose circumcentre is no vertex of the cell, and
                 # the filter needs every listed simplex to be one: keep those
                 # whose d planes meet in a point that satisfies all the rows.
-                rowof[0] = 0
-                kept = 0
-                for c in range(nT):
-                    for r in range(d):
-                        row = rowof[Tc[base + c, r]]
-                        for k in range(d):
-                            E[r, k] = A[0, row, k]
-                        rhs[r] = B[0, row]
-                    ok = True
-                    for cc in range(d):
-                        pv = cc
-                        for r in range(cc + 1, d):
-                            if abs(E[r, cc]) > abs(E[pv, cc]):
-                                pv = r
-                        if not abs(E[pv, cc]) > ztol:
-                            ok = False
-                            break
-                        if pv != cc:
-                            for k in range(d):
-                                E[cc, k], E[pv, k] = E[pv, k], E[cc, k]
-                            rhs[cc], rhs[pv] = rhs[pv], rhs[cc]
-                        for r in range(cc + 1, d):
-                            f = E[r, cc] / E[cc, cc]
-                            for k in range(cc, d):
-                                E[r, k] -= f * E[cc, k]
-                            rhs[r] -= f * rhs[cc]
-                    if ok:
-                        for cc in range(d - 1, -1, -1):
-                            acc_ = rhs[cc]
-                            for k in range(cc + 1, d):
-                                acc_ -= E[cc, k] * lam[k]
-                            lam[cc] = acc_ / E[cc, cc]
-                        for r in range(m):
-                            viol = -B[0, r]
-                            for k in range(d):
-                                viol += A[0, r, k] * lam[k]
-                            if viol > vtol * L:
-                                ok = False
-                                break
-                    if ok:
-                        for k in range(d):
-                            Tc[base + kept, k] = Tc[base + c, k]
-                        kept += 1
-                nT = kept
-            v = _cell(d, m, A, B, I, M, Tc[base:], nT, act, nact, mrows, cur, tpiv, acc,
-                      wm, gs, gc, gp, gq, rep, gmark, stamp, sc, full, strict, want_grad, G,
-                      ztol, btol * L, flag, i, tab)
+                nT = _vertex_simplices(d, m, A, B, Tc[base:], nT, rowof, E, rhs, lam, ztol,
+                                       vtol * L)
+            cell = i
+            if hullw:
+                cell = -1
+            v = _cell(d, m, A, B, I, AX, BX, M, W, Tc[base:], nT, act, nact, mrows, cur, tpiv, acc,
+                      wm, gs, gc, gp, gq, rep, gmark, stamp, sc, full, strict, want_grad,
+                      hullw, G, ztol, btol * L, flag, cell, tab)
+            if hullw:
+                # limit weight on a hull facet: integral over the cell of
+                # |y - p_i|^2 - |y - x|^2 = -2 q_i . (y - o)
+                v = 0.0
+                for k in range(d):
+                    v -= 2.0 * q[i, k] * M[0, k]
             vol[i] = max(v, 0.0)
             if want_grad:
+                # grad V_i = (1 / h) integral over facet 0 of (y - x) dS, with
+                # G = integral of (y - o) dS and G[d] the facet's area
                 for k in range(d):
-                    gv[i, k] = G[k] / h
+                    gv[i, k] = (G[k] + 0.5 * q[i, k] * G[d]) / h
         if flag[0] != 0:
             continue
         # check linear precision, sum_i V_i (p_i - x) = 0: a violated
@@ -959,50 +1183,11 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, tols, smark, mark,
             break
     if flag[0] != 0:
         return 0, UNBOUNDED, 0
-    # The dominant neighbour gets its gradient from complement sums,
-    #   grad phi_d = (grad V_d (1 - phi_d) - phi_d sum_{j != d} grad V_j) / V,
-    # which avoids cancelling two large terms close to node d.
-    dom = 0
-    for i in range(1, K):
-        if vol[i] > vol[dom]:
-            dom = i
-    rest = 0.0
-    gc = np.zeros(d)
-    for i in range(K):
-        if i != dom:
-            rest += vol[i]
-            if want_grad:
-                for k in range(d):
-                    gc[k] += gv[i, k]
-    total = vol[dom] + rest
-    if not total > 0.0:
-        return 0, UNBOUNDED, 0
-    cnt = 0
-    for i in range(K):
-        if vol[i] <= 0.0:
-            continue
-        phi = vol[i] / total
-        out_i[cnt] = nn[i]
-        out_v[cnt] = phi
-        if want_grad:
-            for k in range(d):
-                if i == dom:
-                    out_g[cnt, k] = (gv[i, k] * (rest / total) - phi * gc[k]) / total
-                else:
-                    out_g[cnt, k] = (gv[i, k] - phi * (gv[dom, k] + gc[k])) / total
-        j = cnt
-        while j > 0 and out_i[j - 1] > out_i[j]:
-            out_i[j - 1], out_i[j] = out_i[j], out_i[j - 1]
-            out_v[j - 1], out_v[j] = out_v[j], out_v[j - 1]
-            for k in range(d):
-                out_g[j - 1, k], out_g[j, k] = out_g[j, k], out_g[j - 1, k]
-            j -= 1
-        cnt += 1
-    return cnt, OK, 0
+    return _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
+def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
                  out_i, out_v, out_g, count, status, info):
     """Coordinates of m points into padded (m, ncap) arrays, parallel over blocks."""
     m = Q.shape[0]
@@ -1032,7 +1217,10 @@ def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
         A = np.empty((d, ncap + 1, d))
         B = np.empty((d, ncap + 1))
         I = np.empty((d, ncap + 1), np.int64)
+        AX = np.empty((ncap + 1, d))
+        BX = np.empty(ncap + 1)
         M = np.empty((d, d))
+        W = np.zeros((d, d))
         act = np.empty((d, 3 * ccap), np.int64)
         nact = np.empty(d, np.int64)
         mrows = np.empty(d, np.int64)
@@ -1048,7 +1236,7 @@ def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
         gmark = np.zeros(ncap + 1, np.int64)
         stamp = np.zeros(ncap + 1, np.int64)
         sc = np.zeros(1, np.int64)
-        G = np.empty(d)
+        G = np.empty(d + 1)
         E = np.empty((d, d))
         Mn = np.empty((d, d))
         rhs = np.empty(d)
@@ -1059,8 +1247,10 @@ def _query_batch(P, S, NB, Q, start, want_grad, ncap, ccap, nblocks, tols,
         ov = np.empty(ncap)
         og = np.empty((ncap, d))
         for r in range(lo, hi):
-            cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, tols,
-                                  smark, mark, cav, cst, live, rowof, bf, nn, q, Tc, tab, A, B, I, M, act,
+            cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, kind,
+                                  tols,
+                                  smark, mark, cav, cst, live, rowof, bf, nn, q, Tc, tab,
+                                  A, B, I, AX, BX, M, W, act,
                                   nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq, rep,
                                   gmark, stamp, sc, G, E, Mn,
                                   rhs, lam, vol, gv, oi, ov, og)
@@ -1143,11 +1333,11 @@ def _check_delaunay(tri, p):
             f"coincide with others)")
 
 
-def _run(P, S, NB, Q, start, gradient, ncap, ccap):
-    """Run the kernel on a batch; returns (CSR matrices, status, info)."""
+def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap):
+    """Run the kernel on a batch; returns ((rows, cols, values, gradients),
+    status, info)."""
     import numba
     m, d = Q.shape
-    n = P.shape[0]
     out_i = np.empty((m, ncap), np.int64)
     out_v = np.empty((m, ncap))
     out_g = np.empty((m, ncap, d) if gradient else (1, 1, d))
@@ -1156,7 +1346,7 @@ def _run(P, S, NB, Q, start, gradient, ncap, ccap):
     info = np.empty(m, np.int64)
     tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, _FLAT, _HULL, _LINEAR, _WALK, _VERTEX])
     nblocks = max(1, min(m // 16, 4 * numba.get_num_threads()))
-    _query_batch(P, S, NB, Q, start, gradient, ncap, ccap, nblocks, tols,
+    _query_batch(P, S, NB, Q, start, gradient, kind, ncap, ccap, nblocks, tols,
                  out_i, out_v, out_g, count, status, info)
     indptr = np.zeros(m + 1, dtype=np.int64)
     np.cumsum(count, out=indptr[1:])
@@ -1165,60 +1355,95 @@ def _run(P, S, NB, Q, start, gradient, ncap, ccap):
     data = np.empty(nnz)
     grads = np.empty((d, nnz) if gradient else (d, 0))
     _compress(count, indptr, out_i, out_v, out_g, gradient, indices, data, grads)
-    mats = [sp.csr_matrix((data, indices, indptr), shape=(m, n))]
-    if gradient:
-        mats += [sp.csr_matrix((grads[k], indices.copy(), indptr.copy()), shape=(m, n))
-                 for k in range(d)]
-    return mats, status, info
+    rows = np.repeat(np.arange(m), count)
+    return (rows, indices, data, grads), status, info
 
 
-def _on_hull(P, S, Q, facets):
-    """Coordinates of points on the convex hull: the (d-1)-dimensional Sibson
-    coordinates within the hull plane, with respect to the nodes on it.
+def _facet_planes(p, S, facets):
+    """Unit normals (pointing out of the hull) and offsets, n . y = c, of the
+    hull facets ``s * (d + 1) + k`` (the facet opposite vertex k of simplex s)."""
+    d = p.shape[1]
+    s, k = np.divmod(np.asarray(facets, np.int64), d + 1)
+    keep = np.ones((s.size, d + 1), bool)
+    keep[np.arange(s.size), k] = False
+    F = S[s][keep].reshape(s.size, d)
+    E = p[F[:, 1:]] - p[F[:, :1]]
+    normal = np.linalg.svd(E)[2][:, -1]
+    off = (normal * p[F[:, 0]]).sum(1)
+    flip = normal @ p.mean(axis=0) > off
+    normal[flip] *= -1
+    off[flip] *= -1
+    return normal, off, F
 
-    ``facets[r] = s * (d + 1) + k`` names the hull facet (opposite vertex k of
-    simplex s) whose plane query r lies on. Returns a CSR matrix."""
+
+def _on_hull(p, tri, Q, facets):
+    """Coordinates of points on the boundary of the convex hull, as the limits
+    of the coordinates from inside. Returns a CSR matrix (m, n).
+
+    ``facets[r]`` names a hull facet whose plane query r lies on (from the
+    query kernel). On a face of the hull of codimension k only the nodes on
+    that face get weights, ``integral over C_i of (|y - p_i|^2 - |y - x|^2)^k
+    dy``, where C_i is the second-order Voronoi cell of x and p_i among the
+    face's nodes in the face's own dimension: as x approaches the face, its
+    Voronoi cell becomes a spike whose sections are power diagrams of the
+    face's nodes, and integrating over the spike gives these weights. So
+
+    - inside a facet (k = 1) the weights come from the Lasserre recursion
+      with first moments (kind 2 of the query kernel), in the facet's
+      coordinates; with only d nodes on the facet they are its barycentric
+      coordinates;
+    - on a hull edge (dimension 1) they reduce to linear interpolation
+      between the two nodes around x, for every k (as on hull edges in 2D);
+    - on a 2-face of a 4D hull (k = 2) the limit is extrapolated from two
+      points just inside (Richardson; error about 1e-12).
+
+    These are not the (d-1)-dimensional Sibson coordinates of the facet's
+    nodes (those would weigh C_i by its area alone).
+    """
     m, d = Q.shape
-    n = P.shape[0]
+    n = p.shape[0]
+    S = np.ascontiguousarray(tri.simplices, dtype=np.int64)
+    normal, off, F = _facet_planes(p, S, facets)
+    diam = np.ptp(p, axis=0).max()
+    tol = 1e-9 * diam
+    key = np.round(np.c_[normal, off / diam] * 1e8).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    hull_nodes = np.unique(np.asarray(tri.convex_hull))
     rows, cols, vals = [], [], []
-    groups = {}
-    diam = np.ptp(P, axis=0).max()
-    for r, f in enumerate(facets):
-        s, k = divmod(int(f), d + 1)
-        face = np.delete(S[s], k)
-        f0 = P[face[0]]
-        # unit normal from the facet's edges
-        _, _, vt = np.linalg.svd(P[face[1:]] - f0)
-        normal = vt[-1]
-        offs = (P - f0) @ normal
-        on = np.flatnonzero(np.abs(offs) <= _HULL * diam)
-        key = tuple(on)
-        if key not in groups:
-            groups[key] = (f0, normal, [])
-        groups[key][2].append(r)
-    for on, (f0, normal, rs) in groups.items():
-        on = np.asarray(on)
-        rs = np.asarray(rs)
-        # orthonormal basis of the plane: the complement of the normal
-        basis = np.linalg.svd(normal[None, :])[2][1:].T
-        pn = (P[on] - f0) @ basis
-        qn = (Q[rs] - f0) @ basis
+    for g, f in enumerate(first):
+        rs = np.flatnonzero(inverse.ravel() == g)
+        x = Q[rs]
+        nodes = hull_nodes[np.abs(p[hull_nodes] @ normal[f] - off[f]) <= tol]
+        f0 = p[nodes[0]]
+        basis = np.linalg.svd(normal[f][None, :])[2][1:].T  # the plane's directions
+        pn = np.ascontiguousarray((p[nodes] - f0) @ basis)
+        xn = (x - f0) @ basis
         if d == 2:
-            u = pn[:, 0]
-            order = np.argsort(u)
-            us = u[order]
-            t = qn[:, 0]
-            j = np.clip(np.searchsorted(us, t, side="right") - 1, 0, us.size - 2)
-            w = np.clip((t - us[j]) / (us[j + 1] - us[j]), 0.0, 1.0)
-            a, b = on[order[j]], on[order[j + 1]]
-            rows += [rs, rs]
-            cols += [a, b]
-            vals += [1.0 - w, w]
+            H = _linear_on_line(pn[:, 0], xn[:, 0])
+        elif nodes.size == d:
+            # a simplex facet: the limit has linear precision, so barycentric
+            lam = np.linalg.solve((pn[1:] - pn[0]).T[None], (xn - pn[0])[..., None])[..., 0]
+            lam = np.clip(np.c_[1.0 - lam.sum(1), lam], 0.0, None)
+            H = sp.csr_matrix(lam / lam.sum(1, keepdims=True))
         else:
-            F = sibson_coordinates_nd(pn, qn).tocoo()
-            rows.append(rs[F.row])
-            cols.append(on[F.col])
-            vals.append(F.data)
+            ftri = _triangulate(pn)
+            H, status, info = _coordinates(pn, xn, False, ftri, "nan", 2, hull_status=True)
+            edge = np.flatnonzero(status == ON_HULL)
+            if edge.size:
+                H = H.tolil()
+                # on the boundary of the facet: in 3D an edge, linear along it;
+                # in 4D extrapolated, on the nodes of the lower face only
+                E = _on_hull(pn, ftri, xn[edge], info[edge])
+                if d == 4:
+                    R = _extrapolate_to_hull(p, tri, x[edge], nodes)[:, nodes].toarray()
+                    R *= E.toarray() != 0.0
+                    E = sp.csr_matrix(R / R.sum(axis=1, keepdims=True))
+                H[edge] = E
+                H = H.tocsr()
+        H = H.tocoo()
+        rows.append(rs[H.row])
+        cols.append(nodes[H.col])
+        vals.append(H.data)
     R = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                       shape=(m, n))
     R.eliminate_zeros()
@@ -1226,8 +1451,116 @@ def _on_hull(P, S, Q, facets):
     return R
 
 
+def _linear_on_line(u, t):
+    """Linear interpolation weights at t between the nodes u on a line (CSR)."""
+    order = np.argsort(u)
+    us = u[order]
+    j = np.clip(np.searchsorted(us, t, side="right") - 1, 0, us.size - 2)
+    w = np.clip((t - us[j]) / (us[j + 1] - us[j]), 0.0, 1.0)
+    r = np.arange(t.size)
+    return sp.csr_matrix((np.r_[1.0 - w, w], (np.r_[r, r], np.r_[order[j], order[j + 1]])),
+                         shape=(t.size, u.size))
+
+
+def _extrapolate_to_hull(p, tri, x, nodes):
+    """Coordinates on the hull by Richardson extrapolation from two points just
+    inside, towards the centroid, keeping only the given face nodes."""
+    n = p.shape[0]
+    diam = np.ptp(p, axis=0).max()
+    v = p.mean(axis=0) - x
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    t = 1e-8 * diam
+    F1 = _coordinates(p, x + t * v, False, tri, "nan", 0)
+    F2 = _coordinates(p, x + 2 * t * v, False, tri, "nan", 0)
+    F = (2 * F1 - F2).toarray()[:, nodes]
+    F = np.maximum(F, 0.0)
+    F /= F.sum(axis=1, keepdims=True)
+    F = sp.coo_matrix(F)
+    return sp.csr_matrix((F.data, (F.row, nodes[F.col])), shape=(x.shape[0], n))
+
+
+def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False):
+    """Coordinates (kind 0), second-order volumes (1) or hull-facet weights (2)
+    of the points q; see :func:`sibson_coordinates_nd`."""
+    d = p.shape[1]
+    if tri is None:
+        tri = _triangulate(p)
+    m, n = q.shape[0], p.shape[0]
+    S = np.ascontiguousarray(tri.simplices, dtype=np.int64)
+    NB = np.ascontiguousarray(tri.neighbors, dtype=np.int64)
+    # start each walk from a simplex at the nearest node (scipy's find_simplex
+    # is avoided: its first call computes barycentric transforms through
+    # LAPACK, which is very slow with a multithreaded BLAS)
+    if m:
+        near = cKDTree(p).query(q)[1]
+        start = np.ascontiguousarray(tri.vertex_to_simplex[near], dtype=np.int64)
+    else:
+        start = np.zeros(0, np.int64)
+    status = np.full(m, OUTSIDE, np.int64)
+    info = np.zeros(m, np.int64)
+    ncap, ccap = _CAPS[d]
+    parts = []
+    todo = np.arange(m)
+    while todo.size:
+        (r, c, v, g), st, inf = _run(p, S, NB, np.ascontiguousarray(q[todo]), start[todo],
+                                     gradient, kind, ncap, ccap)
+        status[todo] = st
+        info[todo] = inf
+        parts.append((todo[r], c, v, g))
+        # rare: more natural neighbours or conflict simplices than the buffers
+        # hold (co-spherical clusters); redo those with larger buffers
+        todo = todo[st == OVERFLOW]
+        ncap, ccap = 4 * ncap, 4 * ccap
+    out = np.flatnonzero(status == OUTSIDE)
+    if out.size:
+        raise ValueError(
+            f"{out.size} query point(s) lie outside the convex hull of the nodes; "
+            f"first is x[{out[0]}] = {q[out[0]].tolist()}")
+    bad = np.flatnonzero(status == UNBOUNDED)
+    if bad.size:  # pragma: no cover - a bounded cell is guaranteed inside the hull
+        raise ValueError(
+            f"second-order Voronoi cells of {bad.size} query point(s) came out unbounded; "
+            f"first is x[{bad[0]}] = {q[bad[0]].tolist()}")
+    hull = np.flatnonzero(status == ON_HULL)
+    if hull.size and not hull_status:
+        H = _on_hull(p, tri, q[hull], info[hull]).tocoo()
+        parts.append((hull[H.row], H.col, H.data, np.full((d, H.nnz), np.nan)))
+    # one COO -> CSR conversion per matrix from the same (row, col) arrays:
+    # all matrices get the same pattern, rows sorted by column index
+    rows = np.concatenate([a[0] for a in parts]) if parts else np.zeros(0, np.int64)
+    cols = np.concatenate([a[1] for a in parts]) if parts else np.zeros(0, np.int64)
+    vals = [np.concatenate([a[2] for a in parts]) if parts else np.zeros(0)]
+    if gradient:
+        g = np.concatenate([a[3] for a in parts], axis=1) if parts else np.zeros((d, 0))
+        vals += list(g)
+    order = np.lexsort((cols, rows))
+    indptr = np.zeros(m + 1, np.int64)
+    np.cumsum(np.bincount(rows, minlength=m), out=indptr[1:])
+    idx_dtype = np.int32 if max(n, rows.size) < 2**31 - 1 else np.int64
+    indices = cols[order].astype(idx_dtype)
+    indptr = indptr.astype(idx_dtype)
+    mats = [sp.csr_matrix((v[order], indices, indptr), shape=(m, n)) for v in vals]
+    if hull_status:
+        return mats[0], status, info
+    if gradient and undefined == "raise":
+        for code, what in ((AT_NODE, "coincide with a node"),
+                           (ON_HULL, "lie on the convex hull")):
+            bad = np.flatnonzero(status == code)
+            if bad.size:
+                i = int(bad[0])
+                extra = ""
+                if code == AT_NODE:
+                    j = int(np.flatnonzero((p == q[i]).all(axis=1))[0])
+                    extra = f" (node {j})"
+                raise ValueError(
+                    f"gradients are undefined at {bad.size} query point(s) that {what}; "
+                    f"first is x[{i}] = {q[i].tolist()}{extra}. Pass undefined='nan' to "
+                    f"get NaN rows there instead")
+    return (mats[0], mats[1:]) if gradient else mats[0]
+
+
 def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
-                          undefined: Literal["raise", "nan"] = "raise"):
+                          undefined: Literal["raise", "nan"] = "raise", *, _raw=False):
     """Sibson natural-neighbour coordinates (and gradients) in 2, 3 or 4 dimensions.
 
     Volumes of second-order Voronoi cells by Lasserre's recursive formula
@@ -1264,78 +1597,20 @@ def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
         non-finite queries, queries outside the convex hull (naming the first
         and the count) and gradients at nodes or on the hull with
         ``undefined="raise"``.
+
+    Notes
+    -----
+    ``_raw=True`` (for tests) returns the second-order volumes ``V_i`` and
+    their gradients instead, for points inside the hull and off the nodes.
     """
     p = _check_nodes(nodes)
-    d = p.shape[1]
     if undefined not in ("raise", "nan"):
         raise ValueError(f"undefined must be 'raise' or 'nan', got {undefined!r}")
-    q = _check_queries(x, d)
-    tri = _triangulate(p) if delaunay is None else delaunay
-    _check_delaunay(tri, p)
-    m, n = q.shape[0], p.shape[0]
-    S = np.ascontiguousarray(tri.simplices, dtype=np.int64)
-    NB = np.ascontiguousarray(tri.neighbors, dtype=np.int64)
-    # start each walk from a simplex at the nearest node (scipy's find_simplex
-    # is avoided: its first call computes barycentric transforms through
-    # LAPACK, which is very slow with a multithreaded BLAS)
-    if m:
-        near = cKDTree(p).query(q)[1]
-        start = np.ascontiguousarray(tri.vertex_to_simplex[near], dtype=np.int64)
+    q = _check_queries(x, p.shape[1])
+    if delaunay is not None:
+        _check_delaunay(delaunay, p)
+        tri = delaunay
     else:
-        start = np.zeros(0, np.int64)
-    ok = np.arange(m)
-    status = np.full(m, OUTSIDE, np.int64)
-    info = np.zeros(m, np.int64)
-    ncap, ccap = _CAPS[d]
-    mats = None
-    todo = ok
-    while todo.size:
-        part, st, inf = _run(p, S, NB, q[todo], start[todo], gradient, ncap, ccap)
-        status[todo] = st
-        info[todo] = inf
-        done = todo[st != OVERFLOW]
-        keep = np.flatnonzero(st != OVERFLOW)
-        E = sp.csr_matrix((np.ones(keep.size), (done, keep)), shape=(m, todo.size))
-        part = [E @ M for M in part]
-        mats = part if mats is None else [a + b for a, b in zip(mats, part)]
-        todo = todo[st == OVERFLOW]
-        ncap, ccap = 4 * ncap, 4 * ccap
-    if mats is None:
-        mats = [sp.csr_matrix((m, n)) for _ in range(1 + d * gradient)]
-    out = np.flatnonzero(status == OUTSIDE)
-    if out.size:
-        raise ValueError(
-            f"{out.size} query point(s) lie outside the convex hull of the nodes; "
-            f"first is x[{out[0]}] = {q[out[0]].tolist()}")
-    bad = np.flatnonzero(status == UNBOUNDED)
-    if bad.size:  # pragma: no cover - a bounded cell is guaranteed inside the hull
-        raise ValueError(
-            f"second-order Voronoi cells of {bad.size} query point(s) came out unbounded; "
-            f"first is x[{bad[0]}] = {q[bad[0]].tolist()}")
-    hull = np.flatnonzero(status == ON_HULL)
-    if hull.size:
-        H = _on_hull(p, S, q[hull], info[hull])
-        E = sp.csr_matrix((np.ones(hull.size), (hull, np.arange(hull.size))),
-                          shape=(m, hull.size))
-        mats[0] = mats[0] + E @ H
-        if gradient:
-            G = E @ H
-            G.data[:] = np.nan
-            mats[1:] = [M + G for M in mats[1:]]
-    if gradient and undefined == "raise":
-        for code, what in ((AT_NODE, "coincide with a node"),
-                           (ON_HULL, "lie on the convex hull")):
-            bad = np.flatnonzero(status == code)
-            if bad.size:
-                i = int(bad[0])
-                extra = ""
-                if code == AT_NODE:
-                    j = int(np.flatnonzero((p == q[i]).all(axis=1))[0])
-                    extra = f" (node {j})"
-                raise ValueError(
-                    f"gradients are undefined at {bad.size} query point(s) that {what}; "
-                    f"first is x[{i}] = {q[i].tolist()}{extra}. Pass undefined='nan' to "
-                    f"get NaN rows there instead")
-    for M in mats:
-        M.sort_indices()
-    return (mats[0], mats[1:]) if gradient else mats[0]
+        tri = _triangulate(p)
+        _check_delaunay(tri, p)
+    return _coordinates(p, q, gradient, tri, undefined, 1 if _raw else 0)

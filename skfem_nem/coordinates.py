@@ -1,5 +1,8 @@
 """Sibson and Laplace natural-neighbour coordinates in 2D, with exact gradients.
 
+(The public functions also take 3D and 4D nodes, and ``method="lasserre"`` in
+2D: those go to the paper's Box 1 method, :mod:`skfem_nem.lasserre`.)
+
 For a query point x inside the convex hull of the nodes, the natural
 neighbours of x are the vertices of the Delaunay triangles whose circumcircle
 strictly contains x (the Bowyer--Watson cavity of x). Ordered
@@ -42,23 +45,20 @@ Undefined gradients
 """
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, Optional
 
 import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
+from scipy.spatial import Delaunay
 
+from ._batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, check_queries, compress,
+                     csr_family, raise_outside, raise_undefined)
+from .lasserre import sibson_coordinates_nd
 from .predicates import orient2d
 from .triangulation import Triangulation, _cavity_boundary, _grow_cavity, _locate
 
 __all__ = ["sibson_coordinates", "laplace_coordinates", "natural_neighbour_coordinates"]
-
-# status codes of the query kernel
-OK = 0
-OUTSIDE = 1
-OVERFLOW = 2
-AT_NODE = 3
-ON_HULL = 4
 
 SIBSON = 0
 LAPLACE = 1
@@ -299,24 +299,21 @@ def _query_batch(P, T, N, C, Q, start, kind, want_grad, cap, nblocks,
                     out_gy[q, j] = ogy[j]
 
 
+def _dimension(nodes_or_triangulation) -> int:
+    """Space dimension of nodes, a Triangulation or a scipy Delaunay (2 if unclear:
+    the 2D checks then name the problem)."""
+    if isinstance(nodes_or_triangulation, Triangulation):
+        return 2
+    if isinstance(nodes_or_triangulation, Delaunay):
+        return int(nodes_or_triangulation.points.shape[1])
+    shape = np.shape(nodes_or_triangulation)
+    return int(shape[1]) if len(shape) == 2 and shape[1] in (3, 4) else 2
+
+
 def _as_triangulation(nodes_or_triangulation) -> Triangulation:
     if isinstance(nodes_or_triangulation, Triangulation):
         return nodes_or_triangulation
     return Triangulation(nodes_or_triangulation)
-
-
-def _check_queries(x) -> np.ndarray:
-    q = np.array(x, dtype=np.float64, copy=True)
-    if q.ndim == 1 and q.shape[0] == 2:
-        q = q[None, :]
-    if q.ndim != 2 or q.shape[1] != 2:
-        raise ValueError(f"query points must have shape (m, 2), got {np.shape(x)}")
-    bad = np.flatnonzero(~np.isfinite(q).all(axis=1))
-    if bad.size:
-        raise ValueError(
-            f"{bad.size} query point(s) have non-finite coordinates; first is "
-            f"x[{bad[0]}] = {q[bad[0]].tolist()}")
-    return q
 
 
 def _threads() -> int:
@@ -334,16 +331,18 @@ def natural_neighbour_coordinates(
     return_triangles: bool = False,
     hint=None,
     hull_tol: float = 1e-13,
+    method: Optional[Literal["area", "lasserre"]] = None,
 ):
-    """Natural-neighbour coordinates (and gradients) of points in 2D.
+    """Natural-neighbour coordinates (and gradients) of points in 2, 3 or 4 dimensions.
 
     Parameters
     ----------
     nodes_or_triangulation
-        (n, 2) nodes, or a :class:`~skfem_nem.Triangulation` (reused, so build
-        it once for repeated queries).
+        (n, d) nodes with d = 2, 3 or 4; or, to reuse a triangulation over
+        many calls, a :class:`~skfem_nem.Triangulation` (2D) or a
+        :class:`scipy.spatial.Delaunay` of the nodes (any d, Lasserre method).
     x
-        (m, 2) query points, inside the convex hull (its boundary included).
+        (m, d) query points, inside the convex hull (its boundary included).
     gradient
         Also return the gradients.
     kind
@@ -362,13 +361,21 @@ def natural_neighbour_coordinates(
     hull_tol
         Points outside the convex hull by less than ``hull_tol`` times the
         diagonal of the nodes' bounding box are round-off: they are moved onto
-        the nearest hull edge. Farther points are an error.
+        the nearest hull edge. Farther points are an error. (Area method; the
+        Lasserre method has its own relative tolerance, see
+        :mod:`skfem_nem.lasserre`.)
+    method
+        ``"area"``: the 2D area method of this module (the paper's method 1;
+        the default in 2D). ``"lasserre"``: volumes of second-order Voronoi
+        cells by Lasserre's recursion, :func:`skfem_nem.lasserre.sibson_coordinates_nd`
+        (the paper's Box 1, method 2; the default and only method in 3D and
+        4D; Sibson coordinates only, no ``hint`` or ``return_triangles``).
 
     Returns
     -------
     Phi : scipy.sparse.csr_matrix, shape (m, n)
         ``Phi[q, i] = phi_i(x_q)``, so ``Phi @ f`` interpolates nodal values f.
-    dPhi : list of two csr_matrix, shape (m, n)
+    dPhi : list of d csr_matrix, shape (m, n)
         Only with ``gradient=True``: ``dPhi[k][q, i] = d phi_i / d x_k (x_q)``
         (units: 1 / length), with the same sparsity pattern as ``Phi``.
 
@@ -378,14 +385,38 @@ def natural_neighbour_coordinates(
         For bad nodes (see :class:`~skfem_nem.Triangulation`), non-finite
         queries, queries outside the convex hull (naming the first and the
         count), and gradients at nodes or hull edges with
-        ``undefined="raise"``.
+        ``undefined="raise"``; for an unknown ``method``, or options the
+        chosen method does not have.
     """
+    d = _dimension(nodes_or_triangulation)
+    if method is None:
+        method = "area" if d == 2 else "lasserre"
+    if method not in ("area", "lasserre"):
+        raise ValueError(f"method must be 'area' or 'lasserre', got {method!r}")
+    if method == "lasserre":
+        if kind != "sibson":
+            raise ValueError(f"the Lasserre method computes Sibson coordinates only, got "
+                             f"kind={kind!r}")
+        if hint is not None or return_triangles:
+            raise ValueError("hint and return_triangles are options of the 2D area method "
+                             "(method='area')")
+        src = nodes_or_triangulation
+        if isinstance(src, Triangulation):
+            src = src.nodes
+        if isinstance(src, Delaunay):
+            return sibson_coordinates_nd(src.points, x, gradient=gradient, delaunay=src,
+                                         undefined=undefined, chunk=chunk)
+        return sibson_coordinates_nd(src, x, gradient=gradient, undefined=undefined,
+                                     chunk=chunk)
+    if d != 2:
+        raise ValueError(f"the area method works in 2D only; {d}D nodes need "
+                         f"method='lasserre'")
     tri = _as_triangulation(nodes_or_triangulation)
     if kind not in ("sibson", "laplace"):
         raise ValueError(f"kind must be 'sibson' or 'laplace', got {kind!r}")
     if undefined not in ("raise", "nan"):
         raise ValueError(f"undefined must be 'raise' or 'nan', got {undefined!r}")
-    q = _check_queries(x)
+    q = check_queries(x, 2)
     m = q.shape[0]
     n = tri.npoints
     P, T, N = tri.nodes, tri.triangles, tri.neighbours
@@ -480,10 +511,10 @@ def _snap_to_hull(tri, q, rows, hull_tol):
 
 
 def _buffers(mc, cap, gradient):
-    """Padded per-chunk output rows, reused across chunks (no page faults)."""
+    """Padded per-chunk output rows, reused across chunks (no page faults):
+    indices, values (mc, cap) and gradients (2, mc, cap)."""
     return (np.empty((mc, cap), np.int64), np.empty((mc, cap)),
-            np.empty((mc, cap) if gradient else (1, 1)),
-            np.empty((mc, cap) if gradient else (1, 1)))
+            np.empty((2, mc, cap) if gradient else (2, 1, 1)))
 
 
 def _run_chunk(P, T, N, C, Qc, start, ikind, gradient, cap, nthreads, buffers=None):
@@ -492,7 +523,7 @@ def _run_chunk(P, T, N, C, Qc, start, ikind, gradient, cap, nthreads, buffers=No
     n = P.shape[0]
     if buffers is None:
         buffers = _buffers(mc, cap, gradient)
-    out_i, out_v, out_gx, out_gy = buffers
+    out_i, out_v, out_g = buffers
     count = np.empty(mc, np.int64)
     status = np.empty(mc, np.int64)
     tloc = np.empty(mc, np.int64)
@@ -500,21 +531,9 @@ def _run_chunk(P, T, N, C, Qc, start, ikind, gradient, cap, nthreads, buffers=No
     kernel = _query_batch if mc >= _PARALLEL_MIN else _query_batch_serial
     nblocks = max(1, min(mc // 64, 8 * nthreads))
     kernel(P, T, N, C, Qc, start, ikind, gradient, cap, nblocks,
-           out_i, out_v, out_gx, out_gy, count, status, tloc)
-    indptr = np.zeros(mc + 1, dtype=np.int64)
-    np.cumsum(count, out=indptr[1:])
-    nnz = int(indptr[-1])
-    idx_dtype = np.int32 if max(n, nnz) < 2**31 - 1 else np.int64
-    indices = np.empty(nnz, dtype=idx_dtype)
-    data = np.empty(nnz)
-    gx = np.empty(nnz if gradient else 0)
-    gy = np.empty(nnz if gradient else 0)
-    _compress(count, indptr, out_i, out_v, out_gx, out_gy, gradient, indices, data, gx, gy)
-    indptr = indptr.astype(idx_dtype)
-    mats = [sp.csr_matrix((data, indices, indptr), shape=(mc, n))]
-    if gradient:
-        mats.append(sp.csr_matrix((gx, indices.copy(), indptr.copy()), shape=(mc, n)))
-        mats.append(sp.csr_matrix((gy, indices.copy(), indptr.copy()), shape=(mc, n)))
+           out_i, out_v, out_g[0], out_g[1], count, status, tloc)
+    indptr, indices, data, grads = compress(count, out_i, out_v, out_g, gradient, n)
+    mats = csr_family(indptr, indices, [data, *grads] if gradient else [data], (mc, n))
     return mats, status, tloc
 
 
@@ -522,51 +541,20 @@ _query_batch_serial = njit(cache=True)(_query_batch.py_func)
 _PARALLEL_MIN = 20000
 
 
-@njit(cache=True)
-def _compress(count, indptr, out_i, out_v, out_gx, out_gy, want_grad, indices, data, gx, gy):
-    """Padded (m, cap) rows -> flat CSR arrays."""
-    for q in range(count.shape[0]):
-        p0 = indptr[q]
-        for j in range(count[q]):
-            indices[p0 + j] = out_i[q, j]
-            data[p0 + j] = out_v[q, j]
-            if want_grad:
-                gx[p0 + j] = out_gx[q, j]
-                gy[p0 + j] = out_gy[q, j]
-
-
-def _check_status(status, q, offset, gradient, undefined, tri, index=None):
+def _check_status(status, q, offset, gradient, undefined, tri):
     """Raise for queries outside the hull and for undefined gradients."""
-    def where(bad):
-        i = int(index[bad[0]]) if index is not None else offset + int(bad[0])
-        return i, q[int(bad[0])] if index is not None else q[i]
-    out = np.flatnonzero(status == OUTSIDE)
-    if out.size:
-        i, xi = where(out)
-        raise ValueError(
-            f"{out.size} query point(s) lie outside the convex hull of the nodes; "
-            f"first is x[{i}] = {xi.tolist()}")
+    raise_outside(status, q, offset)
     if gradient and undefined == "raise":
-        for code, what in ((AT_NODE, "coincide with a node"),
-                           (ON_HULL, "lie on a convex-hull edge")):
-            bad = np.flatnonzero(status == code)
-            if bad.size:
-                i, xi = where(bad)
-                extra = ""
-                if code == AT_NODE:
-                    j = int(np.flatnonzero((tri.nodes == xi).all(axis=1))[0])
-                    extra = f" (node {j})"
-                raise ValueError(
-                    f"gradients are undefined at {bad.size} query point(s) that {what}; "
-                    f"first is x[{i}] = {xi.tolist()}{extra}. Pass undefined='nan' to "
-                    f"get NaN rows there instead")
+        raise_undefined(status, q, tri.nodes, "a convex-hull edge", offset)
 
 
 def sibson_coordinates(nodes_or_triangulation, x, gradient: bool = False, **kwargs):
-    """Sibson natural-neighbour coordinates of points x (m, 2).
+    """Sibson natural-neighbour coordinates of points x (m, d), d = 2, 3, 4.
 
     Returns a CSR matrix ``Phi`` (m, n) with ``Phi[q, i] = phi_i(x_q)``; with
-    ``gradient=True`` returns ``(Phi, [dPhi/dx, dPhi/dy])``. See
+    ``gradient=True`` returns ``(Phi, [dPhi/dx_1, ..., dPhi/dx_d])``. In 2D
+    the area method is the default (``method="lasserre"`` selects the paper's
+    Box 1); 3D and 4D nodes use the Lasserre method. See
     :func:`natural_neighbour_coordinates` for all options and errors.
     """
     return natural_neighbour_coordinates(nodes_or_triangulation, x, gradient=gradient,

@@ -119,17 +119,12 @@ import scipy.sparse as sp
 from numba import njit, prange
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
+from ._batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, UNBOUNDED, check_queries,
+                     compress, index_dtype, raise_outside, raise_undefined)
 from .triangulation import validate_nodes
 
 __all__ = ["sibson_coordinates_nd"]
 
-# status codes of the query kernel
-OK = 0
-OUTSIDE = 1
-OVERFLOW = 2
-AT_NODE = 3
-ON_HULL = 4
-UNBOUNDED = 5
 
 # A reduced (unit) constraint normal shorter than this is parallel to the facet.
 _ZERO_ROW = 1e-13
@@ -1262,21 +1257,7 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
                 out_v[r, j] = ov[j]
                 if want_grad:
                     for k in range(d):
-                        out_g[r, j, k] = og[j, k]
-
-
-@njit(cache=True)
-def _compress(count, indptr, out_i, out_v, out_g, want_grad, indices, data, grads):
-    """Padded (m, cap) rows -> flat CSR arrays."""
-    d = grads.shape[0]
-    for r in range(count.shape[0]):
-        p0 = indptr[r]
-        for j in range(count[r]):
-            indices[p0 + j] = out_i[r, j]
-            data[p0 + j] = out_v[r, j]
-            if want_grad:
-                for k in range(d):
-                    grads[k, p0 + j] = out_g[r, j, k]
+                        out_g[k, r, j] = og[j, k]
 
 
 # ---------------------------------------------------------------------------
@@ -1288,20 +1269,6 @@ def _check_nodes(nodes):
     if len(shape) != 2 or shape[1] not in (2, 3, 4):
         raise ValueError(f"nodes must have shape (n, d) with d = 2, 3 or 4, got {shape}")
     return validate_nodes(nodes, dim=shape[1])
-
-
-def _check_queries(x, d) -> np.ndarray:
-    q = np.array(x, dtype=np.float64, copy=True)
-    if q.ndim == 1 and q.shape[0] == d:
-        q = q[None, :]
-    if q.ndim != 2 or q.shape[1] != d:
-        raise ValueError(f"query points must have shape (m, {d}), got {np.shape(x)}")
-    bad = np.flatnonzero(~np.isfinite(q).all(axis=1))
-    if bad.size:
-        raise ValueError(
-            f"{bad.size} query point(s) have non-finite coordinates; first is "
-            f"x[{bad[0]}] = {q[bad[0]].tolist()}")
-    return q
 
 
 def _triangulate(p):
@@ -1340,7 +1307,7 @@ def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap):
     m, d = Q.shape
     out_i = np.empty((m, ncap), np.int64)
     out_v = np.empty((m, ncap))
-    out_g = np.empty((m, ncap, d) if gradient else (1, 1, d))
+    out_g = np.empty((d, m, ncap) if gradient else (d, 1, 1))
     count = np.empty(m, np.int64)
     status = np.empty(m, np.int64)
     info = np.empty(m, np.int64)
@@ -1348,13 +1315,7 @@ def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap):
     nblocks = max(1, min(m // 16, 4 * numba.get_num_threads()))
     _query_batch(P, S, NB, Q, start, gradient, kind, ncap, ccap, nblocks, tols,
                  out_i, out_v, out_g, count, status, info)
-    indptr = np.zeros(m + 1, dtype=np.int64)
-    np.cumsum(count, out=indptr[1:])
-    nnz = int(indptr[-1])
-    indices = np.empty(nnz, dtype=np.int64)
-    data = np.empty(nnz)
-    grads = np.empty((d, nnz) if gradient else (d, 0))
-    _compress(count, indptr, out_i, out_v, out_g, gradient, indices, data, grads)
+    _, indices, data, grads = compress(count, out_i, out_v, out_g, gradient, P.shape[0])
     rows = np.repeat(np.arange(m), count)
     return (rows, indices, data, grads), status, info
 
@@ -1479,7 +1440,7 @@ def _extrapolate_to_hull(p, tri, x, nodes):
     return sp.csr_matrix((F.data, (F.row, nodes[F.col])), shape=(x.shape[0], n))
 
 
-def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False):
+def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=1 << 15):
     """Coordinates (kind 0), second-order volumes (1) or hull-facet weights (2)
     of the points q; see :func:`sibson_coordinates_nd`."""
     d = p.shape[1]
@@ -1498,24 +1459,22 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False):
         start = np.zeros(0, np.int64)
     status = np.full(m, OUTSIDE, np.int64)
     info = np.zeros(m, np.int64)
-    ncap, ccap = _CAPS[d]
     parts = []
-    todo = np.arange(m)
-    while todo.size:
-        (r, c, v, g), st, inf = _run(p, S, NB, np.ascontiguousarray(q[todo]), start[todo],
-                                     gradient, kind, ncap, ccap)
-        status[todo] = st
-        info[todo] = inf
-        parts.append((todo[r], c, v, g))
-        # rare: more natural neighbours or conflict simplices than the buffers
-        # hold (co-spherical clusters); redo those with larger buffers
-        todo = todo[st == OVERFLOW]
-        ncap, ccap = 4 * ncap, 4 * ccap
-    out = np.flatnonzero(status == OUTSIDE)
-    if out.size:
-        raise ValueError(
-            f"{out.size} query point(s) lie outside the convex hull of the nodes; "
-            f"first is x[{out[0]}] = {q[out[0]].tolist()}")
+    # chunks bound the padded output buffers (d + 2 numbers per neighbour slot)
+    for c0 in range(0, m, chunk):
+        todo = np.arange(c0, min(m, c0 + chunk))
+        ncap, ccap = _CAPS[d]
+        while todo.size:
+            (r, c, v, g), st, inf = _run(p, S, NB, np.ascontiguousarray(q[todo]), start[todo],
+                                         gradient, kind, ncap, ccap)
+            status[todo] = st
+            info[todo] = inf
+            parts.append((todo[r], c, v, g))
+            # rare: more natural neighbours or conflict simplices than the buffers
+            # hold (co-spherical clusters); redo those with larger buffers
+            todo = todo[st == OVERFLOW]
+            ncap, ccap = 4 * ncap, 4 * ccap
+    raise_outside(status, q)
     bad = np.flatnonzero(status == UNBOUNDED)
     if bad.size:  # pragma: no cover - a bounded cell is guaranteed inside the hull
         raise ValueError(
@@ -1536,31 +1495,20 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False):
     order = np.lexsort((cols, rows))
     indptr = np.zeros(m + 1, np.int64)
     np.cumsum(np.bincount(rows, minlength=m), out=indptr[1:])
-    idx_dtype = np.int32 if max(n, rows.size) < 2**31 - 1 else np.int64
+    idx_dtype = index_dtype(n, rows.size)
     indices = cols[order].astype(idx_dtype)
     indptr = indptr.astype(idx_dtype)
     mats = [sp.csr_matrix((v[order], indices, indptr), shape=(m, n)) for v in vals]
     if hull_status:
         return mats[0], status, info
     if gradient and undefined == "raise":
-        for code, what in ((AT_NODE, "coincide with a node"),
-                           (ON_HULL, "lie on the convex hull")):
-            bad = np.flatnonzero(status == code)
-            if bad.size:
-                i = int(bad[0])
-                extra = ""
-                if code == AT_NODE:
-                    j = int(np.flatnonzero((p == q[i]).all(axis=1))[0])
-                    extra = f" (node {j})"
-                raise ValueError(
-                    f"gradients are undefined at {bad.size} query point(s) that {what}; "
-                    f"first is x[{i}] = {q[i].tolist()}{extra}. Pass undefined='nan' to "
-                    f"get NaN rows there instead")
+        raise_undefined(status, q, p, "the convex hull")
     return (mats[0], mats[1:]) if gradient else mats[0]
 
 
 def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
-                          undefined: Literal["raise", "nan"] = "raise", *, _raw=False):
+                          undefined: Literal["raise", "nan"] = "raise", chunk: int = 1 << 15,
+                          *, _raw=False):
     """Sibson natural-neighbour coordinates (and gradients) in 2, 3 or 4 dimensions.
 
     Volumes of second-order Voronoi cells by Lasserre's recursive formula
@@ -1581,6 +1529,8 @@ def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
         What to do when gradients are requested at a node or on the convex
         hull, where they are not defined: ``"raise"`` a ``ValueError`` naming
         the query, or give that row NaN gradients.
+    chunk
+        Queries are processed in chunks of this many points (bounds memory).
 
     Returns
     -------
@@ -1606,11 +1556,13 @@ def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
     p = _check_nodes(nodes)
     if undefined not in ("raise", "nan"):
         raise ValueError(f"undefined must be 'raise' or 'nan', got {undefined!r}")
-    q = _check_queries(x, p.shape[1])
+    q = check_queries(x, p.shape[1])
     if delaunay is not None:
         _check_delaunay(delaunay, p)
         tri = delaunay
     else:
         tri = _triangulate(p)
         _check_delaunay(tri, p)
-    return _coordinates(p, q, gradient, tri, undefined, 1 if _raw else 0)
+    if not (isinstance(chunk, (int, np.integer)) and chunk > 0):
+        raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
+    return _coordinates(p, q, gradient, tri, undefined, 1 if _raw else 0, chunk=int(chunk))

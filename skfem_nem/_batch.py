@@ -1,0 +1,121 @@
+"""Plumbing shared by the coordinate kernels of every dimension.
+
+The 2D area method (:mod:`skfem_nem.coordinates`) and the n-D Lasserre
+method (:mod:`skfem_nem.lasserre`) both check query points the same way,
+write padded per-query rows from their numba kernels, compress them into one
+CSR sparsity pattern shared by values and gradients, and report the same
+status codes with the same messages.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from numba import njit
+
+# status codes of the query kernels
+OK = 0
+OUTSIDE = 1
+OVERFLOW = 2
+AT_NODE = 3
+ON_HULL = 4
+UNBOUNDED = 5
+
+
+def check_queries(x, d: int) -> np.ndarray:
+    """A float64 copy of the (m, d) query points x (a single (d,) point becomes
+    (1, d)); ``ValueError`` for a wrong shape or non-finite coordinates,
+    naming the first offending query and the count."""
+    q = np.array(x, dtype=np.float64, copy=True)
+    if q.ndim == 1 and q.shape[0] == d:
+        q = q[None, :]
+    if q.ndim != 2 or q.shape[1] != d:
+        raise ValueError(f"query points must have shape (m, {d}), got {np.shape(x)}")
+    bad = np.flatnonzero(~np.isfinite(q).all(axis=1))
+    if bad.size:
+        raise ValueError(
+            f"{bad.size} query point(s) have non-finite coordinates; first is "
+            f"x[{bad[0]}] = {q[bad[0]].tolist()}")
+    return q
+
+
+@njit(cache=True)
+def _compress(count, indptr, out_i, out_v, out_g, want_grad, indices, data, grads):
+    """Padded rows -> flat CSR arrays: ``out_i``, ``out_v`` (m, cap), ``out_g``
+    (k, m, cap) into ``indices``, ``data`` (nnz,) and ``grads`` (k, nnz)."""
+    k = out_g.shape[0]
+    for r in range(count.shape[0]):
+        p0 = indptr[r]
+        for j in range(count[r]):
+            indices[p0 + j] = out_i[r, j]
+            data[p0 + j] = out_v[r, j]
+            if want_grad:
+                for c in range(k):
+                    grads[c, p0 + j] = out_g[c, r, j]
+
+
+def index_dtype(n: int, nnz: int):
+    """int32 for CSR indices when they fit (what scipy would pick), else int64."""
+    return np.int32 if max(n, nnz) < 2**31 - 1 else np.int64
+
+
+def compress(count, out_i, out_v, out_g, gradient: bool, n: int):
+    """Flat CSR arrays of padded kernel rows.
+
+    ``count`` (m,) entries per row, ``out_i``/``out_v`` (m, cap) column
+    indices and values, ``out_g`` (k, m, cap) gradient components (ignored
+    unless ``gradient``). Returns ``(indptr, indices, data, grads)`` with
+    ``grads`` of shape (k, nnz) (or (k, 0)), ``indptr`` int64 and
+    ``indices`` of :func:`index_dtype`.
+    """
+    m = count.shape[0]
+    indptr = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(count, out=indptr[1:])
+    nnz = int(indptr[-1])
+    indices = np.empty(nnz, dtype=index_dtype(n, nnz))
+    data = np.empty(nnz)
+    grads = np.empty((out_g.shape[0], nnz if gradient else 0))
+    _compress(count, indptr, out_i, out_v, out_g, gradient, indices, data, grads)
+    return indptr, indices, data, grads
+
+
+def csr_family(indptr, indices, values, shape):
+    """One CSR matrix per array in ``values`` on the same (indptr, indices)
+    pattern (each matrix gets its own copy of the index arrays)."""
+    indptr = indptr.astype(indices.dtype, copy=False)
+    mats = [sp.csr_matrix((values[0], indices, indptr), shape=shape)]
+    for v in values[1:]:
+        mats.append(sp.csr_matrix((v, indices.copy(), indptr.copy()), shape=shape))
+    return mats
+
+
+def raise_outside(status, q, offset=0):
+    """``ValueError`` if any query has status OUTSIDE, naming the first and the count."""
+    out = np.flatnonzero(status == OUTSIDE)
+    if out.size:
+        i, xi = _where(out, q, offset)
+        raise ValueError(
+            f"{out.size} query point(s) lie outside the convex hull of the nodes; "
+            f"first is x[{i}] = {xi.tolist()}")
+
+
+def raise_undefined(status, q, nodes, hull_word: str, offset=0):
+    """``ValueError`` for gradients requested at nodes (AT_NODE) or on the hull
+    (ON_HULL), naming the first query, the count and, at a node, the node."""
+    for code, what in ((AT_NODE, "coincide with a node"), (ON_HULL, f"lie on {hull_word}")):
+        bad = np.flatnonzero(status == code)
+        if bad.size:
+            i, xi = _where(bad, q, offset)
+            extra = ""
+            if code == AT_NODE:
+                j = int(np.flatnonzero((nodes == xi).all(axis=1))[0])
+                extra = f" (node {j})"
+            raise ValueError(
+                f"gradients are undefined at {bad.size} query point(s) that {what}; "
+                f"first is x[{i}] = {xi.tolist()}{extra}. Pass undefined='nan' to "
+                f"get NaN rows there instead")
+
+
+def _where(bad, q, offset):
+    """(index of the first bad query in q, its point); ``bad`` counts from ``offset``."""
+    i = offset + int(bad[0])
+    return i, q[i]

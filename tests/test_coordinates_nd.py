@@ -1,0 +1,113 @@
+"""The public coordinate functions in every dimension: method dispatch, 2D Lasserre
+against the area method, 3D and 4D through ``sibson_coordinates``."""
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from skfem_nem import Triangulation, natural_neighbour_coordinates, sibson_coordinates
+from skfem_nem.lasserre import sibson_coordinates_nd
+
+
+def _dense(M):
+    return M.toarray()
+
+
+def _compare_2d(p, q, gtol=1e-12):
+    A, dA = sibson_coordinates(p, q, gradient=True)
+    B, dB = sibson_coordinates(p, q, gradient=True, method="lasserre")
+    np.testing.assert_allclose(_dense(B), _dense(A), rtol=0, atol=1e-12)
+    scale = max(1.0, max(abs(D).max() for D in dA))
+    for Da, Db in zip(dA, dB):
+        np.testing.assert_allclose(_dense(Db), _dense(Da), rtol=0, atol=gtol * scale)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_lasserre_equals_area_in_2d(seed):
+    rng = np.random.default_rng(seed)
+    p = rng.random((400, 2))
+    tri = Triangulation(p)
+    # queries inside the triangles, on interior Delaunay edges and near nodes
+    t = rng.integers(0, tri.ntriangles, 300)
+    lam = rng.dirichlet(np.ones(3), 300)
+    q = np.einsum("mk,mkd->md", lam, p[tri.triangles[t]])
+    a, b = p[tri.triangles[t[:50], 0]], p[tri.triangles[t[:50], 1]]
+    s = rng.random((50, 1))
+    on_edge = a + s * (b - a)
+    q = np.r_[q, on_edge]
+    q = q[tri.locate(q) >= 0]
+    _compare_2d(p, q)
+    # within 1e-7 of a node both methods lose gradient digits like 1e-17 / r
+    near = p[tri.triangles[t[50:80], 2]] + 1e-7 * rng.standard_normal((30, 2))
+    _compare_2d(p, near[tri.locate(near) >= 0], gtol=1e-7)
+    # the Triangulation object is accepted by both methods
+    np.testing.assert_allclose(
+        _dense(sibson_coordinates(tri, q[:20], method="lasserre")),
+        _dense(sibson_coordinates(tri, q[:20])), atol=1e-12)
+
+
+def _check_properties(p, q, Phi, dPhi, tol=1e-12):
+    d = p.shape[1]
+    np.testing.assert_allclose(np.asarray(Phi.sum(axis=1)).ravel(), 1.0, atol=tol)
+    np.testing.assert_allclose(Phi @ p, q, atol=tol)
+    assert len(dPhi) == d
+    for k, D in enumerate(dPhi):
+        assert D.shape == Phi.shape and np.array_equal(D.indices, Phi.indices)
+        np.testing.assert_allclose(np.asarray(D.sum(axis=1)).ravel(), 0.0, atol=1e-9)
+        # sum_i x_i grad phi_i = I
+        np.testing.assert_allclose(D @ p, np.tile(np.eye(d)[k], (q.shape[0], 1)), atol=1e-9)
+
+
+@pytest.mark.parametrize("d", [3, 4])
+def test_public_function_in_3d_and_4d(d):
+    rng = np.random.default_rng(d)
+    p = rng.random((300 if d == 3 else 150, d))
+    q = 0.2 + 0.6 * rng.random((40, d))
+    p_before, q_before = p.copy(), q.copy()
+    Phi, dPhi = sibson_coordinates(p, q, gradient=True)
+    assert np.array_equal(p, p_before) and np.array_equal(q, q_before)
+    _check_properties(p, q, Phi, dPhi)
+    ref, dref = sibson_coordinates_nd(p, q, gradient=True)
+    assert abs(Phi - ref).max() == 0.0
+    assert all(abs(a - b).max() == 0.0 for a, b in zip(dPhi, dref))
+    # a scipy Delaunay is reused
+    tri = Delaunay(p)
+    Phi2 = natural_neighbour_coordinates(tri, q)
+    assert abs(Phi2 - Phi).max() == 0.0
+    # nodal interpolation: Kronecker delta
+    D = sibson_coordinates(p, p[:7]).toarray()
+    np.testing.assert_array_equal(D, np.eye(p.shape[0])[:7])
+
+
+def test_3d_chunks_give_the_same_matrices():
+    rng = np.random.default_rng(5)
+    p = rng.random((200, 3))
+    q = 0.3 + 0.4 * rng.random((130, 3))
+    Phi, dPhi = sibson_coordinates(p, q, gradient=True)
+    Phi2, dPhi2 = sibson_coordinates(p, q, gradient=True, chunk=17)
+    assert abs(Phi - Phi2).max() == 0.0 and np.array_equal(Phi.indices, Phi2.indices)
+    assert all(abs(a - b).max() == 0.0 for a, b in zip(dPhi, dPhi2))
+
+
+def test_dispatch_errors():
+    rng = np.random.default_rng(0)
+    p3 = rng.random((50, 3))
+    with pytest.raises(ValueError, match="area method works in 2D only"):
+        sibson_coordinates(p3, p3[:2] * 0.5 + 0.25, method="area")
+    with pytest.raises(ValueError, match="Sibson coordinates only"):
+        natural_neighbour_coordinates(p3, p3[:2] * 0.5 + 0.25, kind="laplace")
+    with pytest.raises(ValueError, match="method must be"):
+        sibson_coordinates(p3, p3[:2], method="watson")
+    with pytest.raises(ValueError, match="hint and return_triangles"):
+        sibson_coordinates(rng.random((20, 2)), [[0.5, 0.5]], method="lasserre", hint=[0])
+    with pytest.raises(ValueError, match=r"shape \(m, 3\)"):
+        sibson_coordinates(p3, [[0.5, 0.5]])
+    with pytest.raises(ValueError, match=r"x\[1\] = \[2.0, 0.5, 0.5\]"):
+        sibson_coordinates(p3, [[0.5, 0.5, 0.5], [2.0, 0.5, 0.5]])
+    with pytest.raises(ValueError, match=r"non-finite.*x\[0\]"):
+        sibson_coordinates(p3, [[np.nan, 0.5, 0.5]])
+    dup = np.r_[p3, p3[4:5]]
+    with pytest.raises(ValueError, match=r"nodes\[50\] coincides with nodes\[4\]"):
+        sibson_coordinates(dup, [[0.5, 0.5, 0.5]])
+    with pytest.raises(ValueError, match=r"\(node 3\)"):
+        sibson_coordinates(p3, p3[3:4], gradient=True)

@@ -1,0 +1,136 @@
+"""Node sets for natural-neighbour meshes: random nodes in a box, graded by a
+density, and nodes along lines (material interfaces, walls).
+
+All functions return plain ``(n, 2)`` float arrays; build the mesh with
+:func:`skfem_nem.delaunay_mesh`.
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+__all__ = ["box_nodes", "polyline_nodes", "remove_close"]
+
+
+def polyline_nodes(vertices, spacing: float, closed: bool = False) -> np.ndarray:
+    """Nodes along a polyline, about ``spacing`` apart, vertices included.
+
+    Parameters
+    ----------
+    vertices
+        (k, 2) corner points.
+    spacing
+        Target distance between consecutive nodes (length units); each
+        segment is split into ``ceil(length / spacing)`` equal parts.
+    closed
+        Join the last vertex back to the first.
+
+    Returns
+    -------
+    (m, 2) array, each vertex once.
+    """
+    v = np.asarray(vertices, dtype=float)
+    if v.ndim != 2 or v.shape[1] != 2 or v.shape[0] < 2:
+        raise ValueError(f"vertices must have shape (k >= 2, 2), got {v.shape}")
+    if not np.isfinite(v).all():
+        raise ValueError(f"vertex {int(np.flatnonzero(~np.isfinite(v).all(1))[0])} is not finite")
+    if not (np.isfinite(spacing) and spacing > 0):
+        raise ValueError(f"spacing must be a positive number, got {spacing}")
+    segs = np.r_[v, v[:1]] if closed else v
+    out = []
+    for a, b in zip(segs[:-1], segs[1:]):
+        k = max(1, int(np.ceil(np.linalg.norm(b - a) / spacing)))
+        t = np.arange(k)[:, None] / k
+        out.append(a + t * (b - a))
+    if not closed:
+        out.append(v[-1:])
+    return np.concatenate(out)
+
+
+def remove_close(points, keep, distance: float) -> np.ndarray:
+    """``points`` without those closer than ``distance`` to any of ``keep``."""
+    from scipy.spatial import cKDTree
+    points = np.asarray(points, dtype=float)
+    keep = np.asarray(keep, dtype=float)
+    if points.size == 0 or keep.size == 0:
+        return points
+    d, _ = cKDTree(keep).query(points)
+    return points[d >= distance]
+
+
+def box_nodes(n: int, width: float = 1.0, height: float = 1.0,
+              density: Optional[Callable[[np.ndarray], np.ndarray]] = None,
+              seed: int = 0, boundary_spacing: Optional[float] = None,
+              lines: Sequence[np.ndarray] = (), origin=(0.0, 0.0)) -> np.ndarray:
+    """Random nodes in the box ``[x0, x0 + width] x [y0, y0 + height]``.
+
+    The four corners and nodes along the four sides come first (so the
+    convex hull is the box and nodal wall conditions are exact), then the
+    nodes of ``lines`` (kept exactly), then ``n`` random interior nodes drawn
+    with probability proportional to ``density`` (a function of (m, 2) points
+    with values in (0, 1]; uniform if None). Random nodes closer than a
+    quarter of the local spacing to a side or a line node are dropped, so
+    fewer than ``n`` may remain.
+
+    Parameters
+    ----------
+    n
+        Number of random interior nodes drawn.
+    width, height, origin
+        The box (length units).
+    density
+        Relative node density, values in (0, 1].
+    seed
+        Random seed (the result is reproducible).
+    boundary_spacing
+        Spacing of the nodes on the sides; default the mean spacing
+        ``sqrt(width * height / n)``.
+    lines
+        Arrays of (k, 2) nodes to include exactly (e.g. from
+        :func:`polyline_nodes`).
+
+    Returns
+    -------
+    (m, 2) array of nodes, no duplicates.
+    """
+    if int(n) != n or n < 1:
+        raise ValueError(f"n must be a positive integer, got {n}")
+    for name, val in (("width", width), ("height", height)):
+        if not (np.isfinite(val) and val > 0):
+            raise ValueError(f"{name} must be a positive number, got {val}")
+    x0, y0 = map(float, origin)
+    rng = np.random.default_rng(seed)
+    h = np.sqrt(width * height / n)
+    hb = h if boundary_spacing is None else float(boundary_spacing)
+    corners = np.array([[x0, y0], [x0 + width, y0], [x0 + width, y0 + height],
+                        [x0, y0 + height]])
+    walls = polyline_nodes(corners, hb, closed=True)
+    fixed = [walls] + [np.asarray(l, dtype=float).reshape(-1, 2) for l in lines]
+    fixed = np.concatenate(fixed)
+    fixed = np.unique(np.round(fixed, 12), axis=0) if len(lines) else fixed
+    pts = []
+    count = 0
+    while count < n:
+        c = rng.random((2 * n, 2)) * [width, height] + [x0, y0]
+        if density is not None:
+            d = np.asarray(density(c), dtype=float)
+            if d.shape != (c.shape[0],) or not np.all((d > 0) & (d <= 1 + 1e-12)):
+                raise ValueError("density must return one value in (0, 1] per point")
+            c = c[rng.random(c.shape[0]) < d]
+        c = c[: n - count]
+        pts.append(c)
+        count += c.shape[0]
+    inner = np.concatenate(pts)
+    # local spacing ~ h / sqrt(density)
+    loc = h if density is None else h / np.sqrt(np.asarray(density(inner)))
+    margin = np.minimum.reduce([inner[:, 0] - x0, x0 + width - inner[:, 0],
+                                inner[:, 1] - y0, y0 + height - inner[:, 1]])
+    inner = inner[margin > 0.25 * np.minimum(loc, hb)]
+    if len(lines):
+        from scipy.spatial import cKDTree
+        extra = np.concatenate([np.asarray(l, dtype=float).reshape(-1, 2) for l in lines])
+        d, _ = cKDTree(extra).query(inner)
+        loc = h if density is None else h / np.sqrt(np.asarray(density(inner)))
+        inner = inner[d > 0.25 * loc]
+    return np.concatenate([fixed, inner])

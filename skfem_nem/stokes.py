@@ -1,0 +1,554 @@
+"""Incompressible Stokes flow with natural-neighbour velocity.
+
+Equations (creeping flow, viscosity ``eta`` > 0, body force ``f``, optional
+prescribed stress ``tau0`` such as the elastic memory of a visco-elastic
+material)::
+
+    -div(2 eta eps(u) + tau0) + grad p = f,      div u = 0.
+
+Weak form: find (u, p) with ``a(u, v) + b(v, p) = (f, v) - (tau0, eps(v))``
+and ``b(u, q) - s(p, q) = 0``, where ``a(u, v) = (2 eta eps(u), eps(v))`` and
+``b(v, q) = -(div v, q)``.
+
+Spaces
+------
+``method="nem"``
+    Vector Sibson (natural-neighbour) velocity on the nodes and continuous
+    piecewise-linear (P1) pressure on the same Delaunay triangles. Both have
+    one unknown per node and component, so the pair counts like P1-P1 and
+    is not inf-sup stable on its own (see :func:`inf_sup_constant`, which
+    measures it). It is stabilised by the pressure projection of Dohrmann
+    and Bochev (2004)::
+
+        s(p, q) = ((p - P0 p) / eta, q - P0 q),
+
+    with ``P0`` the L2 projection onto piecewise constants. ``s`` needs no
+    tuning parameter, is local (one triangle at a time), scales with the
+    inverse viscosity, so it stays balanced for viscosity contrasts of 1e6,
+    and vanishes on piecewise constants; its consistency error is of the
+    order of the P1 pressure's interpolation error (O(h)). It is stable
+    whenever the velocity space satisfies the weak inf-sup condition with
+    P1 pressure (Bochev, Dohrmann and Gunzburger, SIAM J. Numer. Anal. 44,
+    2006), which holds for any velocity space that contains an H1-stable
+    quasi-interpolant: natural-neighbour spaces do, since they reproduce
+    linear functions with local support. The stabilised constant is measured
+    over mesh sequences in the tests.
+``method="taylor-hood"``
+    scikit-fem's ``ElementVector(ElementTriP2())`` velocity and
+    ``ElementTriP1()`` pressure (inf-sup stable, no stabilisation): the
+    classical baseline on the same triangles.
+
+Boundary conditions
+-------------------
+Free slip on axis-aligned walls (normal velocity zero, no tangential
+traction) and no slip (both components zero) are imposed on the nodal
+values; on convex-hull edges natural-neighbour functions reduce to the
+linear 1D weights, so the conditions hold exactly along the walls. The
+pressure is fixed by its mean (zero) through a Lagrange multiplier.
+
+Solvers
+-------
+``solver="schur"`` (default) factorises the viscous block (sparse LU in a
+symmetric ordering) and solves the pressure Schur complement by
+preconditioned conjugate gradients (preconditioner: the lumped
+1/eta-weighted pressure mass). ``solver="direct"`` factorises the whole
+saddle-point system (slower: natural-neighbour stencils are wide).
+``solver="minres"`` uses MINRES with a block-diagonal preconditioner: one
+smoothed-aggregation AMG V-cycle (pyamg, rigid-body modes as near null
+space) for the viscous block and the diagonal of the viscosity-scaled
+pressure mass matrix for the pressure; the mean pressure is fixed by a
+rank-one term. Iteration counts are reported in :class:`StokesSolution`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Optional, Sequence, Union
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from skfem import Basis, BilinearForm, LinearForm, MeshTri
+from skfem.element import ElementTriP0, ElementTriP1, ElementTriP2, ElementVector
+from skfem.helpers import ddot, div, dot, sym_grad
+
+from .basis import ElementNaturalNeighbour, NaturalNeighbourBasis
+
+__all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes",
+           "assemble_stokes", "inf_sup_constant", "quadrature_values", "wall_dofs"]
+
+Field = Union[float, np.ndarray, Callable]
+
+
+@dataclass
+class StokesSpaces:
+    """Velocity and pressure bases on one triangulation (same quadrature)."""
+
+    mesh: MeshTri
+    method: str
+    ubasis: object
+    pbasis: Basis
+    p0basis: Basis
+
+    @property
+    def n_velocity(self) -> int:
+        """Number of velocity unknowns."""
+        return self.ubasis.N
+
+    @property
+    def n_pressure(self) -> int:
+        """Number of pressure unknowns."""
+        return self.pbasis.N
+
+    @property
+    def stabilised(self) -> bool:
+        return self.method == "nem"
+
+    @property
+    def quadrature_points(self) -> np.ndarray:
+        """Global coordinates of the quadrature points, (2, ne, nq)."""
+        return np.asarray(self.pbasis.global_coordinates())
+
+
+@dataclass
+class StokesSolution:
+    """Velocity and pressure dof vectors and how they were obtained."""
+
+    spaces: StokesSpaces
+    u: np.ndarray
+    p: np.ndarray
+    solver: str
+    iterations: int = 0
+    residual: float = 0.0
+    info: dict = field(default_factory=dict)
+
+    def velocity_at_nodes(self) -> np.ndarray:
+        """(n, 2) velocity at the mesh nodes."""
+        nd = self.spaces.ubasis.dofs.nodal_dofs
+        return np.stack([self.u[nd[0]], self.u[nd[1]]], axis=1)
+
+    def pressure_at_nodes(self) -> np.ndarray:
+        """(n,) pressure at the mesh nodes (P1 pressure: its nodal values)."""
+        return self.p[self.spaces.pbasis.dofs.nodal_dofs[0]]
+
+
+def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: int = 6,
+                  coordinates: str = "sibson") -> StokesSpaces:
+    """Velocity/pressure bases for :func:`solve_stokes`.
+
+    Parameters
+    ----------
+    mesh
+        A Delaunay ``MeshTri`` (build it with :func:`skfem_nem.delaunay_mesh`).
+    method
+        ``"nem"`` (natural-neighbour velocity, P1 pressure, stabilised) or
+        ``"taylor-hood"`` (P2 velocity, P1 pressure).
+    npoints
+        Quadrature points per triangle (1, 3, 4, 6, 7, 12, 13). The default 6
+        integrates the Taylor-Hood forms exactly and keeps the NEM
+        quadrature error below its discretisation error on typical meshes.
+    coordinates
+        ``"sibson"`` or ``"laplace"`` (NEM only).
+    """
+    if method == "nem":
+        ub = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()),
+                                   npoints=npoints, coordinates=coordinates)
+        quad = ub.quadrature
+    elif method in ("taylor-hood", "th"):
+        method = "taylor-hood"
+        from .basis import _quadrature
+        quad = _quadrature(npoints, None, None)
+        ub = Basis(mesh, ElementVector(ElementTriP2()), quadrature=quad)
+    else:
+        raise ValueError(f"method must be 'nem' or 'taylor-hood', got {method!r}")
+    pb = Basis(mesh, ElementTriP1(), quadrature=quad)
+    p0 = Basis(mesh, ElementTriP0(), quadrature=quad)
+    return StokesSpaces(mesh, method, ub, pb, p0)
+
+
+# ---------------------------------------------------------------------------
+# forms
+# ---------------------------------------------------------------------------
+
+@BilinearForm
+def viscous(u, v, w):
+    return 2.0 * w["eta"] * ddot(sym_grad(u), sym_grad(v))
+
+
+@BilinearForm
+def divergence(u, q, w):
+    return -div(u) * q
+
+
+@BilinearForm
+def weighted_mass(p, q, w):
+    return w["c"] * p * q
+
+
+@LinearForm
+def body_force(v, w):
+    return dot(w["f"], v)
+
+
+@LinearForm
+def stress_load(v, w):
+    return -ddot(w["tau"], sym_grad(v))
+
+
+@LinearForm
+def _unit(q, w):
+    return q
+
+
+def quadrature_values(spaces: StokesSpaces, value: Field, name: str,
+                      shape: tuple = (), positive: bool = False) -> np.ndarray:
+    """A coefficient at the quadrature points, shape ``shape + (ne, nq)``.
+
+    ``value`` may be a number, a callable of the quadrature points
+    ``x`` (2, ne, nq), an array already of that shape, or an array of nodal
+    values (n,) + ... interpolated with the P1 functions of the mesh (the
+    nodes carry the material, as in the paper). Raises ``ValueError`` naming
+    ``name`` and the first offending element or node for non-finite values
+    (and non-positive ones if ``positive``).
+    """
+    x = spaces.quadrature_points
+    ne, nq = x.shape[1:]
+    nn = spaces.mesh.p.shape[1]
+    if callable(value):
+        v = np.asarray(value(x), dtype=float)
+        where = "quadrature point"
+    else:
+        v = np.asarray(value, dtype=float)
+        where = "quadrature point"
+        if v.shape[:1] == (nn,) and v.shape[1:] == shape and v.shape[-2:] != (ne, nq):
+            bad = ~np.isfinite(v) | ((v <= 0) if positive else False)
+            if bad.any():
+                i = int(np.flatnonzero(bad.reshape(nn, -1).any(1))[0])
+                raise ValueError(f"{name} at node {i} is {v[i].tolist()}: must be finite"
+                                 + (" and positive" if positive else "")
+                                 + f" ({int(bad.reshape(nn, -1).any(1).sum())} node(s))")
+            flat = v.reshape(nn, -1)
+            vals = [np.asarray(spaces.pbasis.interpolate(flat[:, k])) for k in range(flat.shape[1])]
+            v = np.stack(vals).reshape(shape + (ne, nq))
+            where = "quadrature point (interpolated from nodes)"
+    v = np.broadcast_to(v, shape + (ne, nq)) if v.shape != shape + (ne, nq) else v
+    if v.shape != shape + (ne, nq):
+        raise ValueError(f"{name} has shape {v.shape}, expected {shape + (ne, nq)}")
+    bad = ~np.isfinite(v)
+    if positive:
+        bad = bad | (v <= 0)
+    if bad.any():
+        e = int(np.flatnonzero(bad.reshape(-1, ne, nq).any(axis=(0, 2)))[0])
+        raise ValueError(f"{name} is not finite" + (" and positive" if positive else "")
+                         + f" at a {where} of element {e} (value "
+                         f"{np.asarray(v)[..., e, :].min():.6g}; "
+                         f"{int(bad.reshape(-1, ne, nq).any(axis=(0, 2)).sum())} element(s))")
+    return np.ascontiguousarray(v)
+
+
+def wall_dofs(spaces: StokesSpaces, free_slip: Union[str, Sequence[str], None] = "all",
+              no_slip: Union[str, Sequence[str], None] = None, tol: float = 1e-9) -> np.ndarray:
+    """Velocity dofs fixed to zero by wall conditions.
+
+    ``free_slip`` / ``no_slip``: ``"all"`` (every boundary facet), a list of
+    boundary names of the mesh (``mesh.boundaries``), or None. Free slip
+    fixes the normal component and needs axis-aligned walls; a tilted
+    boundary facet raises ``ValueError`` naming it.
+    """
+    mesh = spaces.mesh
+    ub = spaces.ubasis
+
+    def facets(spec, what):
+        if spec is None:
+            return np.zeros(0, dtype=np.int64)
+        if isinstance(spec, str) and spec == "all":
+            return mesh.boundary_facets()
+        names = [spec] if isinstance(spec, str) else list(spec)
+        bnd = mesh.boundaries or {}
+        out = []
+        for nm in names:
+            if nm not in bnd:
+                raise ValueError(f"{what}: the mesh has no boundary named {nm!r} "
+                                 f"(it has {sorted(bnd)})")
+            out.append(np.asarray(bnd[nm]))
+        return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+
+    fixed = []
+    ns = facets(no_slip, "no_slip")
+    if ns.size:
+        fixed.append(ub.get_dofs(ns).all())
+    fs = facets(free_slip, "free_slip")
+    fs = np.setdiff1d(fs, ns)
+    if fs.size:
+        p = mesh.p[:, mesh.facets[:, fs]]  # (2, 2, nf)
+        d = p[:, 1] - p[:, 0]
+        L = np.hypot(*d)
+        vert = np.abs(d[0]) <= tol * L  # wall x = const: fix u^1
+        horiz = np.abs(d[1]) <= tol * L  # wall y = const: fix u^2
+        bad = ~(vert | horiz)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"free slip needs axis-aligned walls: boundary facet {int(fs[k])} "
+                             f"from {p[:, 0, k].tolist()} to {p[:, 1, k].tolist()} is tilted "
+                             f"({int(bad.sum())} such facet(s))")
+        if vert.any():
+            fixed.append(ub.get_dofs(fs[vert]).all("u^1"))
+        if horiz.any():
+            fixed.append(ub.get_dofs(fs[horiz]).all("u^2"))
+    if not fixed:
+        return np.zeros(0, dtype=np.int64)
+    return np.unique(np.concatenate(fixed))
+
+
+def _stabilisation(spaces: StokesSpaces, inv_eta: np.ndarray) -> sp.csr_matrix:
+    """Dohrmann-Bochev projection matrix ((p - P0 p)/eta, q - P0 q)."""
+    pb, p0 = spaces.pbasis, spaces.p0basis
+    Mw = weighted_mass.assemble(pb, c=inv_eta)
+    Cw = weighted_mass.assemble(pb, p0, c=inv_eta)   # (ne, Np): int w p q0
+    C = weighted_mass.assemble(pb, p0, c=np.ones_like(inv_eta))
+    area = np.asarray(C.sum(axis=1)).ravel()         # |K|
+    W0 = np.asarray(weighted_mass.assemble(p0, c=inv_eta).diagonal())  # int_K w
+    Di = sp.diags(1.0 / area)
+    S = Mw - C.T @ Di @ Cw - Cw.T @ Di @ C + C.T @ sp.diags(W0 / area ** 2) @ C
+    return ((S + S.T) * 0.5).tocsr()
+
+
+@dataclass
+class StokesSystem:
+    """The assembled blocks of the discrete Stokes problem."""
+
+    A: sp.csr_matrix        # (nu, nu) viscous block
+    B: sp.csr_matrix        # (np, nu) -(div u, q)
+    S: sp.csr_matrix        # (np, np) pressure stabilisation (zero for Taylor-Hood)
+    Mp: sp.csr_matrix       # (np, np) pressure mass weighted by 1 / eta
+    m: np.ndarray           # (np,) integrals of the pressure basis functions
+    f: np.ndarray           # (nu,) load
+    eta: np.ndarray         # (ne, nq) viscosity at quadrature points
+
+
+def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
+                    tau0: Optional[Field] = None) -> StokesSystem:
+    """Assemble the Stokes blocks.
+
+    Parameters
+    ----------
+    eta
+        Viscosity (Pa s or nondimensional): number, callable of x (2, ne, nq),
+        (ne, nq) values at the quadrature points, or (n,) nodal values.
+    f
+        Body force per unit volume, shape (2,) + that of ``eta`` (e.g.
+        ``rho * g``); a callable returns (2, ne, nq).
+    tau0
+        Optional known stress (2, 2, ne, nq) (or callable) moved to the right
+        side: the load gains ``-(tau0, eps(v))``.
+    """
+    e = quadrature_values(spaces, eta, "viscosity eta", positive=True)
+    fv = quadrature_values(spaces, f, "body force f", shape=(2,))
+    ub, pb = spaces.ubasis, spaces.pbasis
+    A = viscous.assemble(ub, eta=e)
+    B = divergence.assemble(ub, pb)
+    b = body_force.assemble(ub, f=fv)
+    if tau0 is not None:
+        t = quadrature_values(spaces, tau0, "stress tau0", shape=(2, 2))
+        b = b + stress_load.assemble(ub, tau=t)
+    inv = 1.0 / e
+    Mp = weighted_mass.assemble(pb, c=inv)
+    S = _stabilisation(spaces, inv) if spaces.stabilised else sp.csr_matrix((pb.N, pb.N))
+    m = _unit.assemble(pb)
+    return StokesSystem(A.tocsr(), B.tocsr(), S, Mp.tocsr(), m, b, e)
+
+
+def _rigid_modes(spaces: StokesSpaces, free: np.ndarray) -> np.ndarray:
+    ub = spaces.ubasis
+    loc = ub.doflocs  # (2, nu)
+    comp = np.zeros(ub.N, dtype=int)
+    comp[ub.get_dofs().all("u^2")] = 1
+    Bm = np.zeros((ub.N, 3))
+    Bm[comp == 0, 0] = 1.0
+    Bm[comp == 1, 1] = 1.0
+    Bm[comp == 0, 2] = -loc[1, comp == 0]
+    Bm[comp == 1, 2] = loc[0, comp == 1]
+    return Bm[free]
+
+
+def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
+                 tau0: Optional[Field] = None,
+                 free_slip: Union[str, Sequence[str], None] = "all",
+                 no_slip: Union[str, Sequence[str], None] = None,
+                 solver: str = "schur", tol: float = 1e-10, maxiter: int = 2000,
+                 system: Optional[StokesSystem] = None) -> StokesSolution:
+    """Solve the Stokes problem (see the module docstring).
+
+    Parameters
+    ----------
+    spaces
+        From :func:`stokes_spaces`.
+    eta, f, tau0
+        Viscosity, body force and known stress (see :func:`assemble_stokes`).
+    free_slip, no_slip
+        Walls (see :func:`wall_dofs`); default free slip everywhere.
+    solver
+        ``"schur"`` (default): sparse Cholesky-ordered LU of the viscous
+        block and preconditioned conjugate gradients on the pressure Schur
+        complement (preconditioner: the 1/eta-weighted, lumped pressure
+        mass); ``"direct"``: sparse LU of the whole saddle-point system;
+        ``"minres"``: MINRES with an AMG (pyamg) V-cycle on the viscous
+        block and the lumped 1/eta-weighted pressure mass, for problems too
+        large to factorise.
+    tol, maxiter
+        Relative tolerance and iteration limit of the iterative parts.
+    system
+        A :class:`StokesSystem` assembled before (then eta, f, tau0 are not
+        read).
+
+    Returns
+    -------
+    StokesSolution
+        Velocity dof vector (ordered as ``spaces.ubasis``), pressure dof
+        vector of mean zero, iteration count and relative residual.
+
+    Raises
+    ------
+    RuntimeError
+        If an iterative solver does not reach ``tol`` in ``maxiter``
+        iterations (naming both), or the system is singular.
+    """
+    if solver not in ("schur", "direct", "minres"):
+        raise ValueError(f"solver must be 'schur', 'direct' or 'minres', got {solver!r}")
+    if not (np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a positive number, got {tol}")
+    sys_ = assemble_stokes(spaces, eta, f, tau0) if system is None else system
+    nu, npr = spaces.n_velocity, spaces.n_pressure
+    D = wall_dofs(spaces, free_slip, no_slip)
+    free = np.setdiff1d(np.arange(nu), D)
+    A = sys_.A[free][:, free].tocsc()
+    B = sys_.B[:, free].tocsr()
+    fu = sys_.f[free]
+    u = np.zeros(nu)
+    info = {"fixed_velocity_dofs": int(D.size)}
+    mvec = sys_.m
+    area = float(mvec.sum())
+    Sb = sys_.S
+    n1 = free.size
+
+    def full_residual(xu, xp):
+        r1 = A @ xu + B.T @ xp - fu
+        r2 = B @ xu - Sb @ xp
+        r2 = r2 - mvec * ((mvec @ r2) / (mvec @ mvec))  # the multiplier's share
+        return float(np.sqrt(r1 @ r1 + r2 @ r2) / max(np.linalg.norm(fu), 1e-300))
+
+    if solver == "direct":
+        K = sp.bmat([[A, B.T, None],
+                     [B, -Sb, sp.csr_matrix(mvec[:, None])],
+                     [None, sp.csr_matrix(mvec[None, :]), None]], format="csc")
+        rhs = np.concatenate([fu, np.zeros(npr), [0.0]])
+        x = spla.spsolve(K, rhs)
+        if not np.isfinite(x).all():
+            raise RuntimeError("the Stokes system is singular: check the wall conditions "
+                               "(a rigid-body motion left free?) and the viscosity")
+        u[free] = x[:n1]
+        p = x[n1:n1 + npr]
+        return StokesSolution(spaces, u, p, "direct", 1, full_residual(x[:n1], p), info)
+    # the mean pressure is fixed by a rank-one term c m m^T of the size of 1/eta
+    c = float(sys_.Mp.diagonal().sum()) / area ** 2
+    dp = np.asarray(sys_.Mp.sum(axis=1)).ravel()  # lumped 1/eta-weighted mass
+    count = [0]
+
+    def cb(*args):
+        count[0] += 1
+
+    if solver == "schur":
+        try:
+            lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True))
+        except RuntimeError as err:
+            raise RuntimeError(f"the viscous block is singular ({err}): check the wall "
+                               f"conditions (a rigid-body motion left free?)") from None
+
+        def schur(q):
+            return B @ lu.solve(B.T @ q) + Sb @ q + c * mvec * (mvec @ q)
+
+        Sop = spla.LinearOperator((npr, npr), matvec=schur, dtype=float)
+        Pp = spla.LinearOperator((npr, npr), matvec=lambda q: q / dp, dtype=float)
+        g = B @ lu.solve(fu)
+        p, flag = spla.cg(Sop, g, M=Pp, rtol=tol, maxiter=maxiter, callback=cb)
+        if flag != 0:
+            r = np.linalg.norm(schur(p) - g) / max(np.linalg.norm(g), 1e-300)
+            raise RuntimeError(f"pressure CG did not converge: {count[0]} iterations, "
+                               f"relative residual {r:.3e} > tol {tol:.1e} (raise maxiter)")
+        xu = lu.solve(fu - B.T @ p)
+        u[free] = xu
+        p = p - (mvec @ p) / area
+        return StokesSolution(spaces, u, p, "schur", count[0], full_residual(xu, p), info)
+    # MINRES with block-diagonal preconditioner
+    import pyamg
+    Bm = _rigid_modes(spaces, free)
+    ml = pyamg.smoothed_aggregation_solver(A.tocsr(), B=Bm, symmetry="symmetric",
+                                           strength="symmetric", max_coarse=500)
+    Pu = ml.aspreconditioner(cycle="V")
+
+    def matvec(x):
+        xu, xp = x[:n1], x[n1:]
+        return np.concatenate([A @ xu + B.T @ xp,
+                               B @ xu - Sb @ xp - c * mvec * (mvec @ xp)])
+
+    K = spla.LinearOperator((n1 + npr, n1 + npr), matvec=matvec, dtype=float)
+    M = spla.LinearOperator(K.shape, matvec=lambda x: np.concatenate([Pu @ x[:n1], x[n1:] / dp]),
+                            dtype=float)
+    rhs = np.concatenate([fu, np.zeros(npr)])
+    x, flag = spla.minres(K, rhs, M=M, rtol=tol, maxiter=maxiter, callback=cb)
+    res = full_residual(x[:n1], x[n1:])
+    if flag != 0 or res > max(1e4 * tol, 1e-6):
+        raise RuntimeError(f"MINRES did not converge: {count[0]} iterations, relative "
+                           f"residual {res:.3e} (tol {tol:.1e}; raise maxiter, or use "
+                           f"solver='schur' for strong viscosity contrasts)")
+    u[free] = x[:n1]
+    p = x[n1:]
+    p = p - (mvec @ p) / area
+    info["amg_levels"] = len(ml.levels)
+    return StokesSolution(spaces, u, p, "minres", count[0], res, info)
+
+
+def inf_sup_constant(spaces: StokesSpaces, stabilised: Optional[bool] = None,
+                     eta: Field = 1.0) -> float:
+    """Numerical inf-sup constant (Chapelle and Bathe 1993) with no-slip walls.
+
+    The smallest nonzero eigenvalue ``mu_min`` of
+    ``(B A^-1 B^T + S) q = mu M q`` (A: the H1 velocity norm ``(grad u,
+    grad v) + (u, v)``, M: the pressure mass matrix, S: the stabilisation
+    if ``stabilised``), over pressures of mean zero; returns
+    ``sqrt(mu_min)``. For a stable pair it stays bounded away from zero as
+    the mesh is refined. Dense eigen-solve: for meshes up to a few thousand
+    nodes.
+    """
+    import scipy.linalg as sla
+    from skfem.helpers import grad
+    from skfem.helpers import ddot as _dd
+    from skfem.helpers import dot as _dot
+    stab = spaces.stabilised if stabilised is None else stabilised
+    ub, pb = spaces.ubasis, spaces.pbasis
+
+    @BilinearForm
+    def h1(u, v, w):
+        return _dd(grad(u), grad(v)) + _dot(u, v)
+
+    @BilinearForm
+    def mass(p, q, w):
+        return p * q
+
+    D = wall_dofs(spaces, free_slip=None, no_slip="all")
+    free = np.setdiff1d(np.arange(ub.N), D)
+    A = h1.assemble(ub)[free][:, free].tocsc()
+    B = divergence.assemble(ub, pb)[:, free]
+    M = mass.assemble(pb).toarray()
+    lu = spla.splu(A)
+    X = lu.solve(B.T.toarray())
+    G = B @ X
+    if stab:
+        e = quadrature_values(spaces, eta, "viscosity eta", positive=True)
+        G = G + _stabilisation(spaces, 1.0 / e).toarray()
+    G = 0.5 * (G + G.T)
+    # restrict to mean-zero pressures: basis of the M-orthogonal complement of 1
+    m = M @ np.ones(M.shape[0])
+    Q, _ = np.linalg.qr(np.c_[m, np.eye(M.shape[0])[:, :-1]])
+    Z = Q[:, 1:]
+    mu = sla.eigh(Z.T @ G @ Z, Z.T @ M @ Z, eigvals_only=True, subset_by_index=[0, 0])
+    return float(np.sqrt(max(mu[0], 0.0)))

@@ -88,7 +88,10 @@ def box_nodes(n: int, width: float = 1.0, height: float = 1.0,
         ``sqrt(width * height / n)``.
     lines
         Arrays of (k, 2) nodes to include exactly (e.g. from
-        :func:`polyline_nodes`).
+        :func:`polyline_nodes`), each read as a polyline: random nodes inside
+        the diametral disc of one of its segments are dropped, so that every
+        segment becomes an edge of the Delaunay triangulation (material
+        interfaces along the lines are then not cut by triangles).
 
     Returns
     -------
@@ -133,4 +136,17 @@ def box_nodes(n: int, width: float = 1.0, height: float = 1.0,
         d, _ = cKDTree(extra).query(inner)
         loc = h if density is None else h / np.sqrt(np.asarray(density(inner)))
         inner = inner[d > 0.25 * loc]
+        # keep the diametral disc of every line segment empty (Gabriel
+        # property), so each segment is an edge of the Delaunay triangulation
+        # and material interfaces along the lines are not cut by triangles
+        for l in lines:
+            l = np.asarray(l, dtype=float).reshape(-1, 2)
+            if l.shape[0] < 2:
+                continue
+            mid = 0.5 * (l[1:] + l[:-1])
+            rad = 0.5 * np.linalg.norm(l[1:] - l[:-1], axis=1)
+            near = cKDTree(mid).query_ball_point(inner, r=rad.max() * (1 + 1e-9))
+            bad = np.array([any(np.linalg.norm(inner[i] - mid[j]) <= rad[j] * (1 + 1e-9)
+                                for j in js) for i, js in enumerate(near)], dtype=bool)
+            inner = inner[~bad] if bad.size else inner
     return np.concatenate([fixed, inner])

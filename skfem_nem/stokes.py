@@ -12,31 +12,46 @@ and ``b(u, q) - s(p, q) = 0``, where ``a(u, v) = (2 eta eps(u), eps(v))`` and
 
 Spaces
 ------
-``method="nem"``
-    Vector Sibson (natural-neighbour) velocity on the nodes and continuous
-    piecewise-linear (P1) pressure on the same Delaunay triangles. Both have
-    one unknown per node and component, so the pair counts like P1-P1 and
-    is not inf-sup stable on its own (see :func:`inf_sup_constant`, which
-    measures it). It is stabilised by the pressure projection of Dohrmann
-    and Bochev (2004)::
-
-        s(p, q) = ((p - P0 p) / eta, q - P0 q),
-
-    with ``P0`` the L2 projection onto piecewise constants. ``s`` needs no
-    tuning parameter, is local (one triangle at a time), scales with the
-    inverse viscosity, so it stays balanced for viscosity contrasts of 1e6,
-    and vanishes on piecewise constants; its consistency error is of the
-    order of the P1 pressure's interpolation error (O(h)). It is stable
-    whenever the velocity space satisfies the weak inf-sup condition with
-    P1 pressure (Bochev, Dohrmann and Gunzburger, SIAM J. Numer. Anal. 44,
-    2006), which holds for any velocity space that contains an H1-stable
-    quasi-interpolant: natural-neighbour spaces do, since they reproduce
-    linear functions with local support. The stabilised constant is measured
-    over mesh sequences in the tests.
+``method="nem"`` (default)
+    Vector Sibson (natural-neighbour) velocity on the nodes, enriched by one
+    cubic bubble per triangle and component, and continuous piecewise-linear
+    (P1) pressure on the same Delaunay triangles: the MINI element's
+    construction with natural-neighbour functions in place of P1. The
+    bubbles give the pair a uniform inf-sup constant (the MINI proof needs
+    only an H1-stable quasi-interpolant in the base space, which
+    natural-neighbour functions provide since they reproduce linear
+    functions with local support); it is measured by
+    :func:`inf_sup_constant` over mesh sequences in the tests (0.29-0.35 on
+    100 to 900 random nodes). The bubbles are condensed triangle by
+    triangle before the solve, so the unknowns are nodal only. No parameter
+    to tune, and consistent.
+``method="nem-projection"``
+    The same velocity without bubbles, stabilised by the pressure projection
+    of Dohrmann and Bochev (2004), ``s(p, q) = ((p - P0 p) / eta, q - P0 q)``
+    (``P0``: L2 projection onto piecewise constants). Without ``s`` the
+    pair counts like P1-P1 and has spurious pressure modes (measured inf-sup
+    constant 0.0004-0.03). ``s`` is only weakly consistent: it resists the
+    hydrostatic pressure gradient with weight 1/eta, so a weak buoyant
+    inclusion (viscosity 1e-4 of its surroundings) sinks several times too
+    fast. Kept for comparison; prefer ``"nem"``.
 ``method="taylor-hood"``
     scikit-fem's ``ElementVector(ElementTriP2())`` velocity and
     ``ElementTriP1()`` pressure (inf-sup stable, no stabilisation): the
     classical baseline on the same triangles.
+
+For the natural-neighbour methods the pressure term is written as
+``b(v, q) = (v, grad q)`` (``-(div v, q)`` integrated by parts, with
+``v . n = 0`` on the walls). The two agree for exact integration, but
+natural-neighbour functions are not polynomials and Gauss quadrature is not
+exact for them; in the gradient form a hydrostatic pressure balances a
+piecewise-constant body force exactly at every quadrature point, so
+spurious buoyancy-driven flow cannot arise (with ``-(div v, q)`` a block
+1e4 times weaker than its surroundings sank 3.6 times too fast).
+
+Natural-neighbour functions are C1 across element edges, so they cannot
+follow the kink of the velocity at a viscosity jump: velocity errors at
+material interfaces converge about like h (Taylor-Hood on triangles whose
+edges follow the interface: h^3). See ``docs/stokes.md``.
 
 Boundary conditions
 -------------------
@@ -68,8 +83,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from skfem import Basis, BilinearForm, LinearForm, MeshTri
-from skfem.element import ElementTriP0, ElementTriP1, ElementTriP2, ElementVector
-from skfem.helpers import ddot, div, dot, sym_grad
+from skfem.element import ElementH1, ElementTriP0, ElementTriP1, ElementTriP2, ElementVector
+from skfem.refdom import RefTri
+from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from .basis import ElementNaturalNeighbour, NaturalNeighbourBasis
 
@@ -77,6 +93,26 @@ __all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes",
            "assemble_stokes", "inf_sup_constant", "quadrature_values", "wall_dofs"]
 
 Field = Union[float, np.ndarray, Callable]
+
+
+class ElementTriBubble(ElementH1):
+    """The cubic bubble ``27 x y (1 - x - y)`` alone: one interior dof per
+    triangle (the enrichment of the MINI element)."""
+
+    interior_dofs = 1
+    dim = 2
+    maxdeg = 3
+    dofnames = ["b"]
+    doflocs = np.array([[1.0 / 3.0, 1.0 / 3.0]])
+    refdom = RefTri
+
+    def lbasis(self, X, i):
+        x, y = X
+        if i != 0:
+            self._index_error()
+        phi = 27.0 * x * y * (1.0 - x - y)
+        dphi = 27.0 * np.array([y * (1.0 - x - y) - x * y, x * (1.0 - x - y) - x * y])
+        return phi, dphi
 
 
 @dataclass
@@ -88,6 +124,7 @@ class StokesSpaces:
     ubasis: object
     pbasis: Basis
     p0basis: Basis
+    bbasis: Optional[Basis] = None
 
     @property
     def n_velocity(self) -> int:
@@ -101,7 +138,8 @@ class StokesSpaces:
 
     @property
     def stabilised(self) -> bool:
-        return self.method == "nem"
+        """True where the pressure projection stabilisation is used."""
+        return self.method == "nem-projection"
 
     @property
     def quadrature_points(self) -> np.ndarray:
@@ -149,20 +187,24 @@ def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: int = 6,
     coordinates
         ``"sibson"`` or ``"laplace"`` (NEM only).
     """
-    if method == "nem":
+    bb = None
+    if method in ("nem", "nem-projection"):
         ub = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()),
                                    npoints=npoints, coordinates=coordinates)
         quad = ub.quadrature
+        if method == "nem":
+            bb = Basis(mesh, ElementVector(ElementTriBubble()), quadrature=quad)
     elif method in ("taylor-hood", "th"):
         method = "taylor-hood"
         from .basis import _quadrature
         quad = _quadrature(npoints, None, None)
         ub = Basis(mesh, ElementVector(ElementTriP2()), quadrature=quad)
     else:
-        raise ValueError(f"method must be 'nem' or 'taylor-hood', got {method!r}")
+        raise ValueError(f"method must be 'nem', 'nem-projection' or 'taylor-hood', "
+                         f"got {method!r}")
     pb = Basis(mesh, ElementTriP1(), quadrature=quad)
     p0 = Basis(mesh, ElementTriP0(), quadrature=quad)
-    return StokesSpaces(mesh, method, ub, pb, p0)
+    return StokesSpaces(mesh, method, ub, pb, p0, bb)
 
 
 # ---------------------------------------------------------------------------
@@ -177,6 +219,12 @@ def viscous(u, v, w):
 @BilinearForm
 def divergence(u, q, w):
     return -div(u) * q
+
+
+@BilinearForm
+def weak_divergence(u, q, w):
+    # -(div u, q) integrated by parts, with u . n = 0 on the walls
+    return dot(u, grad(q))
 
 
 @BilinearForm
@@ -323,6 +371,8 @@ class StokesSystem:
     m: np.ndarray           # (np,) integrals of the pressure basis functions
     f: np.ndarray           # (nu,) load
     eta: np.ndarray         # (ne, nq) viscosity at quadrature points
+    g: Optional[np.ndarray] = None  # (np,) right side of the continuity equation
+    bubble: Optional[tuple] = None  # (Ainv_bb, A_bn, B_b, f_b) of the condensed bubbles
 
 
 def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
@@ -343,18 +393,57 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     """
     e = quadrature_values(spaces, eta, "viscosity eta", positive=True)
     fv = quadrature_values(spaces, f, "body force f", shape=(2,))
+    t = None if tau0 is None else quadrature_values(spaces, tau0, "stress tau0", shape=(2, 2))
     ub, pb = spaces.ubasis, spaces.pbasis
-    A = viscous.assemble(ub, eta=e)
-    B = divergence.assemble(ub, pb)
-    b = body_force.assemble(ub, f=fv)
-    if tau0 is not None:
-        t = quadrature_values(spaces, tau0, "stress tau0", shape=(2, 2))
-        b = b + stress_load.assemble(ub, tau=t)
+
+    def loads(basis):
+        b = body_force.assemble(basis, f=fv)
+        if t is not None:
+            b = b + stress_load.assemble(basis, tau=t)
+        return b
+
+    A = viscous.assemble(ub, eta=e).tocsr()
+    bform = divergence if spaces.method == "taylor-hood" else weak_divergence
+    B = bform.assemble(ub, pb).tocsr()
+    b = loads(ub)
     inv = 1.0 / e
-    Mp = weighted_mass.assemble(pb, c=inv)
-    S = _stabilisation(spaces, inv) if spaces.stabilised else sp.csr_matrix((pb.N, pb.N))
+    Mp = weighted_mass.assemble(pb, c=inv).tocsr()
     m = _unit.assemble(pb)
-    return StokesSystem(A.tocsr(), B.tocsr(), S, Mp.tocsr(), m, b, e)
+    g = np.zeros(pb.N)
+    S = _stabilisation(spaces, inv) if spaces.stabilised else sp.csr_matrix((pb.N, pb.N))
+    bubble = None
+    if spaces.bbasis is not None:
+        # static condensation of the bubbles (they live in one triangle each)
+        bb = spaces.bbasis
+        Abb = viscous.assemble(bb, eta=e).tocsr()
+        Abn = viscous.assemble(ub, bb, eta=e).tocsr()       # (nb, nu)
+        Bb = bform.assemble(bb, pb).tocsr()                  # (np, nb)
+        fb = loads(bb)
+        Ainv = _block_inverse(Abb, bb.element_dofs)
+        AiAbn = (Ainv @ Abn).tocsr()
+        A = (A - Abn.T @ AiAbn).tocsr()
+        B = (B - Bb @ AiAbn).tocsr()
+        S = (Bb @ Ainv @ Bb.T).tocsr()
+        b = b - Abn.T @ (Ainv @ fb)
+        g = -(Bb @ (Ainv @ fb))
+        bubble = (Ainv, Abn, Bb, fb)
+    return StokesSystem(0.5 * (A + A.T), B, 0.5 * (S + S.T), Mp, m, b, e, g, bubble)
+
+
+def _block_inverse(A: sp.csr_matrix, element_dofs: np.ndarray) -> sp.csr_matrix:
+    """Inverse of a matrix that is block diagonal with one block per element
+    (the dofs ``element_dofs[:, e]`` of element e)."""
+    k, ne = element_dofs.shape
+    rows = np.repeat(element_dofs.T, k, axis=1).ravel()          # (ne*k*k)
+    cols = np.tile(element_dofs.T, (1, k)).ravel()
+    blocks = np.asarray(A[rows, cols]).reshape(ne, k, k)
+    det = np.linalg.det(blocks)
+    bad = ~(np.abs(det) > 0)
+    if bad.any():
+        raise ValueError(f"degenerate triangle {int(np.flatnonzero(bad)[0])}: its bubble "
+                         f"block is singular ({int(bad.sum())} triangle(s))")
+    inv = np.linalg.inv(blocks)
+    return sp.csr_matrix((inv.ravel(), (rows, cols)), shape=A.shape)
 
 
 def _rigid_modes(spaces: StokesSpaces, free: np.ndarray) -> np.ndarray:
@@ -423,6 +512,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     A = sys_.A[free][:, free].tocsc()
     B = sys_.B[:, free].tocsr()
     fu = sys_.f[free]
+    gp = np.zeros(npr) if sys_.g is None else sys_.g
     u = np.zeros(nu)
     info = {"fixed_velocity_dofs": int(D.size)}
     mvec = sys_.m
@@ -432,7 +522,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
 
     def full_residual(xu, xp):
         r1 = A @ xu + B.T @ xp - fu
-        r2 = B @ xu - Sb @ xp
+        r2 = B @ xu - Sb @ xp - gp
         r2 = r2 - mvec * ((mvec @ r2) / (mvec @ mvec))  # the multiplier's share
         return float(np.sqrt(r1 @ r1 + r2 @ r2) / max(np.linalg.norm(fu), 1e-300))
 
@@ -440,7 +530,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         K = sp.bmat([[A, B.T, None],
                      [B, -Sb, sp.csr_matrix(mvec[:, None])],
                      [None, sp.csr_matrix(mvec[None, :]), None]], format="csc")
-        rhs = np.concatenate([fu, np.zeros(npr), [0.0]])
+        rhs = np.concatenate([fu, gp, [0.0]])
         x = spla.spsolve(K, rhs)
         if not np.isfinite(x).all():
             raise RuntimeError("the Stokes system is singular: check the wall conditions "
@@ -468,7 +558,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
 
         Sop = spla.LinearOperator((npr, npr), matvec=schur, dtype=float)
         Pp = spla.LinearOperator((npr, npr), matvec=lambda q: q / dp, dtype=float)
-        g = B @ lu.solve(fu)
+        g = B @ lu.solve(fu) - gp
         p, flag = spla.cg(Sop, g, M=Pp, rtol=tol, maxiter=maxiter, callback=cb)
         if flag != 0:
             r = np.linalg.norm(schur(p) - g) / max(np.linalg.norm(g), 1e-300)
@@ -493,7 +583,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     K = spla.LinearOperator((n1 + npr, n1 + npr), matvec=matvec, dtype=float)
     M = spla.LinearOperator(K.shape, matvec=lambda x: np.concatenate([Pu @ x[:n1], x[n1:] / dp]),
                             dtype=float)
-    rhs = np.concatenate([fu, np.zeros(npr)])
+    rhs = np.concatenate([fu, gp])
     x, flag = spla.minres(K, rhs, M=M, rtol=tol, maxiter=maxiter, callback=cb)
     res = full_residual(x[:n1], x[n1:])
     if flag != 0 or res > max(1e4 * tol, 1e-6):
@@ -536,8 +626,16 @@ def inf_sup_constant(spaces: StokesSpaces, stabilised: Optional[bool] = None,
 
     D = wall_dofs(spaces, free_slip=None, no_slip="all")
     free = np.setdiff1d(np.arange(ub.N), D)
-    A = h1.assemble(ub)[free][:, free].tocsc()
-    B = divergence.assemble(ub, pb)[:, free]
+    A = h1.assemble(ub)[free][:, free]
+    bform = divergence if spaces.method == "taylor-hood" else weak_divergence
+    B = bform.assemble(ub, pb)[:, free]
+    if spaces.bbasis is not None:  # bubbles vanish on the walls: all free
+        bb = spaces.bbasis
+        Hbn = h1.assemble(ub, bb)[:, free]
+        A = sp.bmat([[A, Hbn.T], [Hbn, h1.assemble(bb)]])
+        B = sp.hstack([B, bform.assemble(bb, pb)])
+    A = sp.csc_matrix(A)
+    B = sp.csr_matrix(B)
     M = mass.assemble(pb).toarray()
     lu = spla.splu(A)
     X = lu.solve(B.T.toarray())

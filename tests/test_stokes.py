@@ -1,0 +1,139 @@
+"""Stokes flow: analytic SolCx, inf-sup stability, rates, solvers, bad input."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from skfem_nem import delaunay_mesh
+from skfem_nem.analytic import SolCx
+from skfem_nem.nodesets import box_nodes
+from skfem_nem.stokes import inf_sup_constant, solve_stokes, stokes_spaces
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+import ex07_solcx  # noqa: E402
+import ex08_sinking_block  # noqa: E402
+
+
+def _stress(sol, x):
+    G = sol.velocity_gradient(x)
+    E = 0.5 * (G + G.transpose(1, 0, 2))
+    return 2 * sol.viscosity(x) * E - sol.pressure(x) * np.eye(2)[:, :, None]
+
+
+@pytest.mark.parametrize("contrast", [1.0, 1e6])
+def test_solcx_analytic_solves_stokes(contrast):
+    sol = SolCx(1.0, contrast)
+    rng = np.random.default_rng(0)
+    h = 1e-4
+    for lo, hi in ((0.05, 0.45), (0.55, 0.95)):
+        x = np.stack([rng.uniform(lo, hi, 30), rng.uniform(0.05, 0.95, 30)])
+        ds = np.zeros((2, 30))
+        for j in range(2):
+            e = np.zeros((2, 1))
+            e[j] = h
+            ds += (_stress(sol, x + e)[:, j] - _stress(sol, x - e)[:, j]) / (2 * h)
+        assert np.abs(ds + sol.force(x)).max() < 1e-6          # momentum
+        G = sol.velocity_gradient(x)
+        assert np.abs(G[0, 0] + G[1, 1]).max() < 1e-14         # incompressible
+    z = np.linspace(0.05, 0.95, 9)
+    xl, xr = np.stack([0.5 - 1e-13 + 0 * z, z]), np.stack([0.5 + 1e-13 + 0 * z, z])
+    assert np.abs(sol.velocity(xl) - sol.velocity(xr)).max() < 1e-12
+    assert np.abs(_stress(sol, xl)[:, 0] - _stress(sol, xr)[:, 0]).max() < 1e-10  # traction
+    w = np.stack([0 * z, z])
+    assert np.abs(sol.velocity(w)[0]).max() < 1e-15            # free slip wall
+    assert abs(_stress(sol, w)[0, 1]).max() < 1e-12
+
+
+def test_inf_sup_bubble_stable_plain_pair_not():
+    plain, bubble, th = [], [], []
+    for n in (100, 200, 400):
+        mesh = delaunay_mesh(box_nodes(n, seed=3))
+        plain.append(inf_sup_constant(stokes_spaces(mesh, "nem-projection"), stabilised=False))
+        bubble.append(inf_sup_constant(stokes_spaces(mesh, "nem")))
+        th.append(inf_sup_constant(stokes_spaces(mesh, "taylor-hood")))
+    assert min(bubble) > 0.25 and min(th) > 0.3
+    assert max(plain) < 0.05   # NEM-P1 without enrichment: spurious pressure modes
+
+
+def test_stabilised_projection_inf_sup_bounded():
+    vals = [inf_sup_constant(stokes_spaces(delaunay_mesh(box_nodes(n, seed=3)),
+                                           "nem-projection")) for n in (100, 400)]
+    assert min(vals) > 0.35
+
+
+def test_hydrostatic_state_exact():
+    mesh = delaunay_mesh(box_nodes(400, seed=5))
+    s = solve_stokes(stokes_spaces(mesh, "nem"), 1.0, np.array([0.0, -2.0])[:, None, None],
+                     tol=1e-13)
+    assert np.abs(s.u).max() < 1e-10
+    p, z = s.pressure_at_nodes(), mesh.p[1]
+    assert np.abs(p - (-2.0 * (z - 0.5))).max() < 1e-9
+
+
+def test_solcx_nem_rates_smooth_viscosity():
+    rows = ex07_solcx.run(sizes=(250, 1000, 4000), contrast=1.0, methods=("nem",),
+                          verbose=False)
+    ru = ex07_solcx.rates(rows, "nem", "u_l2")
+    rp = ex07_solcx.rates(rows, "nem", "p_l2")
+    assert ru.mean() > 1.9          # measured 2.27, 2.16
+    assert rp.mean() > 0.6          # measured 1.08, 0.66
+    assert rows[-1]["u_l2"] < 2e-5
+
+
+def test_solcx_jump_nem_and_taylor_hood():
+    rows = ex07_solcx.run(sizes=(250, 1000), contrast=1e6, verbose=False)
+    nem = [r for r in rows if r["method"] == "nem"]
+    th = [r for r in rows if r["method"] == "taylor-hood"]
+    assert nem[-1]["u_l2"] < 5e-4 and th[-1]["u_l2"] < 2e-6
+    assert th[-1]["p_l2"] < 1e-2 and nem[-1]["p_l2"] < 0.3
+    assert ex07_solcx.rates(rows, "nem", "u_l2")[0] > 0.8      # interface kink: about 1
+    assert ex07_solcx.rates(rows, "taylor-hood", "u_l2")[0] > 2.5
+
+
+def test_sinking_block_weak_and_strong():
+    rows = ex08_sinking_block.run(n=1200, ratios=(1e-2, 1.0, 1e4), reference=False,
+                                  verbose=False)
+    for r in rows:
+        # same triangles: NEM within 12% of Taylor-Hood even for a block 1e4 weaker
+        assert abs(r["nem"] / r["th"] - 1) < 0.12, r
+    assert rows[-1]["nem"] > rows[1]["nem"] > rows[0]["nem"]   # weaker block sinks faster
+
+
+def test_solvers_agree():
+    sol = SolCx(1.0, 10.0)
+    mesh = delaunay_mesh(box_nodes(300, seed=2))
+    for method in ("nem", "nem-projection", "taylor-hood"):
+        sp_ = stokes_spaces(mesh, method)
+        ref = solve_stokes(sp_, sol.viscosity, sol.force, solver="direct")
+        for solver in ("schur", "minres"):
+            s = solve_stokes(sp_, sol.viscosity, sol.force, solver=solver, tol=1e-12,
+                             maxiter=5000)
+            assert np.abs(s.u - ref.u).max() < 1e-6 * np.abs(ref.u).max(), (method, solver)
+            assert s.iterations > 1
+
+
+def test_bad_input():
+    mesh = delaunay_mesh(box_nodes(200, seed=2))
+    sp_ = stokes_spaces(mesh, "nem")
+    with pytest.raises(ValueError, match="viscosity eta .* element"):
+        solve_stokes(sp_, lambda x: np.where(x[0] > 0.7, -1.0, 1.0), 0.0)
+    eta = np.ones(mesh.p.shape[1])
+    eta[7] = np.nan
+    with pytest.raises(ValueError, match="node 7"):
+        solve_stokes(sp_, eta, 0.0)
+    assert np.isnan(eta[7]) and np.isfinite(np.delete(eta, 7)).all()   # untouched
+    with pytest.raises(ValueError, match="body force"):
+        solve_stokes(sp_, 1.0, lambda x: np.stack([x[0] * np.inf, x[1]]))
+    with pytest.raises(ValueError, match="method"):
+        stokes_spaces(mesh, "p1p1")
+    with pytest.raises(ValueError, match="solver"):
+        solve_stokes(sp_, 1.0, 0.0, solver="lu")
+    with pytest.raises(ValueError, match="no boundary named"):
+        solve_stokes(sp_, 1.0, 0.0, free_slip=["top"])
+    with pytest.raises(RuntimeError, match="did not converge: 2 iterations"):
+        solve_stokes(sp_, 1.0, lambda x: np.stack([0 * x[0], np.sin(3 * x[0])]),
+                     solver="schur", maxiter=2)
+    tilted = delaunay_mesh(np.array([[0, 0], [1, 0], [1.2, 1], [0, 1], [0.5, 0.5]]))
+    with pytest.raises(ValueError, match="tilted"):
+        solve_stokes(stokes_spaces(tilted, "nem"), 1.0, 0.0)

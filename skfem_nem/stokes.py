@@ -32,8 +32,8 @@ Spaces
     pair counts like P1-P1 and has spurious pressure modes (measured inf-sup
     constant 0.0004-0.03). ``s`` is only weakly consistent: it resists the
     hydrostatic pressure gradient with weight 1/eta, so a weak buoyant
-    inclusion (viscosity 1e-4 of its surroundings) sinks several times too
-    fast. Kept for comparison; prefer ``"nem"``.
+    inclusion (viscosity 1e-4 of its surroundings) sinks an order of magnitude too
+    fast (15 times at 3000 nodes). Kept for comparison; prefer ``"nem"``.
 ``method="taylor-hood"``
     scikit-fem's ``ElementVector(ElementTriP2())`` velocity and
     ``ElementTriP1()`` pressure (inf-sup stable, no stabilisation): the

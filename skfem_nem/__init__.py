@@ -4,10 +4,11 @@ Layers (bottom to top): geometry (:mod:`~skfem_nem.predicates`,
 :mod:`~skfem_nem.triangulation`), coordinates (:mod:`~skfem_nem.coordinates`),
 basis (:mod:`~skfem_nem.basis`: NEM trial functions inside scikit-fem's assembly).
 """
-from .basis import (ElementNaturalNeighbour, NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
-                    delaunay_mesh)
+from .basis import (ElementNaturalNeighbour, ElementTetNaturalNeighbour, NaturalNeighbourBasis,
+                    NaturalNeighbourFacetBasis, delaunay_mesh)
 from .coordinates import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
 from .evolution import LagrangianMesh
+from .evolution3d import LagrangianMesh3D
 from .triangulation import Triangulation
 
 __version__ = "0.1.0"
@@ -15,10 +16,12 @@ __version__ = "0.1.0"
 __all__ = [
     "Triangulation",
     "ElementNaturalNeighbour",
+    "ElementTetNaturalNeighbour",
     "NaturalNeighbourBasis",
     "NaturalNeighbourFacetBasis",
     "delaunay_mesh",
     "LagrangianMesh",
+    "LagrangianMesh3D",
     "sibson_coordinates",
     "laplace_coordinates",
     "natural_neighbour_coordinates",

@@ -2,8 +2,14 @@
 
 :class:`NaturalNeighbourBasis` evaluates Sibson (or Laplace) natural-neighbour
 coordinates and their gradients at the quadrature points of a Delaunay
-``MeshTri`` and presents them to scikit-fem's ``BilinearForm``,
-``LinearForm`` and ``Functional`` exactly like a ``CellBasis`` does for P1.
+``MeshTri`` (or ``MeshTet``) and presents them to scikit-fem's
+``BilinearForm``, ``LinearForm`` and ``Functional`` exactly like a
+``CellBasis`` does for P1.
+
+In 2D the coordinates come from the area method (:mod:`skfem_nem.coordinates`,
+the default) or from the paper's Box 1 (``method="lasserre"``,
+:mod:`skfem_nem.lasserre`); on tetrahedra always from Box 1, with scikit-fem's
+tetrahedral quadrature and the Delaunay tetrahedra of Qhull.
 
 Stencils
 --------
@@ -25,17 +31,19 @@ from typing import Optional, Tuple
 import numpy as np
 from numba import njit
 from numpy import ndarray
-from skfem import MeshTri
+from scipy.spatial import Delaunay
+from skfem import MeshTet, MeshTri
 from skfem.assembly.basis import AbstractBasis, FacetBasis
-from skfem.element import DiscreteField, Element, ElementTriP1, ElementVector
+from skfem.element import DiscreteField, Element, ElementTetP1, ElementTriP1, ElementVector
 from skfem.quadrature import get_quadrature
-from skfem.refdom import RefTri
+from skfem.refdom import RefTet, RefTri
 
 from . import _assembly
 from .coordinates import natural_neighbour_coordinates
-from .triangulation import Triangulation, _count_non_delaunay
+from .lasserre import _check_delaunay, _triangulate
+from .triangulation import Triangulation, _count_non_delaunay, validate_nodes
 
-__all__ = ["ElementNaturalNeighbour", "NaturalNeighbourBasis",
+__all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeighbourBasis",
            "NaturalNeighbourFacetBasis", "delaunay_mesh", "QUADRATURE_POINTS"]
 
 _assembly.install()
@@ -69,33 +77,121 @@ class ElementNaturalNeighbour(Element):
             "use skfem_nem.NaturalNeighbourBasis")
 
 
-def delaunay_mesh(points) -> MeshTri:
-    """A ``MeshTri`` of the Delaunay triangulation of (n, 2) points.
+class ElementTetNaturalNeighbour(ElementNaturalNeighbour):
+    """The natural-neighbour numbering on tetrahedra (one dof per node).
 
-    Node i of the mesh is ``points[i]`` (nothing is reordered or dropped).
-    Raises ``ValueError`` for bad points (see :class:`~skfem_nem.Triangulation`).
+    :class:`NaturalNeighbourBasis` on a ``MeshTet`` uses it in place of
+    :class:`ElementNaturalNeighbour` (either may be passed);
+    ``ElementVector(ElementTetNaturalNeighbour())`` has three components.
     """
+
+    doflocs = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    refdom = RefTet
+
+
+def _element_for(mesh, elem, who):
+    """``elem`` (natural-neighbour, scalar or vector) on the reference cell of
+    ``mesh``: the triangle and tetrahedron variants are the same numbering."""
+    elem = ElementNaturalNeighbour() if elem is None else elem
+    vec = isinstance(elem, ElementVector)
+    base = elem.elem if vec else elem
+    if not isinstance(base, ElementNaturalNeighbour):
+        raise TypeError(f"{who} needs ElementNaturalNeighbour() or "
+                        f"ElementVector(ElementNaturalNeighbour()), got {type(elem).__name__}")
+    want = ElementTetNaturalNeighbour if isinstance(mesh, MeshTet) else ElementNaturalNeighbour
+    if type(base) is not want:
+        base = want()
+        elem = ElementVector(base) if vec else base
+    return elem
+
+
+def delaunay_mesh(points):
+    """The Delaunay triangulation of points as a scikit-fem mesh.
+
+    (n, 2) points give a ``MeshTri`` (robust 2D triangulation,
+    :class:`~skfem_nem.Triangulation`), (n, 3) points a ``MeshTet`` (Qhull,
+    :class:`scipy.spatial.Delaunay`). Node i of the mesh is ``points[i]``:
+    nothing is reordered or dropped, every node is a vertex of some
+    triangle or tetrahedron. Raises ``ValueError`` for bad points (non-finite,
+    too few, duplicate, all collinear or coplanar) and for points Qhull would
+    drop (nearly coincident with others), naming the point.
+    """
+    shape = np.shape(points)
+    if len(shape) == 2 and shape[1] == 3:
+        p = validate_nodes(points, dim=3, name="points")
+        tri = _triangulate(p)
+        _check_delaunay(tri, p)
+        mesh = MeshTet(np.ascontiguousarray(p.T),
+                       np.ascontiguousarray(tri.simplices.T, dtype=np.int64))
+        mesh._skfem_nem_triangulation = tri
+        return mesh
     tri = Triangulation(points)
     return MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T))
 
 
-def triangulation_of(mesh: MeshTri) -> Triangulation:
-    """The :class:`~skfem_nem.Triangulation` of a ``MeshTri`` (same triangle
-    order), after checking that it is Delaunay."""
-    cached = getattr(mesh, "_skfem_nem_triangulation", None)
-    if cached is not None:
-        return cached
-    if not isinstance(mesh, MeshTri):
-        raise TypeError(f"natural-neighbour bases need a MeshTri, got {type(mesh).__name__}")
-    p, t = mesh.p.T, mesh.t.T
+def _check_used(p, t, what):
     used = np.zeros(p.shape[0], dtype=bool)
     used[t.ravel()] = True
     if not used.all():
         i = int(np.flatnonzero(~used)[0])
         raise ValueError(
-            f"mesh node {i} at {p[i].tolist()} belongs to no triangle, so no trial function "
+            f"mesh node {i} at {p[i].tolist()} belongs to no {what}, so no trial function "
             f"would be defined there ({np.count_nonzero(~used)} such node(s)); build the mesh "
             f"with skfem_nem.delaunay_mesh(points)")
+
+
+def _tet_delaunay(mesh: MeshTet) -> Delaunay:
+    """Qhull's Delaunay triangulation of a ``MeshTet``'s nodes, after checking
+    that the mesh's own tetrahedra are Delaunay (the coordinates are computed
+    on Qhull's tetrahedra: where several Delaunay triangulations exist, as for
+    co-spherical nodes, all give the same natural-neighbour coordinates)."""
+    p, t = mesh.p.T, mesh.t.T
+    _check_used(p, t, "tetrahedron")
+    tri = _triangulate(np.ascontiguousarray(p))
+    _check_delaunay(tri, np.ascontiguousarray(p))
+    if tri.simplices.shape[0] == t.shape[0] and np.array_equal(
+            np.unique(np.sort(tri.simplices, axis=1), axis=0), np.unique(np.sort(t, axis=1), axis=0)):
+        return tri
+    # another triangulation: local empty-sphere test across every interior face
+    f2t = mesh.f2t
+    inner = np.flatnonzero(f2t[1] >= 0)
+    a, b = f2t[0, inner], f2t[1, inner]
+    face = mesh.facets[:, inner]
+    tb = t[b]
+    opp = tb[~(tb[:, :, None] == face.T[:, None, :]).any(axis=2)]
+    V = p[t[a]]                                   # (k, 4, 3)
+    w = V - p[opp][:, None, :]
+    lifted = np.concatenate([w, (w ** 2).sum(axis=2, keepdims=True)], axis=2)
+    insph = np.linalg.det(lifted)
+    orient = np.linalg.det(V[:, 1:] - V[:, :1])
+    scale = np.abs(w).max(axis=(1, 2)) ** 5
+    bad = np.flatnonzero(-insph * np.sign(orient) > 1e-10 * scale)
+    if bad.size:
+        raise ValueError(
+            f"the mesh is not a Delaunay tetrahedralisation ({bad.size} interior face(s) fail "
+            f"the in-sphere test; first: tetrahedra {int(a[bad[0]])} and {int(b[bad[0]])}); "
+            f"natural-neighbour trial functions need one: build the mesh with "
+            f"skfem_nem.delaunay_mesh(points)")
+    return tri
+
+
+def triangulation_of(mesh):
+    """The triangulation the coordinates of a mesh are computed on, checked to
+    be Delaunay and cached on the mesh: for a ``MeshTri`` its
+    :class:`~skfem_nem.Triangulation` (same triangle order), for a
+    ``MeshTet`` a :class:`scipy.spatial.Delaunay` of its nodes."""
+    cached = getattr(mesh, "_skfem_nem_triangulation", None)
+    if cached is not None:
+        return cached
+    if isinstance(mesh, MeshTet):
+        tri = _tet_delaunay(mesh)
+        mesh._skfem_nem_triangulation = tri
+        return tri
+    if not isinstance(mesh, MeshTri):
+        raise TypeError(f"natural-neighbour bases need a MeshTri or a MeshTet, got "
+                        f"{type(mesh).__name__}")
+    p, t = mesh.p.T, mesh.t.T
+    _check_used(p, t, "triangle")
     tri = Triangulation.from_triangles(p, t, make_delaunay=False)
     bad = _count_non_delaunay(tri.nodes, tri.triangles, tri.neighbours)
     if bad:
@@ -127,18 +223,21 @@ def triangulation_of(mesh: MeshTri) -> Triangulation:
     return tri
 
 
-def _quadrature(npoints, intorder, quadrature):
+def _quadrature(npoints, intorder, quadrature, refdom=RefTri):
     if quadrature is not None:
         X, W = quadrature
         return np.asarray(X, dtype=float), np.asarray(W, dtype=float)
     if npoints is not None:
+        if refdom is not RefTri:
+            raise ValueError("npoints chooses a triangle rule; on tetrahedra pass intorder "
+                             "or quadrature")
         if npoints == 1:
             return np.array([[1.0 / 3.0], [1.0 / 3.0]]), np.array([0.5])
         if npoints not in QUADRATURE_POINTS:
             raise ValueError(f"npoints must be one of 1, {', '.join(map(str, QUADRATURE_POINTS))}; "
                              f"got {npoints}")
         return get_quadrature(RefTri, QUADRATURE_POINTS[npoints])
-    return get_quadrature(RefTri, 2 if intorder is None else intorder)
+    return get_quadrature(refdom, 2 if intorder is None else intorder)
 
 
 # ---------------------------------------------------------------------------
@@ -174,8 +273,11 @@ def _stencils(indptr, indices, nq, ne):
 
 
 @njit(cache=True)
-def _fill(elems, ptr, sten, indptr, indices, data, gx, gy, nq, V, GX, GY):
-    """Dense (S, ne_g, nq) values and gradients of a group of equal-size stencils."""
+def _fill(elems, ptr, sten, indptr, indices, data, grads, nq, V, G):
+    """Dense values V (S, ne_g, nq) and gradients G (dim, S, ne_g, nq) of a group
+    of equal-size stencils; ``grads`` is a tuple of dim arrays on the pattern
+    of (indptr, indices)."""
+    dim = len(grads)
     for k in range(elems.shape[0]):
         e = elems[k]
         s0 = ptr[e]
@@ -193,8 +295,8 @@ def _fill(elems, ptr, sten, indptr, indices, data, gx, gy, nq, V, GX, GY):
                     else:
                         hi = mid
                 V[lo, k, q] = data[kk]
-                GX[lo, k, q] = gx[kk]
-                GY[lo, k, q] = gy[kk]
+                for c in range(dim):
+                    G[c, lo, k, q] = grads[c][kk]
 
 
 class _GroupBasis(AbstractBasis):
@@ -204,7 +306,7 @@ class _GroupBasis(AbstractBasis):
     form kernels do.
     """
 
-    def __init__(self, parent, elems, stencils, V, GX, GY):
+    def __init__(self, parent, elems, stencils, V, G):
         self.parent = parent
         self.mesh = parent.mesh
         self.elem = parent.elem
@@ -227,20 +329,19 @@ class _GroupBasis(AbstractBasis):
                     val = np.zeros((dim,) + V.shape[1:])
                     val[c] = V[j]
                     grad = np.zeros((dim, dim) + V.shape[1:])
-                    grad[c, 0] = GX[j]
-                    grad[c, 1] = GY[j]
+                    grad[c] = G[:, j]
                     basis.append((DiscreteField(val, grad),))
         else:
             self._element_dofs = self.dofs.nodal_dofs[0][stencils]
-            basis = [(DiscreteField(V[j], np.stack([GX[j], GY[j]])),) for j in range(S)]
+            basis = [(DiscreteField(V[j], G[:, j]),) for j in range(S)]
         self.basis = basis
         self.Nbfun = len(basis)
-        self._raw = (V, GX, GY)  # for the stacked assembly in _assembly
+        self._raw = (V, G)  # for the stacked assembly in _assembly
 
     def stacked(self, idx):
         """Local functions ``idx`` (P,) stacked along the element axis: a
         one-tuple of DiscreteField over P * nelems elements (pair-major)."""
-        V, GX, GY = self._raw
+        V, G = self._raw
         nq = V.shape[2]
         if isinstance(self.elem, ElementVector):
             dim = self.elem.dim
@@ -250,11 +351,9 @@ class _GroupBasis(AbstractBasis):
             for comp in range(dim):
                 sel = c == comp
                 val[comp, sel] = V[j[sel]]
-                grad[comp, 0, sel] = GX[j[sel]]
-                grad[comp, 1, sel] = GY[j[sel]]
+                grad[comp, :, sel] = G[:, j[sel]].transpose(1, 0, 2, 3)
             return (DiscreteField(val.reshape(dim, -1, nq), grad.reshape(dim, dim, -1, nq)),)
-        return (DiscreteField(V[idx].reshape(-1, nq),
-                              np.stack([GX[idx].reshape(-1, nq), GY[idx].reshape(-1, nq)])),)
+        return (DiscreteField(V[idx].reshape(-1, nq), G[:, idx].reshape(G.shape[0], -1, nq)),)
 
     @property
     def element_dofs(self):
@@ -283,18 +382,26 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
     """Shared machinery of the cell and facet bases: stencils and groups."""
 
     coordinates: str
-    triangulation: Triangulation
+    method: str
+    triangulation: object  # Triangulation (2D area method) or scipy Delaunay
+
+    def _coordinates(self, pts, gradient=False, hint=None, undefined="nan"):
+        """Coordinates (and gradients) at the (m, dim) points pts."""
+        kw = {}
+        if self.method == "area" and hint is not None:
+            kw["hint"] = hint
+        return natural_neighbour_coordinates(
+            self.triangulation, pts, gradient=gradient, kind=self.coordinates,
+            undefined=undefined, method=self.method, **kw)
 
     def _build(self, x, hint):
         """Coordinates at the (dim, ne, nq) points x and their stencil groups."""
-        ne, nq = x.shape[1], x.shape[2]
-        pts = np.ascontiguousarray(x.transpose(1, 2, 0).reshape(-1, 2))
-        Phi, (DX, DY) = natural_neighbour_coordinates(
-            self.triangulation, pts, gradient=True, kind=self.coordinates,
-            hint=np.repeat(hint, nq), undefined="nan")
-        if DX.nnz and not (np.isfinite(DX.data).all() and np.isfinite(DY.data).all()):
-            Phi, DX, DY = self._fix_undefined(pts, Phi, DX, DY)
-        self._Phi, self._DX, self._DY = Phi, DX, DY
+        dim, ne, nq = x.shape
+        pts = np.ascontiguousarray(x.transpose(1, 2, 0).reshape(-1, dim))
+        Phi, D = self._coordinates(pts, gradient=True, hint=np.repeat(hint, nq))
+        if Phi.nnz and not all(np.isfinite(Dk.data).all() for Dk in D):
+            Phi, D = self._fix_undefined(pts, Phi, D)
+        self._Phi, self._D = Phi, list(D)
         ptr, sten = _stencils(Phi.indptr.astype(np.int64), Phi.indices.astype(np.int64), nq, ne)
         self.stencil_ptr, self.stencil_nodes = ptr, sten
         sizes = np.diff(ptr)
@@ -310,13 +417,12 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
         S = int(ptr[elems[0] + 1] - ptr[elems[0]])
         nq = self.dx.shape[1]
         V = np.zeros((S, elems.size, nq))
-        GX = np.zeros_like(V)
-        GY = np.zeros_like(V)
-        Phi, DX, DY = self._Phi, self._DX, self._DY
-        _fill(elems, ptr, sten, Phi.indptr, Phi.indices, Phi.data, DX.data, DY.data,
-              nq, V, GX, GY)
+        G = np.zeros((len(self._D), S, elems.size, nq))
+        Phi = self._Phi
+        _fill(elems, ptr, sten, Phi.indptr, Phi.indices, Phi.data,
+              tuple(Dk.data for Dk in self._D), nq, V, G)
         stencils = sten[ptr[elems][None, :] + np.arange(S)[:, None]]
-        return self._group(elems, stencils, V, GX, GY)
+        return self._group(elems, stencils, V, G)
 
     def _restricted(self, idx, key=None):
         """A group basis on the elements ``idx`` (equal stencil sizes), cached."""
@@ -326,13 +432,13 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
             cache[k] = self._make_group(np.asarray(idx))
         return cache[k]
 
-    def _fix_undefined(self, pts, Phi, DX, DY):
-        raise ValueError("quadrature points at nodes or on convex-hull edges: gradients of "
+    def _fix_undefined(self, pts, Phi, D):
+        raise ValueError("quadrature points at nodes or on the convex hull: gradients of "
                          "natural-neighbour functions are undefined there; use a quadrature "
                          "rule with interior points")
 
-    def _group(self, elems, stencils, V, GX, GY):
-        return _GroupBasis(self, elems, stencils, V, GX, GY)
+    def _group(self, elems, stencils, V, G):
+        return _GroupBasis(self, elems, stencils, V, G)
 
     # -- what assembly and users read ----------------------------------------
     @property
@@ -373,22 +479,22 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
 
     def interpolate(self, w: ndarray) -> DiscreteField:
         """Values and gradients of the dof vector ``w`` (N,) at the quadrature
-        points: a DiscreteField with value (ne, nq) and grad (2, ne, nq), or
-        (2, ne, nq) and (2, 2, ne, nq) for a vector basis."""
+        points: a DiscreteField with value (ne, nq) and grad (dim, ne, nq), or
+        (dim, ne, nq) and (dim, dim, ne, nq) for a vector basis."""
         w = np.asarray(w)
         if w.shape[0] != self.N:
             raise ValueError(f"dof vector has {w.shape[0]} entries, the basis {self.N}")
         sh = self.dx.shape
+
+        def field(u):
+            return ((self._Phi @ u).reshape(sh),
+                    np.stack([(Dk @ u).reshape(sh) for Dk in self._D]))
+
         if isinstance(self.elem, ElementVector):
             nd = self.dofs.nodal_dofs
-            comps = [w[nd[c]] for c in range(self.elem.dim)]
-            val = np.stack([(self._Phi @ u).reshape(sh) for u in comps])
-            grad = np.stack([np.stack([(self._DX @ u).reshape(sh), (self._DY @ u).reshape(sh)])
-                             for u in comps])
-            return DiscreteField(val, grad)
-        u = w[self.dofs.nodal_dofs[0]]
-        return DiscreteField((self._Phi @ u).reshape(sh),
-                             np.stack([(self._DX @ u).reshape(sh), (self._DY @ u).reshape(sh)]))
+            vals, grads = zip(*[field(w[nd[c]]) for c in range(self.elem.dim)])
+            return DiscreteField(np.stack(vals), np.stack(grads))
+        return DiscreteField(*field(w[self.dofs.nodal_dofs[0]]))
 
     def zeros(self, dtype=None):
         return np.zeros(self.N, dtype=dtype)
@@ -399,26 +505,64 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
         return int((self.stencil_sizes.astype(np.int64) ** 2).sum())
 
 
+def _check_method(mesh, coordinates, method):
+    if coordinates not in ("sibson", "laplace"):
+        raise ValueError(f"coordinates must be 'sibson' or 'laplace', got {coordinates!r}")
+    tet = isinstance(mesh, MeshTet)
+    if method is None:
+        method = "lasserre" if tet else "area"
+    if method not in ("area", "lasserre"):
+        raise ValueError(f"method must be 'area' or 'lasserre', got {method!r}")
+    if tet and method != "lasserre":
+        raise ValueError("on tetrahedra the coordinates come from the Lasserre method only "
+                         "(method='lasserre')")
+    if method == "lasserre" and coordinates != "sibson":
+        raise ValueError("the Lasserre method computes Sibson coordinates only "
+                         "(coordinates='sibson')")
+    return method
+
+
+def _adopt(mesh, method):
+    """The triangulation a basis on ``mesh`` queries with ``method`` (cached)."""
+    tri = triangulation_of(mesh)
+    if method == "lasserre" and isinstance(tri, Triangulation):
+        cached = getattr(mesh, "_skfem_nem_delaunay", None)
+        if cached is None:
+            cached = _triangulate(np.ascontiguousarray(tri.nodes))
+            _check_delaunay(cached, np.ascontiguousarray(tri.nodes))
+            mesh._skfem_nem_delaunay = cached
+        return cached
+    return tri
+
+
 class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
-    """Natural-neighbour (Sibson or Laplace) trial functions on a Delaunay MeshTri.
+    """Natural-neighbour (Sibson or Laplace) trial functions on a Delaunay
+    ``MeshTri`` or ``MeshTet``.
 
     Parameters
     ----------
     mesh
-        A ``MeshTri`` whose triangles are Delaunay (build it with
-        :func:`delaunay_mesh`). Checked; a ``ValueError`` says how to fix it.
+        A ``MeshTri`` whose triangles, or a ``MeshTet`` whose tetrahedra, are
+        Delaunay (build it with :func:`delaunay_mesh`). Checked; a
+        ``ValueError`` says how to fix it.
     elem
         ``ElementNaturalNeighbour()`` (default) or
         ``ElementVector(ElementNaturalNeighbour())``; dofs are numbered as
         scikit-fem numbers them for these elements (node i's dofs for the
-        vector case are ``2 i, 2 i + 1``, named ``u^1``, ``u^2``).
+        vector case are ``dim i, ..., dim i + dim - 1``, named ``u^1``,
+        ``u^2``, ...). On a ``MeshTet`` the tetrahedron variant
+        :class:`ElementTetNaturalNeighbour` is used (same numbering).
     intorder, npoints, quadrature
-        Quadrature per triangle: scikit-fem's integration order, or the number
-        of points (1, 3, 4, 6, 7, 12, 13; 4 and 13 have a negative weight), or
-        an explicit ``(X, W)`` pair on the reference triangle. Default: the
-        3-point rule (the paper's choice).
+        Quadrature per cell: scikit-fem's integration order (on tetrahedra:
+        2 -> 4 points, 3 -> 6, 4 -> 11), or on triangles the number of points
+        (1, 3, 4, 6, 7, 12, 13; 4 and 13 have a negative weight), or an
+        explicit ``(X, W)`` pair on the reference cell. Default: the 3-point
+        rule on triangles (the paper's choice), 4 points on tetrahedra.
     coordinates
-        ``"sibson"`` (default) or ``"laplace"``.
+        ``"sibson"`` (default) or ``"laplace"`` (2D area method only).
+    method
+        ``"area"`` (2D default: the area method, the paper's method 1) or
+        ``"lasserre"`` (Box 1, method 2; the only one on tetrahedra).
 
     Everything a ``CellBasis`` offers for assembly works: forms, ``asm``,
     ``get_dofs``, ``interpolate``, ``project``, ``probes``, ``plot``. Trial
@@ -426,20 +570,16 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     same mesh and quadrature.
     """
 
-    def __init__(self, mesh: MeshTri, elem: Optional[Element] = None,
+    def __init__(self, mesh, elem: Optional[Element] = None,
                  intorder: Optional[int] = None, quadrature: Optional[Tuple[ndarray, ndarray]] = None,
-                 npoints: Optional[int] = None, coordinates: str = "sibson"):
-        elem = ElementNaturalNeighbour() if elem is None else elem
-        base = elem.elem if isinstance(elem, ElementVector) else elem
-        if not isinstance(base, ElementNaturalNeighbour):
-            raise TypeError(f"NaturalNeighbourBasis needs ElementNaturalNeighbour() or "
-                            f"ElementVector(ElementNaturalNeighbour()), got {type(elem).__name__}")
-        if coordinates not in ("sibson", "laplace"):
-            raise ValueError(f"coordinates must be 'sibson' or 'laplace', got {coordinates!r}")
-        self.triangulation = triangulation_of(mesh)
+                 npoints: Optional[int] = None, coordinates: str = "sibson",
+                 method: Optional[str] = None):
+        elem = _element_for(mesh, elem, "NaturalNeighbourBasis")
+        self.method = _check_method(mesh, coordinates, method)
+        self.triangulation = _adopt(mesh, self.method)
         self.coordinates = coordinates
-        super().__init__(mesh, elem, None, None, _quadrature(npoints, intorder, quadrature),
-                         mesh.refdom)
+        super().__init__(mesh, elem, None, None,
+                         _quadrature(npoints, intorder, quadrature, mesh.refdom), mesh.refdom)
         self.tind = None
         self.nelems = mesh.nelements
         self.dx = np.abs(self.mapping.detDF(self.X)) * np.broadcast_to(
@@ -460,7 +600,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     def with_element(self, elem: Element) -> "NaturalNeighbourBasis":
         """The same mesh and quadrature with another (natural-neighbour) element."""
         return type(self)(self.mesh, elem, quadrature=self.quadrature,
-                          coordinates=self.coordinates)
+                          coordinates=self.coordinates, method=self.method)
 
     def split_bases(self):
         if isinstance(self.elem, ElementVector):
@@ -469,13 +609,15 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
 
     # -- evaluation at arbitrary points ----------------------------------------
     def probes(self, x: ndarray):
-        """Sparse matrix mapping a dof vector to its values at points x (2, m).
+        """Sparse matrix mapping a dof vector to its values at points x (dim, m).
 
         Scalar: shape (m, N). Vector: (dim * m, N), component-major rows, as
         scikit-fem's ``CellBasis.probes``.
         """
         x = np.asarray(x, dtype=float)
-        Phi = natural_neighbour_coordinates(self.triangulation, x.T, kind=self.coordinates)
+        if x.ndim != 2 or x.shape[0] != self.mesh.dim():
+            raise ValueError(f"points must have shape ({self.mesh.dim()}, m), got {x.shape}")
+        Phi = self._coordinates(x.T, undefined="raise")
         if isinstance(self.elem, ElementVector):
             import scipy.sparse as sp
             nd = self.dofs.nodal_dofs
@@ -491,11 +633,11 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         return Phi @ S
 
     def interpolator(self, y: ndarray):
-        """A function x (2, ...) -> values of the dof vector y at x."""
+        """A function x (dim, ...) -> values of the dof vector y at x."""
         def f(x):
             x = np.asarray(x, dtype=float)
             shape = x.shape[1:]
-            out = self.probes(x.reshape(2, -1)) @ y
+            out = self.probes(x.reshape(x.shape[0], -1)) @ y
             if isinstance(self.elem, ElementVector):
                 return out.reshape((self.elem.dim,) + shape)
             return out.reshape(shape)
@@ -520,7 +662,10 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         return solve(M, b)
 
     def refinterp(self, y: ndarray, nrefs: int = 2):
-        """A refined MeshTri and the values of y at its nodes (for plotting)."""
+        """A refined MeshTri and the values of y at its nodes (for plotting; 2D)."""
+        if not isinstance(self.mesh, MeshTri):
+            raise NotImplementedError("refinterp draws triangles; on tetrahedra use probes "
+                                      "on a slice (see examples/ex06_poisson_3d.py)")
         ref = MeshTri.init_refdom().refined(nrefs)
         x = self.mapping.F(ref.p)  # (2, ne, npts)
         ne, npt = x.shape[1], x.shape[2]
@@ -551,17 +696,15 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
     inside the domain.
     """
 
-    def __init__(self, mesh: MeshTri, elem: Optional[Element] = None, facets=None,
+    def __init__(self, mesh, elem: Optional[Element] = None, facets=None,
                  intorder: Optional[int] = None, quadrature=None, coordinates: str = "sibson",
-                 side: int = 0):
-        elem = ElementNaturalNeighbour() if elem is None else elem
-        base = elem.elem if isinstance(elem, ElementVector) else elem
-        if not isinstance(base, ElementNaturalNeighbour):
-            raise TypeError(f"NaturalNeighbourFacetBasis needs ElementNaturalNeighbour(), got "
-                            f"{type(elem).__name__}")
-        self.triangulation = triangulation_of(mesh)
+                 side: int = 0, method: Optional[str] = None):
+        elem = _element_for(mesh, elem, "NaturalNeighbourFacetBasis")
+        self.method = _check_method(mesh, coordinates, method)
+        self.triangulation = _adopt(mesh, self.method)
         self.coordinates = coordinates
-        geom = FacetBasis(mesh, ElementTriP1(), facets=facets, intorder=intorder,
+        p1 = ElementTetP1() if isinstance(mesh, MeshTet) else ElementTriP1()
+        geom = FacetBasis(mesh, p1, facets=facets, intorder=intorder,
                           quadrature=quadrature, side=side)
         self._geom = geom
         AbstractBasis.__init__(self, mesh, elem, geom.mapping, None, geom.quadrature,
@@ -573,35 +716,35 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
         self.normals = geom.normals
         self._build(np.asarray(geom.global_coordinates()), geom.tind)
 
-    def _fix_undefined(self, pts, Phi, DX, DY):
-        # gradients on hull edges: one-sided limit, evaluated just inside
-        bad = np.flatnonzero(~np.isfinite(DX.sum(axis=1).A.ravel()) |
-                             ~np.isfinite(DY.sum(axis=1).A.ravel()))
+    def _fix_undefined(self, pts, Phi, D):
+        # gradients on the hull: one-sided limit, evaluated just inside
+        import scipy.sparse as sp
+        dim = pts.shape[1]
+        finite = np.ones(Phi.shape[0], dtype=bool)
+        for Dk in D:
+            finite &= np.isfinite(np.asarray(Dk.sum(axis=1)).ravel())
+        bad = np.flatnonzero(~finite)
         nq = self.dx.shape[1]
-        n = np.asarray(self.normals)  # (2, nf, nq)
-        nrm = n.transpose(1, 2, 0).reshape(-1, 2)[bad]
+        n = np.asarray(self.normals)  # (dim, nf, nq)
+        nrm = n.transpose(1, 2, 0).reshape(-1, dim)[bad]
         h = np.asarray(self.mesh_parameters()).reshape(-1)[bad]
         inner = pts[bad] - 1e-7 * h[:, None] * nrm
-        _, (dx2, dy2) = natural_neighbour_coordinates(
-            self.triangulation, inner, gradient=True, kind=self.coordinates,
-            hint=np.repeat(self._geom.tind, nq)[bad])
-        import scipy.sparse as sp
-        keep = np.ones(Phi.shape[0])
-        keep[bad] = 0.0
+        _, D2 = self._coordinates(inner, gradient=True, undefined="raise",
+                                  hint=np.repeat(self._geom.tind, nq)[bad])
+        keep = sp.diags(finite.astype(float))
         E = sp.csr_matrix((np.ones(bad.size), (bad, np.arange(bad.size))),
                           shape=(Phi.shape[0], bad.size))
-        DX = sp.diags(keep) @ DX
-        DY = sp.diags(keep) @ DY
-        DX.data[~np.isfinite(DX.data)] = 0.0
-        DY.data[~np.isfinite(DY.data)] = 0.0
-        DX = DX + E @ dx2
-        DY = DY + E @ dy2
+        out = []
+        for Dk, Dk2 in zip(D, D2):
+            Dk = keep @ Dk
+            Dk.data[~np.isfinite(Dk.data)] = 0.0
+            out.append(Dk + E @ Dk2)
         # one sparsity pattern for values and gradients: the union of the
         # neighbours of the point and of the point just inside
-        pattern = (abs(Phi) + abs(DX) + abs(DY)).tocsr()
+        pattern = (abs(Phi) + sum(abs(Dk) for Dk in out)).tocsr()
         pattern.data[:] = 1.0
         pattern.sort_indices()
-        return tuple(_on_pattern(A, pattern) for A in (Phi, DX, DY))
+        return _on_pattern(Phi, pattern), [_on_pattern(Dk, pattern) for Dk in out]
 
     def _build(self, x, hint):
         super()._build(x, hint)
@@ -615,8 +758,8 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
     def mesh_parameters(self) -> DiscreteField:
         return self._geom.mesh_parameters()
 
-    def _group(self, elems, stencils, V, GX, GY):
-        g = _GroupBasis(self, elems, stencils, V, GX, GY)
+    def _group(self, elems, stencils, V, G):
+        g = _GroupBasis(self, elems, stencils, V, G)
         g.default_parameters = lambda: {
             "x": _take(self.global_coordinates(), elems),
             "h": _take(self.mesh_parameters(), elems),

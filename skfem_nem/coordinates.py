@@ -313,6 +313,8 @@ def _dimension(nodes_or_triangulation) -> int:
 def _as_triangulation(nodes_or_triangulation) -> Triangulation:
     if isinstance(nodes_or_triangulation, Triangulation):
         return nodes_or_triangulation
+    if isinstance(nodes_or_triangulation, Delaunay):
+        return Triangulation(nodes_or_triangulation.points)
     return Triangulation(nodes_or_triangulation)
 
 

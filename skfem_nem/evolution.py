@@ -195,6 +195,74 @@ def _cross(u, v):
 # the evolving mesh
 # ---------------------------------------------------------------------------
 
+def _check_node_fields(node_fields, n) -> Dict[str, np.ndarray]:
+    """Float copies of named per-node arrays (n, ...), checked finite."""
+    out = {}
+    for name, a in (node_fields or {}).items():
+        a = np.array(a, dtype=float, copy=True)
+        if a.shape[:1] != (n,):
+            raise ValueError(f"node field {name!r} has shape {a.shape}, expected ({n}, ...)")
+        if not np.isfinite(a).all():
+            raise ValueError(f"node field {name!r} has non-finite values "
+                             f"(first at node {np.argwhere(~np.isfinite(a))[0][0]})")
+        out[name] = a
+    return out
+
+
+def _evaluate_velocity(velocity, x, on_wall=None):
+    """``velocity(x)`` checked: shape of x, finite (naming the node); the
+    components normal to a wall (``on_wall`` (n, d) bool) set to zero."""
+    v = np.asarray(velocity(x.copy()), dtype=float)
+    if v.shape != x.shape:
+        raise ValueError(f"velocity returned shape {v.shape}, expected {x.shape}")
+    bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
+    if bad.size:
+        raise ValueError(f"velocity returned non-finite values at {bad.size} node(s), "
+                         f"first node {bad[0]} at {x[bad[0]].tolist()}")
+    if on_wall is not None:
+        v = np.where(on_wall, 0.0, v)
+    return v
+
+
+def _predictor_corrector(velocity, x0, dt, tol, maxiter, step):
+    """Trapezoidal update x = x0 + dt/2 (v(x0) + v(x)), iterated from the Euler
+    predictor until the largest change is below ``tol`` times the size of the
+    node set (at most ``maxiter`` corrections; a RuntimeWarning if not).
+    Returns ``(x, iterations, converged)``."""
+    if not np.isfinite(dt) or dt <= 0:
+        raise ValueError(f"dt must be positive and finite, got {dt}")
+    size = float(np.ptp(x0, axis=0).max())
+    v0 = velocity(x0)
+    x = x0 + dt * v0
+    it = 0
+    converged = False
+    for it in range(1, maxiter + 1):
+        xn = x0 + 0.5 * dt * (v0 + velocity(x))
+        change = np.abs(xn - x).max()
+        x = xn
+        if change <= tol * size:
+            converged = True
+            break
+    if not converged:
+        import warnings
+        warnings.warn(f"step {step}: the predictor-corrector did not converge in "
+                      f"{maxiter} iterations (last change {change:.3e}, tolerance "
+                      f"{tol * size:.3e}); reduce dt", RuntimeWarning, stacklevel=3)
+    return x, it, converged
+
+
+def _keep_in_box(x, x0, on_wall, box):
+    """Wall coordinates kept exactly; ``ValueError`` naming the first node that
+    would leave the box."""
+    x = np.where(on_wall, x0, x)
+    lo, hi = box
+    out = np.flatnonzero(((x < lo) | (x > hi)).any(axis=1))
+    if out.size:
+        raise ValueError(f"{out.size} node(s) would leave the box, first node {out[0]} "
+                         f"to {x[out[0]].tolist()}: reduce dt")
+    return x
+
+
 class LagrangianMesh:
     """A 2D node set carried by a flow, kept Delaunay by local flips.
 
@@ -237,15 +305,7 @@ class LagrangianMesh:
             raise ValueError(f"walls must be 'box' or None, got {walls!r}")
         self.remap = remap
         self.walls = walls
-        self.node_fields = {}
-        for name, a in (node_fields or {}).items():
-            a = np.array(a, dtype=float, copy=True)
-            if a.shape[:1] != (n,):
-                raise ValueError(f"node field {name!r} has shape {a.shape}, expected ({n}, ...)")
-            if not np.isfinite(a).all():
-                raise ValueError(f"node field {name!r} has non-finite values "
-                                 f"(first at node {np.argwhere(~np.isfinite(a))[0][0]})")
-            self.node_fields[name] = a
+        self.node_fields = _check_node_fields(node_fields, n)
         self.ip_fields = {}
         for name, a in (ip_fields or {}).items():
             a = np.array(a, dtype=float, copy=True)
@@ -348,17 +408,7 @@ class LagrangianMesh:
 
     # -- advection -------------------------------------------------------------
     def _velocity(self, velocity, x):
-        v = velocity(x.copy())
-        v = np.asarray(v, dtype=float)
-        if v.shape != x.shape:
-            raise ValueError(f"velocity returned shape {v.shape}, expected {x.shape}")
-        bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
-        if bad.size:
-            raise ValueError(f"velocity returned non-finite values at {bad.size} node(s), "
-                             f"first node {bad[0]} at {x[bad[0]].tolist()}")
-        if self.walls == "box":
-            v = np.where(self._on_wall, 0.0, v)
-        return v
+        return _evaluate_velocity(velocity, x, self._on_wall if self.walls == "box" else None)
 
     def advance(self, velocity: Callable[[np.ndarray], np.ndarray], dt: float,
                 tol: float = 1e-10, maxiter: int = 10, max_substeps: int = 8,
@@ -386,33 +436,11 @@ class LagrangianMesh:
         Returns the step's report (also appended to ``history``). On any error
         the mesh is left exactly as it was before the step.
         """
-        if not np.isfinite(dt) or dt <= 0:
-            raise ValueError(f"dt must be positive and finite, got {dt}")
         x0 = self.nodes.copy()
-        size = float(np.ptp(x0, axis=0).max())
-        v0 = self._velocity(velocity, x0)
-        x = x0 + dt * v0
-        it = 0
-        converged = False
-        for it in range(1, maxiter + 1):
-            xn = x0 + 0.5 * dt * (v0 + self._velocity(velocity, x))
-            change = np.abs(xn - x).max()
-            x = xn
-            if change <= tol * size:
-                converged = True
-                break
-        if not converged:
-            import warnings
-            warnings.warn(f"step {self.step + 1}: the predictor-corrector did not converge in "
-                          f"{maxiter} iterations (last change {change:.3e}, tolerance "
-                          f"{tol * size:.3e}); reduce dt", RuntimeWarning, stacklevel=2)
+        x, it, converged = _predictor_corrector(lambda y: self._velocity(velocity, y), x0, dt,
+                                                tol, maxiter, self.step + 1)
         if self.walls == "box":
-            x = np.where(self._on_wall, x0, x)
-            lo, hi = self._box
-            out = np.flatnonzero(((x < lo) | (x > hi)).any(axis=1))
-            if out.size:
-                raise ValueError(f"{out.size} node(s) would leave the box, first node {out[0]} "
-                                 f"to {x[out[0]].tolist()}: reduce dt")
+            x = _keep_in_box(x, x0, self._on_wall, self._box)
         state = self._state()
         self._touched = []
         try:

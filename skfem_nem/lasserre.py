@@ -1260,6 +1260,12 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
                         out_g[k, r, j] = og[j, k]
 
 
+_query_batch_serial = njit(cache=True, error_model="numpy")(_query_batch.py_func)
+# queries per batch from which the parallel kernel is used (a 3D query costs
+# ~50 us, a 2D one ~7 us: a few thousand amortise the thread pool's wake-up)
+_PARALLEL_MIN = 2000
+
+
 # ---------------------------------------------------------------------------
 # Python orchestration
 # ---------------------------------------------------------------------------
@@ -1313,8 +1319,10 @@ def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap):
     info = np.empty(m, np.int64)
     tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, _FLAT, _HULL, _LINEAR, _WALK, _VERTEX])
     nblocks = max(1, min(m // 16, 4 * numba.get_num_threads()))
-    _query_batch(P, S, NB, Q, start, gradient, kind, ncap, ccap, nblocks, tols,
-                 out_i, out_v, out_g, count, status, info)
+    # small batches run serially: waking the thread pool costs more than it saves
+    kernel = _query_batch if m >= _PARALLEL_MIN else _query_batch_serial
+    kernel(P, S, NB, Q, start, gradient, kind, ncap, ccap, nblocks, tols,
+           out_i, out_v, out_g, count, status, info)
     _, indices, data, grads = compress(count, out_i, out_v, out_g, gradient, P.shape[0])
     rows = np.repeat(np.arange(m), count)
     return (rows, indices, data, grads), status, info

@@ -111,3 +111,13 @@ def test_dispatch_errors():
         sibson_coordinates(dup, [[0.5, 0.5, 0.5]])
     with pytest.raises(ValueError, match=r"\(node 3\)"):
         sibson_coordinates(p3, p3[3:4], gradient=True)
+
+
+def test_scipy_delaunay_in_2d_works_with_both_methods():
+    rng = np.random.default_rng(7)
+    p = rng.random((100, 2))
+    tri = Delaunay(p)
+    q = 0.3 + 0.4 * rng.random((20, 2))
+    A = sibson_coordinates(tri, q)
+    B = sibson_coordinates(tri, q, method="lasserre")
+    assert abs(A - B).max() < 1e-12 and abs(A - sibson_coordinates(p, q)).max() == 0.0

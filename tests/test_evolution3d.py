@@ -1,0 +1,116 @@
+"""LagrangianMesh3D: nodes advected in 3D, fields follow their nodes, Qhull every step."""
+
+import numpy as np
+import pytest
+from skfem import MeshTet
+
+from skfem_nem import LagrangianMesh3D
+
+
+def box_nodes(n=300, seed=0):
+    rng = np.random.default_rng(seed)
+    corners = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
+    faces = []
+    for ax in range(3):
+        for v in (0.0, 1.0):
+            f = 0.05 + 0.9 * rng.random((25, 3))
+            f[:, ax] = v
+            faces.append(f)
+    return np.concatenate([corners, *faces, 0.02 + 0.96 * rng.random((n, 3))])
+
+
+def vortex(x):
+    """A divergence-free rotation about the vertical axis through the box centre,
+    vanishing on the walls' normal directions (free slip)."""
+    X, Y, Z = x.T
+    u = -np.sin(np.pi * X) ** 2 * np.sin(2 * np.pi * Y) * np.sin(np.pi * Z)
+    v = np.sin(np.pi * Y) ** 2 * np.sin(2 * np.pi * X) * np.sin(np.pi * Z)
+    return np.c_[u, v, 0 * Z]
+
+
+def test_fields_follow_their_nodes_and_nothing_is_lost():
+    p = box_nodes()
+    n = p.shape[0]
+    rng = np.random.default_rng(1)
+    density = rng.random(n)
+    m = LagrangianMesh3D(p, {"density": density, "x0": p, "id": np.arange(n)})
+    density[:] = -1.0                      # the mesh holds copies
+    assert m.node_fields["density"].min() >= 0
+    vol0 = m.mesh
+    dt = 0.05
+    assert 0 < m.max_dt(vortex(m.nodes)) < 0.05   # a step moves nodes past their neighbours
+    changed = 0
+    x = np.array(m.nodes)
+    for _ in range(6):
+        r = m.advance(vortex, dt)
+        # the nodes move like an accurate integration of the flow (trapezoidal
+        # predictor-corrector: second order; reference by RK4 substeps)
+        for _ in range(8):
+            h = dt / 8
+            k1 = vortex(x)
+            k2 = vortex(x + h / 2 * k1)
+            k3 = vortex(x + h / 2 * k2)
+            k4 = vortex(x + h * k3)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        err = np.abs(m.nodes - x).max()
+        assert err < 3e-3
+        assert r["converged"]
+        changed += r["tetrahedra_changed"]
+        # nothing is lost: every node is a vertex, the tetrahedra fill the box
+        assert isinstance(m.mesh, MeshTet) and np.unique(m.mesh.t).size == n
+        assert abs(_volume(m.mesh) - 1.0) < 1e-12
+    assert m.step == 6 and abs(m.time - 6 * dt) < 1e-15
+    assert changed > 0                     # the connectivity did change
+    assert np.abs(m.nodes - p).max() > 0.05
+    # the fields are untouched and still belong to the same nodes
+    np.testing.assert_array_equal(m.node_fields["x0"], p)
+    np.testing.assert_array_equal(m.node_fields["id"], np.arange(n))
+    assert np.array_equal(m.node_fields["density"], np.random.default_rng(1).random(n))
+    # walls: the nodes on a face stay on it
+    on = (p == 0) | (p == 1)
+    np.testing.assert_array_equal(m.nodes[on], p[on])
+    # Sibson interpolation of a node field reproduces it at the nodes
+    np.testing.assert_allclose(m.interpolate("x0", m.nodes[:10]), p[:10], atol=1e-12)
+    assert vol0 is not m.mesh
+    # second order in time: half the step, a quarter of the error
+    m2 = LagrangianMesh3D(p)
+    for _ in range(12):
+        m2.advance(vortex, dt / 2)
+    assert np.abs(m2.nodes - x).max() < 0.3 * err
+    b = m.basis()
+    assert b is m.basis() and b.mesh is m.mesh
+
+
+def test_bad_input_leaves_the_mesh_unchanged():
+    p = box_nodes(100)
+    m = LagrangianMesh3D(p, {"c": np.ones(p.shape[0])})
+    t0 = m.mesh.t.copy()
+    with pytest.raises(ValueError, match="shape"):
+        m.advance(lambda x: x[:, :2], 0.01)
+    with pytest.raises(ValueError, match="node 3"):
+        m.advance(lambda x: np.where(np.arange(x.shape[0])[:, None] == 3, np.nan, 0 * x), 0.01)
+    with pytest.raises(ValueError, match="leave the box"):
+        m.advance(lambda x: np.tile([0.0, 0.0, 5.0], (x.shape[0], 1)), 1.0)
+    with pytest.raises(ValueError, match="dt must be positive"):
+        m.advance(vortex, -1.0)
+    with pytest.raises(ValueError, match="node field 'c'"):
+        LagrangianMesh3D(p, {"c": np.ones(3)})
+    # a flow that collapses two nodes onto each other is refused, naming them
+    p = np.r_[p, [[0.5, 0.5, 0.5], [0.25, 0.5, 0.5]]]
+    m = LagrangianMesh3D(p)
+    t0 = m.mesh.t.copy()
+    k = p.shape[0] - 1
+
+    def collapse(x):
+        v = np.zeros_like(x)
+        v[k] = [0.25, 0.0, 0.0]
+        return v
+
+    with pytest.raises(ValueError, match=rf"step 1.*points\[{k}\] coincides with points\[{k - 1}\]"):
+        m.advance(collapse, 1.0)
+    assert m.step == 0 and np.array_equal(m.mesh.t, t0) and np.array_equal(m.nodes, p)
+
+
+def _volume(mesh):
+    p = mesh.p.T[mesh.t.T]
+    return np.abs(np.linalg.det(p[:, 1:] - p[:, :1])).sum() / 6

@@ -1,0 +1,672 @@
+"""Visco-elasto-plastic (Maxwell + von Mises) solids on top of the Stokes solver.
+
+The stress history ``tau`` (deviatoric, Pa) lives at the quadrature points of
+the triangles, shape (2, 2, ne, nq): the paper's "tensorial memory". One time
+step of length ``dt`` (s) is the velocity-based incremental formulation of
+Moresi, Dufour and Muehlhaus (2003) and Gerya (2010):
+
+* Maxwell body (viscosity ``eta``, shear modulus ``mu``), backward Euler::
+
+      Z = mu dt / (mu dt + eta),   eta_ve = eta Z = 1 / (1/eta + 1/(mu dt)),
+      tau_new = 2 eta_ve eps(u) + (1 - Z) tau_rot,
+
+  so the Stokes solve takes ``eta = eta_ve`` and ``tau0 = (1 - Z) tau_rot``
+  (``1 - Z = eta_ve / (mu dt)``). As ``eta / (mu dt)`` grows, ``eta_ve ->
+  mu dt`` and ``1 - Z -> 1``: ``tau_new = tau_old + 2 mu eps(u dt)``,
+  incremental linear elasticity with incompressibility.
+* Objective (Jaumann) rotation of the old stress with the spin
+  ``W = (grad u - grad u^T) / 2``: ``tau_rot = tau_old + dt (W tau_old -
+  tau_old W)`` (``rotation="jaumann"``), or the exact rotation ``R tau_old
+  R^T``, ``R = exp(W dt)``, which keeps the invariants exactly
+  (``rotation="exact"``).
+* Von Mises plasticity: with the effective strain rate ``edot_eff = eps(u) +
+  tau_rot / (2 mu dt)`` the trial stress is ``2 eta_ve edot_eff``; where its
+  second invariant exceeds the yield stress ``Y`` it is scaled back onto the
+  yield surface (radial return), which is the same as the effective viscosity
+  ``eta_vp = Y / (2 edot_eff_II)``. The Stokes solve is repeated with the
+  updated viscosity (Picard iterations) until the velocity settles.
+
+The stress is built from the full symmetric velocity gradient of the discrete
+solution (its trace, the pointwise divergence, is zero only weakly), so that
+the stored stress is exactly the one the discrete momentum balance used: an
+elastic body under a constant load stays at rest in the next step.
+
+Invariants: ``II(t) = sqrt(t_ij t_ij / 2)`` of the 2D deviatoric tensor
+(``sqrt(t_xx^2 + t_xy^2)`` when traceless), equal to ``sqrt(J2)`` in plane
+strain. The yield stress is therefore the shear yield stress ``k``; a von
+Mises tensile yield stress ``sigma0`` corresponds to ``k = sigma0 / sqrt(3)``.
+
+Prescribed non-zero wall velocities (pure shear, a punch) are handled here by
+:func:`solve_stokes_bc`, which reuses :func:`skfem_nem.stokes.assemble_stokes`
+and solves the saddle-point system directly with the prescribed values lifted
+to the right side; it also returns the reaction forces on the prescribed
+dofs, and fixes the pressure mean only where the walls confine the flow.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Callable, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .stokes import StokesSolution, StokesSpaces, assemble_stokes, quadrature_values, wall_dofs
+
+__all__ = ["Material", "combine_materials", "maxwell_coefficients", "strain_rate", "spin",
+           "deviator", "second_invariant", "rotate_stress", "return_map",
+           "prescribed_velocity", "solve_stokes_bc", "velocity_gradient", "VEPStep", "vep_step",
+           "to_ip_field", "from_ip_field", "vep_update"]
+
+ArrayLike = Union[float, np.ndarray]
+
+
+# ---------------------------------------------------------------------------
+# material
+# ---------------------------------------------------------------------------
+
+def _where(bad: np.ndarray) -> str:
+    """Position of the first True of ``bad`` as words (element / point)."""
+    idx = np.argwhere(bad)[0]
+    if bad.ndim == 1:
+        return f" at element {int(idx[0])}"
+    if bad.ndim == 2:
+        return f" at element {int(idx[0])}, quadrature point {int(idx[1])}"
+    return f" at index {tuple(int(i) for i in idx)}"
+
+
+def _check(name: str, value, allow_inf: bool, optional: bool = False):
+    if value is None and optional:
+        return None
+    v = np.asarray(value, dtype=float)
+    if v.ndim > 2:
+        raise ValueError(f"{name} must be a number, a per-element (ne,) or a per-point (ne, nq) "
+                         f"array, got shape {v.shape}")
+    bad = np.isnan(v) | (v <= 0) | (np.isinf(v) if not allow_inf else False)
+    if np.any(bad):
+        first = v[tuple(np.argwhere(bad)[0])] if v.ndim else float(v)
+        more = f" ({int(np.count_nonzero(bad))} bad value(s))" if v.ndim else ""
+        raise ValueError(f"{name} must be positive" + ("" if allow_inf else " and finite")
+                         + f", got {first}" + (_where(bad) if v.ndim else "") + more)
+    return float(v) if v.ndim == 0 else v.copy()
+
+
+@dataclass(frozen=True)
+class Material:
+    """A Maxwell visco-elastic, von Mises plastic material.
+
+    Each parameter is a number, a per-element array (ne,) or a per-point
+    array (ne, nq) matching :attr:`StokesSpaces.quadrature_points`.
+
+    Parameters
+    ----------
+    viscosity
+        Shear viscosity eta (Pa s), positive; ``inf`` for a purely elastic
+        solid (then ``shear_modulus`` must be finite).
+    shear_modulus
+        Elastic shear modulus mu (Pa), positive; ``inf`` (default) for a
+        viscous fluid.
+    yield_stress
+        Von Mises yield stress in shear, the limit of the second invariant
+        of the deviatoric stress (Pa), positive; ``inf`` (default): no
+        plasticity. (Tensile yield stress ``sigma0 = sqrt(3) * yield_stress``.)
+    density
+        Mass density (kg m^-3), positive, or None (no gravity load).
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter (and element / point of an array) for NaN,
+        zero, negative or (where not allowed) infinite values.
+    """
+
+    viscosity: ArrayLike
+    shear_modulus: ArrayLike = np.inf
+    yield_stress: ArrayLike = np.inf
+    density: Optional[ArrayLike] = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "viscosity", _check("viscosity", self.viscosity, True))
+        object.__setattr__(self, "shear_modulus",
+                           _check("shear_modulus", self.shear_modulus, True))
+        object.__setattr__(self, "yield_stress", _check("yield_stress", self.yield_stress, True))
+        object.__setattr__(self, "density", _check("density", self.density, False, True))
+        both = np.isinf(self.viscosity) & np.isinf(self.shear_modulus)
+        if np.any(both):
+            raise ValueError("viscosity and shear_modulus are both infinite (a rigid body)"
+                             + (_where(np.broadcast_to(both, np.broadcast(
+                                 self.viscosity, self.shear_modulus).shape))
+                                if np.ndim(both) else ""))
+
+    def at_points(self, name: str, ne: int, nq: int) -> np.ndarray:
+        """Parameter ``name`` broadcast to (ne, nq)."""
+        v = np.asarray(getattr(self, name), dtype=float)
+        if v.ndim == 1:
+            if v.shape[0] != ne:
+                raise ValueError(f"{name} has {v.shape[0]} per-element values, the mesh has "
+                                 f"{ne} elements")
+            v = v[:, None]
+        elif v.ndim == 2 and v.shape != (ne, nq):
+            raise ValueError(f"{name} has shape {v.shape}, expected ({ne}, {nq})")
+        return np.ascontiguousarray(np.broadcast_to(v, (ne, nq)))
+
+
+def combine_materials(materials: Sequence[Material], phase) -> Material:
+    """One :class:`Material` with per-element (or per-point) arrays from a
+    list of materials and a phase index per element (ne,) or point (ne, nq).
+
+    Raises ``ValueError`` naming the element of a phase index out of range,
+    or the material index whose parameters are not scalars.
+    """
+    phase = np.asarray(phase)
+    if not np.issubdtype(phase.dtype, np.integer):
+        raise ValueError(f"phase must be an integer array, got dtype {phase.dtype}")
+    bad = (phase < 0) | (phase >= len(materials))
+    if bad.any():
+        raise ValueError(f"phase index {int(phase[tuple(np.argwhere(bad)[0])])} out of range "
+                         f"0..{len(materials) - 1}" + _where(bad))
+    out = {}
+    for f in fields(Material):
+        vals = []
+        for i, m in enumerate(materials):
+            v = getattr(m, f.name)
+            if v is not None and np.ndim(v) != 0:
+                raise ValueError(f"material {i}: {f.name} must be a number to combine materials")
+            vals.append(v)
+        if f.name == "density" and any(v is None for v in vals):
+            if not all(v is None for v in vals):
+                i = [v is None for v in vals].index(True)
+                raise ValueError(f"material {i} has no density while others have one")
+            out[f.name] = None
+            continue
+        out[f.name] = np.asarray(vals, dtype=float)[phase]
+    return Material(**out)
+
+
+# ---------------------------------------------------------------------------
+# pointwise kernels (vectorised over the trailing axes)
+# ---------------------------------------------------------------------------
+
+def maxwell_coefficients(eta: ArrayLike, mu: ArrayLike, dt: float) -> Tuple[np.ndarray, np.ndarray]:
+    """``(eta_ve, 1 - Z)`` of the backward-Euler Maxwell step.
+
+    ``eta_ve = 1 / (1/eta + 1/(mu dt))`` (Pa s) and ``1 - Z = eta / (mu dt +
+    eta) = eta_ve / (mu dt)`` (dimensionless); ``mu = inf`` gives
+    ``(eta, 0)``, ``eta = inf`` gives ``(mu dt, 1)``.
+    """
+    eta = np.asarray(eta, dtype=float)
+    mu = np.asarray(mu, dtype=float)
+    with np.errstate(divide="ignore"):
+        eta_ve = 1.0 / (1.0 / eta + 1.0 / (mu * dt))
+        keep = np.where(np.isinf(mu), 0.0, eta_ve / (mu * dt))
+    return eta_ve, keep
+
+
+def strain_rate(grad: np.ndarray) -> np.ndarray:
+    """Symmetric part of the velocity gradient (2, 2, ...) (``[i, j] = du_i/dx_j``), 1/s."""
+    return 0.5 * (grad + np.swapaxes(grad, 0, 1))
+
+
+def spin(grad: np.ndarray) -> np.ndarray:
+    """Antisymmetric part ``W = (grad u - grad u^T) / 2`` (2, 2, ...), 1/s."""
+    return 0.5 * (grad - np.swapaxes(grad, 0, 1))
+
+
+def deviator(t: np.ndarray) -> np.ndarray:
+    """2D deviator ``t - tr(t) / 2 I`` of (2, 2, ...) tensors."""
+    out = np.array(t, dtype=float, copy=True)
+    h = 0.5 * (t[0, 0] + t[1, 1])
+    out[0, 0] -= h
+    out[1, 1] -= h
+    return out
+
+
+def second_invariant(t: np.ndarray) -> np.ndarray:
+    """``sqrt(t_ij t_ij / 2)`` of the deviator of (2, 2, ...) tensors, shape (...)."""
+    d = deviator(t)
+    return np.sqrt(0.5 * (d[0, 0] ** 2 + d[1, 1] ** 2) + 0.25 * (d[0, 1] + d[1, 0]) ** 2)
+
+
+def rotate_stress(tau: np.ndarray, W: np.ndarray, dt: float,
+                  method: str = "jaumann") -> np.ndarray:
+    """Advance the stress (2, 2, ...) by the objective rotation with spin W (2, 2, ...) over dt.
+
+    ``"jaumann"``: ``tau + dt (W tau - tau W)`` (first order: invariants change
+    by O((w dt)^2) per step); ``"exact"``: ``R tau R^T`` with ``R = exp(W dt)``,
+    the rotation by the angle ``w dt``, ``w = W[1, 0]`` (the solution of the
+    Jaumann rate equation for a constant spin; invariants kept exactly).
+    """
+    if method == "jaumann":
+        Wt = np.einsum("ik...,kj...->ij...", W, tau)
+        tW = np.einsum("ik...,kj...->ij...", tau, W)
+        return tau + dt * (Wt - tW)
+    if method == "exact":
+        a = 0.5 * (W[1, 0] - W[0, 1]) * dt
+        c, s = np.cos(a), np.sin(a)
+        R = np.array([[c, -s], [s, c]])
+        return np.einsum("ik...,kl...,jl...->ij...", R, tau, R)
+    raise ValueError(f"rotation must be 'jaumann' or 'exact', got {method!r}")
+
+
+def return_map(tau_trial: np.ndarray, yield_stress: ArrayLike) -> Tuple[np.ndarray, np.ndarray]:
+    """Radial return of trial stresses (2, 2, ...) onto the von Mises surface ``II = Y``.
+
+    Returns ``(tau, factor)``: ``tau = factor * tau_trial`` with ``factor =
+    min(1, Y / II(tau_trial))`` (shape (...); 1 where elastic/viscous).
+    """
+    II = second_invariant(tau_trial)
+    Y = np.asarray(yield_stress, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = np.where(II > Y, Y / np.where(II > 0, II, 1.0), 1.0)
+    return tau_trial * factor, factor
+
+
+def vep_update(eps: np.ndarray, W: Optional[np.ndarray], tau_old: np.ndarray, eta: ArrayLike,
+               mu: ArrayLike, yield_stress: ArrayLike, dt: float,
+               rotation: str = "jaumann") -> Tuple[np.ndarray, np.ndarray]:
+    """Pointwise visco-elasto-plastic stress update for a known strain rate.
+
+    Parameters
+    ----------
+    eps
+        Strain rate (2, 2, ...) (1/s).
+    W
+        Spin (2, 2, ...) (1/s) or None (no rotation).
+    tau_old
+        Stress at the start of the step (2, 2, ...), Pa.
+    eta, mu, yield_stress
+        Viscosity (Pa s), shear modulus (Pa), yield stress (Pa), broadcast
+        to the trailing shape.
+    dt
+        Time step (s).
+
+    Returns
+    -------
+    (tau_new, plastic_rate): the stress (2, 2, ...) after the step and the
+    plastic strain-rate tensor (2, 2, ...) (1/s).
+    """
+    if not (np.isscalar(dt) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"time step dt must be a positive finite number, got {dt!r}")
+    eta_ve, keep = maxwell_coefficients(eta, mu, dt)
+    chi = keep / eta_ve
+    tau_rot = tau_old if (W is None or rotation == "none") else rotate_stress(tau_old, W, dt,
+                                                                               rotation)
+    edot = eps + 0.5 * chi * tau_rot
+    tau_new, _ = return_map(2.0 * eta_ve * edot, yield_stress)
+    return tau_new, edot - tau_new / (2.0 * eta_ve)
+
+
+def to_ip_field(tau: np.ndarray) -> np.ndarray:
+    """(2, 2, ne, nq) -> (ne, nq, 2, 2): the layout of :class:`~skfem_nem.LagrangianMesh`
+    integration-point fields (with the 3-point rule, ``stokes_spaces(mesh, npoints=3)``)."""
+    return np.ascontiguousarray(np.moveaxis(np.asarray(tau), (0, 1), (2, 3)))
+
+
+def from_ip_field(F: np.ndarray) -> np.ndarray:
+    """(ne, nq, 2, 2) -> (2, 2, ne, nq), the inverse of :func:`to_ip_field`."""
+    return np.ascontiguousarray(np.moveaxis(np.asarray(F), (2, 3), (0, 1)))
+
+
+# ---------------------------------------------------------------------------
+# Stokes with prescribed wall velocities
+# ---------------------------------------------------------------------------
+
+def prescribed_velocity(spaces: StokesSpaces, facets, value: Union[Callable, Sequence[float]],
+                        components: Sequence[int] = (0, 1)) -> Tuple[np.ndarray, np.ndarray]:
+    """Velocity dofs and values on boundary facets.
+
+    Parameters
+    ----------
+    facets
+        Facet indices of ``spaces.mesh``, a boundary name, or ``"all"``.
+    value
+        Callable of points x (2, m) returning (2, m) velocities (m/s), or a
+        constant (2,) velocity.
+    components
+        Which components to prescribe (0: x, 1: y).
+
+    Returns
+    -------
+    (dofs, values), both (k,), for ``solve_stokes_bc(prescribed=...)``.
+    """
+    mesh, ub = spaces.mesh, spaces.ubasis
+    if isinstance(facets, str):
+        facets = mesh.boundary_facets() if facets == "all" else mesh.boundaries[facets]
+    facets = np.asarray(facets, dtype=np.int64)
+    dofs, vals = [], []
+    for c in components:
+        d = ub.get_dofs(facets).all(f"u^{c + 1}")
+        x = ub.doflocs[:, d]
+        v = (np.asarray(value(x), dtype=float)[c] if callable(value)
+             else np.full(d.size, float(np.asarray(value, dtype=float)[c])))
+        dofs.append(d)
+        vals.append(np.broadcast_to(v, d.shape))
+    dofs, vals = np.concatenate(dofs), np.concatenate(vals)
+    if not np.isfinite(vals).all():
+        raise ValueError(f"prescribed velocity is not finite at dof {int(dofs[~np.isfinite(vals)][0])}")
+    return dofs, vals
+
+
+def _boundary_flux(spaces: StokesSpaces) -> sp.csr_matrix:
+    """(np, nu) matrix of ``oint q_i u . n ds`` over the boundary (exact: on
+    convex-hull edges both the natural-neighbour velocity and the P1 pressure
+    are linear between the two end nodes)."""
+    mesh, ub, pb = spaces.mesh, spaces.ubasis, spaces.pbasis
+    bf = mesh.boundary_facets()
+    a, b = mesh.facets[:, bf]
+    d = mesh.p[:, b] - mesh.p[:, a]
+    # outward normal (times length): the mesh interior lies on one side
+    mid = 0.5 * (mesh.p[:, a] + mesh.p[:, b])
+    t2f = mesh.f2t[0, bf]
+    c = mesh.p[:, mesh.t[:, t2f]].mean(axis=1)
+    n = np.array([d[1], -d[0]])
+    n *= np.where(np.einsum("ij,ij->j", n, mid - c) < 0, -1.0, 1.0)
+    pn = pb.dofs.nodal_dofs[0]
+    un = ub.dofs.nodal_dofs
+    rows, cols, vals = [], [], []
+    for qi, qj in ((a, a), (a, b), (b, a), (b, b)):
+        w = np.where(qi == qj, 1.0 / 3.0, 1.0 / 6.0)   # int phi_i phi_j ds / L
+        for comp in (0, 1):
+            rows.append(pn[qi])
+            cols.append(un[comp, qj])
+            vals.append(w * n[comp])
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(pb.N, ub.N))
+
+
+def _strong_divergence(spaces: StokesSpaces, B: sp.csr_matrix) -> sp.csr_matrix:
+    """``B`` as ``-(div u, q)`` whether it was assembled so or integrated by
+    parts (``(u, grad q)``, which drops ``oint q u . n`` and holds only for
+    zero normal wall velocity): tested on the field u = (x, 0)."""
+    ub = spaces.ubasis
+    v = np.zeros(ub.N)
+    v[ub.dofs.nodal_dofs[0]] = spaces.mesh.p[0]
+    area = float(spaces.mesh.volume().sum()) if hasattr(spaces.mesh, "volume") else None
+    s = float((B @ v).sum())
+    if area is None:
+        area = abs(float((_boundary_flux(spaces) @ v).sum()))
+    if abs(s + area) <= 1e-8 * area:
+        return B
+    if abs(s) <= 1e-8 * area:
+        return (B - _boundary_flux(spaces)).tocsr()
+    raise RuntimeError(f"unexpected divergence matrix: sum of B u for u = (x, 0) is {s}, "
+                       f"expected {-area} or 0")
+
+
+def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
+                    prescribed: Optional[Tuple[np.ndarray, np.ndarray]] = None,
+                    free_slip: Union[str, Sequence[str], None] = "all",
+                    no_slip: Union[str, Sequence[str], None] = None,
+                    pressure_mean: Optional[bool] = None) -> StokesSolution:
+    """Stokes solve (as :func:`skfem_nem.stokes.solve_stokes`) with prescribed velocities.
+
+    Parameters
+    ----------
+    eta, f, tau0
+        Viscosity (Pa s), body force (N m^-3) and known stress (Pa), see
+        :func:`skfem_nem.stokes.assemble_stokes`.
+    prescribed
+        ``(dofs, values)`` from :func:`prescribed_velocity` (m/s); they
+        override the zero wall conditions on the same dofs.
+    free_slip, no_slip
+        Zero wall conditions (see :func:`skfem_nem.stokes.wall_dofs`).
+    pressure_mean
+        Fix the pressure by its mean (zero). Default: only if every boundary
+        node has a constrained velocity component (no free surface).
+
+    Returns
+    -------
+    StokesSolution
+        ``info["reaction"]``: (nu,) the boundary forces on the body at the
+        constrained dofs (N/m in 2D; zero elsewhere), ``info["fixed"]`` those
+        dofs, ``info["bubble"]`` the bubble dof vector where the velocity
+        space has condensed bubbles. Direct sparse solve (meshes up to some
+        ten thousand nodes). The system is solved with the viscosity scaled
+        by its geometric mean (velocities unchanged).
+    """
+    e = quadrature_values(spaces, eta, "viscosity eta", positive=True)
+    scale = float(np.exp(np.mean(np.log(e))))
+    fs = quadrature_values(spaces, f, "body force f", shape=(2,)) / scale
+    ts = None if tau0 is None else quadrature_values(spaces, tau0, "stress tau0",
+                                                     shape=(2, 2)) / scale
+    sys_ = assemble_stokes(spaces, e / scale, fs, ts)
+    nu, npr = spaces.n_velocity, spaces.n_pressure
+    A, S = sys_.A.tocsr(), sys_.S
+    B = _strong_divergence(spaces, sys_.B.tocsr())
+    g = getattr(sys_, "g", None)
+    g = np.zeros(npr) if g is None else np.asarray(g)
+    D0 = wall_dofs(spaces, free_slip, no_slip)
+    uD = np.zeros(nu)
+    if prescribed is not None:
+        pd, pv = prescribed
+        pd = np.asarray(pd, dtype=np.int64)
+        D = np.union1d(D0, pd)
+        uD[pd] = pv
+    else:
+        D = D0
+    free = np.setdiff1d(np.arange(nu), D)
+    Aff = A[free][:, free]
+    ru = sys_.f[free] - A[free][:, D] @ uD[D]
+    rp = g - B[:, D] @ uD[D]
+    if pressure_mean is None:
+        nd = spaces.ubasis.dofs.nodal_dofs  # (2, n)
+        bn = np.unique(spaces.mesh.facets[:, spaces.mesh.boundary_facets()])
+        fixed = np.zeros(nu, dtype=bool)
+        fixed[D] = True
+        pressure_mean = bool(np.all(fixed[nd[0, bn]] | fixed[nd[1, bn]]))
+    Bf = B[:, free]
+    blocks = [[Aff, Bf.T], [Bf, -S]]
+    rhs = [ru, rp]
+    if pressure_mean:
+        m = sys_.m
+        blocks = [[Aff, Bf.T, None], [Bf, -S, sp.csr_matrix(m[:, None])],
+                  [None, sp.csr_matrix(m[None, :]), None]]
+        rhs.append([0.0])
+    K = sp.bmat(blocks, format="csc")
+    x = spla.spsolve(K, np.concatenate(rhs))
+    if not np.all(np.isfinite(x)):
+        raise RuntimeError("the Stokes system is singular: check the wall conditions "
+                           "(a rigid-body motion left free?)")
+    u = uD.copy()
+    u[free] = x[:free.size]
+    p = x[free.size:free.size + npr]
+    r = (A @ u + B.T @ p - sys_.f) * scale
+    res_free = np.linalg.norm(r[free]) / max(np.linalg.norm(sys_.f * scale), np.linalg.norm(r),
+                                             1e-300)
+    reaction = np.zeros(nu)
+    reaction[D] = r[D]
+    info = {"fixed": D, "reaction": reaction, "pressure_mean": pressure_mean,
+            "fixed_velocity_dofs": int(D.size)}
+    bub = getattr(sys_, "bubble", None)
+    if bub is not None:
+        Ainv, Abn, Bb, fb = bub
+        info["bubble"] = Ainv @ (fb - Abn @ u - Bb.T @ p)
+    return StokesSolution(spaces, u, p * scale, "direct", 1, float(res_free), info)
+
+
+def velocity_gradient(spaces: StokesSpaces, sol: StokesSolution) -> np.ndarray:
+    """(2, 2, ne, nq) velocity gradient ``[i, j] = du_i/dx_j`` of a solution (1/s),
+    including the condensed bubbles where the space has them."""
+    G = np.asarray(spaces.ubasis.interpolate(sol.u).grad)
+    ub = sol.info.get("bubble") if isinstance(sol.info, dict) else None
+    bb = getattr(spaces, "bbasis", None)
+    if ub is not None and bb is not None:
+        G = G + np.asarray(bb.interpolate(ub).grad)
+    return G
+
+
+# ---------------------------------------------------------------------------
+# one visco-elasto-plastic step
+# ---------------------------------------------------------------------------
+
+@dataclass
+class VEPStep:
+    """Result of :func:`vep_step` (arrays at the quadrature points).
+
+    Attributes
+    ----------
+    tau
+        New deviatoric stress (2, 2, ne, nq), Pa.
+    solution
+        The Stokes solution (velocity ``solution.u``, m/s; pressure, Pa).
+    strain_rate
+        Strain rate of the solution (2, 2, ne, nq), 1/s.
+    plastic_strain_rate
+        Plastic strain-rate tensor (2, 2, ne, nq), 1/s, and
+        ``plastic_rate_II`` its second invariant (ne, nq).
+    plastic_strain
+        Accumulated plastic strain (ne, nq) (``plastic_strain_old + dt *
+        plastic_rate_II``).
+    eta_eff
+        Effective viscosity used in the last solve (ne, nq), Pa s.
+    yielded
+        (ne, nq) bool, points on the yield surface.
+    iterations, residual
+        Picard iterations and the final relative velocity change.
+    history
+        Relative velocity change of each iteration.
+    """
+
+    tau: np.ndarray
+    solution: StokesSolution
+    strain_rate: np.ndarray
+    plastic_strain_rate: np.ndarray
+    plastic_rate_II: np.ndarray
+    plastic_strain: np.ndarray
+    eta_eff: np.ndarray
+    yielded: np.ndarray
+    iterations: int
+    residual: float
+    history: list = field(default_factory=list)
+
+
+def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: float,
+             f=0.0, gravity: Optional[Sequence[float]] = None,
+             prescribed: Optional[Tuple[np.ndarray, np.ndarray]] = None,
+             free_slip: Union[str, Sequence[str], None] = "all",
+             no_slip: Union[str, Sequence[str], None] = None,
+             pressure_mean: Optional[bool] = None,
+             plastic_strain: Optional[np.ndarray] = None,
+             rotation: str = "jaumann", tol: float = 1e-6, maxiter: int = 100,
+             min_viscosity: Optional[float] = None, u_guess: Optional[np.ndarray] = None
+             ) -> VEPStep:
+    """One visco-elasto-plastic time step (see the module docstring).
+
+    Parameters
+    ----------
+    spaces
+        From :func:`skfem_nem.stokes.stokes_spaces`.
+    material
+        The :class:`Material` (per-element or per-point arrays allowed).
+    tau_old
+        Deviatoric stress at the start of the step, (2, 2, ne, nq), Pa
+        (for :class:`~skfem_nem.LagrangianMesh` fields use :func:`from_ip_field`).
+    dt
+        Time step (s), positive and finite.
+    f, gravity
+        Body force (N m^-3, see ``assemble_stokes``) plus ``density *
+        gravity`` if ``gravity`` (2,) (m s^-2) is given.
+    prescribed, free_slip, no_slip, pressure_mean
+        Boundary conditions, see :func:`solve_stokes_bc`.
+    plastic_strain
+        Accumulated plastic strain (ne, nq) at the start (default zero).
+    rotation
+        ``"jaumann"`` or ``"exact"`` (see :func:`rotate_stress`), or
+        ``"none"``. The spin is taken from the current Picard iterate (from
+        ``u_guess`` for the first solve, zero if not given).
+    tol, maxiter
+        Picard iterations stop when the relative change of the velocity
+        (max norm) falls below ``tol``.
+    min_viscosity
+        Lower bound of the effective plastic viscosity (Pa s); default
+        ``1e-8`` times the smallest visco-elastic viscosity.
+    u_guess
+        Velocity dof vector to start from (e.g. the previous step's).
+
+    Raises
+    ------
+    ValueError
+        For a bad ``dt``, stress of the wrong shape or non-finite values
+        (naming the element), or a non-finite new stress (naming the element).
+    RuntimeError
+        If the Picard iterations do not converge in ``maxiter`` iterations
+        (naming the count and the last residual).
+    """
+    if not (np.isscalar(dt) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"time step dt must be a positive finite number, got {dt!r}")
+    if rotation not in ("jaumann", "exact", "none"):
+        raise ValueError(f"rotation must be 'jaumann', 'exact' or 'none', got {rotation!r}")
+    ne, nq = spaces.quadrature_points.shape[1:]
+    tau_old = np.asarray(tau_old, dtype=float)
+    if tau_old.shape != (2, 2, ne, nq):
+        raise ValueError(f"tau_old has shape {tau_old.shape}, expected (2, 2, {ne}, {nq})")
+    bad = ~np.isfinite(tau_old).all(axis=(0, 1))
+    if bad.any():
+        raise ValueError("tau_old is not finite" + _where(bad))
+    eta = material.at_points("viscosity", ne, nq)
+    mu = material.at_points("shear_modulus", ne, nq)
+    Y = material.at_points("yield_stress", ne, nq)
+    eta_ve, keep = maxwell_coefficients(eta, mu, dt)
+    chi = keep / eta_ve           # 1 / (mu dt), zero for mu = inf
+    eta_min = 1e-8 * float(eta_ve.min()) if min_viscosity is None else float(min_viscosity)
+    load = quadrature_values(spaces, f, "body force f", shape=(2,))
+    if gravity is not None:
+        if material.density is None:
+            raise ValueError("gravity given but the material has no density")
+        rho = material.at_points("density", ne, nq)
+        load = load + rho[None] * np.asarray(gravity, dtype=float)[:, None, None]
+    ps = np.zeros((ne, nq)) if plastic_strain is None else np.asarray(plastic_strain, dtype=float)
+    if ps.shape != (ne, nq):
+        raise ValueError(f"plastic_strain has shape {ps.shape}, expected ({ne}, {nq})")
+    u = None if u_guess is None else np.asarray(u_guess, dtype=float)
+    G = None if u is None else np.asarray(spaces.ubasis.interpolate(u).grad)
+
+    def rotated(Gv):
+        if rotation == "none" or Gv is None:
+            return tau_old
+        return rotate_stress(tau_old, spin(Gv), dt, rotation)
+
+    eta_eff = eta_ve.copy()
+    plastic = bool(np.isfinite(Y).any())
+    history = []
+    res = np.inf
+    for it in range(1, maxiter + 1):
+        tau_rot = rotated(G)
+        sol = solve_stokes_bc(spaces, eta_eff, load, (eta_eff * chi)[None, None] * tau_rot,
+                              prescribed, free_slip, no_slip, pressure_mean)
+        G = velocity_gradient(spaces, sol)
+        eps = strain_rate(G)
+        edot = eps + 0.5 * chi[None, None] * rotated(G)
+        IIe = second_invariant(edot)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            eta_vp = np.where(2.0 * eta_ve * IIe > Y, Y / (2.0 * IIe), eta_ve)
+        eta_new = np.maximum(eta_vp, eta_min)
+        if u is None:
+            res = np.inf if (plastic or rotation != "none") else 0.0
+        else:
+            res = float(np.abs(sol.u - u).max() / max(np.abs(sol.u).max(), 1e-300))
+        history.append(res)
+        u = sol.u
+        d_eta = float(np.abs(np.log(eta_new / eta_eff)).max())
+        eta_eff = eta_new
+        if res <= tol and (d_eta <= 1e-12 or it > 1):
+            break
+        if not plastic and rotation == "none":
+            break
+    else:
+        raise RuntimeError(f"visco-elasto-plastic Picard iterations did not converge: "
+                           f"{maxiter} iterations, relative velocity change {res:.3e} > tol "
+                           f"{tol:.1e} (raise maxiter or min_viscosity, or shorten dt)")
+    tau_rot = rotated(G)
+    edot = eps + 0.5 * chi[None, None] * tau_rot
+    tau_trial = 2.0 * eta_ve[None, None] * edot
+    tau_new, factor = return_map(tau_trial, Y)
+    bad = ~np.isfinite(tau_new).all(axis=(0, 1))
+    if bad.any():
+        raise ValueError("the updated stress is not finite" + _where(bad)
+                         + f" ({int(bad.any(axis=1).sum())} element(s))")
+    pl = edot - tau_new / (2.0 * eta_ve[None, None])
+    plII = second_invariant(pl)
+    return VEPStep(tau=tau_new, solution=sol, strain_rate=eps, plastic_strain_rate=pl,
+                   plastic_rate_II=plII, plastic_strain=ps + dt * plII, eta_eff=eta_eff,
+                   yielded=factor < 1.0, iterations=it, residual=res, history=history)

@@ -48,10 +48,9 @@ from dataclasses import dataclass, field, fields
 from typing import Callable, Optional, Sequence, Tuple, Union
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from .stokes import StokesSolution, StokesSpaces, assemble_stokes, quadrature_values, wall_dofs
+from .stokes import (StokesSolution, StokesSpaces, quadrature_values,
+                     solve_stokes)
 
 __all__ = ["Material", "combine_materials", "maxwell_coefficients", "strain_rate", "spin",
            "deviator", "second_invariant", "rotate_stress", "return_map",
@@ -347,58 +346,14 @@ def prescribed_velocity(spaces: StokesSpaces, facets, value: Union[Callable, Seq
     return dofs, vals
 
 
-def _boundary_flux(spaces: StokesSpaces) -> sp.csr_matrix:
-    """(np, nu) matrix of ``oint q_i u . n ds`` over the boundary (exact: on
-    convex-hull edges both the natural-neighbour velocity and the P1 pressure
-    are linear between the two end nodes)."""
-    mesh, ub, pb = spaces.mesh, spaces.ubasis, spaces.pbasis
-    bf = mesh.boundary_facets()
-    a, b = mesh.facets[:, bf]
-    d = mesh.p[:, b] - mesh.p[:, a]
-    # outward normal (times length): the mesh interior lies on one side
-    mid = 0.5 * (mesh.p[:, a] + mesh.p[:, b])
-    t2f = mesh.f2t[0, bf]
-    c = mesh.p[:, mesh.t[:, t2f]].mean(axis=1)
-    n = np.array([d[1], -d[0]])
-    n *= np.where(np.einsum("ij,ij->j", n, mid - c) < 0, -1.0, 1.0)
-    pn = pb.dofs.nodal_dofs[0]
-    un = ub.dofs.nodal_dofs
-    rows, cols, vals = [], [], []
-    for qi, qj in ((a, a), (a, b), (b, a), (b, b)):
-        w = np.where(qi == qj, 1.0 / 3.0, 1.0 / 6.0)   # int phi_i phi_j ds / L
-        for comp in (0, 1):
-            rows.append(pn[qi])
-            cols.append(un[comp, qj])
-            vals.append(w * n[comp])
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                         shape=(pb.N, ub.N))
-
-
-def _strong_divergence(spaces: StokesSpaces, B: sp.csr_matrix) -> sp.csr_matrix:
-    """``B`` as ``-(div u, q)`` whether it was assembled so or integrated by
-    parts (``(u, grad q)``, which drops ``oint q u . n`` and holds only for
-    zero normal wall velocity): tested on the field u = (x, 0)."""
-    ub = spaces.ubasis
-    v = np.zeros(ub.N)
-    v[ub.dofs.nodal_dofs[0]] = spaces.mesh.p[0]
-    area = float(spaces.mesh.volume().sum()) if hasattr(spaces.mesh, "volume") else None
-    s = float((B @ v).sum())
-    if area is None:
-        area = abs(float((_boundary_flux(spaces) @ v).sum()))
-    if abs(s + area) <= 1e-8 * area:
-        return B
-    if abs(s) <= 1e-8 * area:
-        return (B - _boundary_flux(spaces)).tocsr()
-    raise RuntimeError(f"unexpected divergence matrix: sum of B u for u = (x, 0) is {s}, "
-                       f"expected {-area} or 0")
-
-
 def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
                     prescribed: Optional[Tuple[np.ndarray, np.ndarray]] = None,
                     free_slip: Union[str, Sequence[str], None] = "all",
                     no_slip: Union[str, Sequence[str], None] = None,
-                    pressure_mean: Optional[bool] = None) -> StokesSolution:
-    """Stokes solve (as :func:`skfem_nem.stokes.solve_stokes`) with prescribed velocities.
+                    pressure_mean: Optional[bool] = None, solver: str = "schur",
+                    tol: float = 1e-10) -> StokesSolution:
+    """Stokes solve with prescribed velocities: :func:`skfem_nem.stokes.solve_stokes`
+    with ``prescribed`` (kept for its reaction forces and defaults).
 
     Parameters
     ----------
@@ -420,68 +375,12 @@ def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
         ``info["reaction"]``: (nu,) the boundary forces on the body at the
         constrained dofs (N/m in 2D; zero elsewhere), ``info["fixed"]`` those
         dofs, ``info["bubble"]`` the bubble dof vector where the velocity
-        space has condensed bubbles. Direct sparse solve (meshes up to some
-        ten thousand nodes). The system is solved with the viscosity scaled
-        by its geometric mean (velocities unchanged).
+        space has condensed bubbles. ``solver``: as for ``solve_stokes``
+        (default the Schur-complement CG).
     """
-    e = quadrature_values(spaces, eta, "viscosity eta", positive=True)
-    scale = float(np.exp(np.mean(np.log(e))))
-    fs = quadrature_values(spaces, f, "body force f", shape=(2,)) / scale
-    ts = None if tau0 is None else quadrature_values(spaces, tau0, "stress tau0",
-                                                     shape=(2, 2)) / scale
-    sys_ = assemble_stokes(spaces, e / scale, fs, ts)
-    nu, npr = spaces.n_velocity, spaces.n_pressure
-    A, S = sys_.A.tocsr(), sys_.S
-    B = _strong_divergence(spaces, sys_.B.tocsr())
-    g = getattr(sys_, "g", None)
-    g = np.zeros(npr) if g is None else np.asarray(g)
-    D0 = wall_dofs(spaces, free_slip, no_slip)
-    uD = np.zeros(nu)
-    if prescribed is not None:
-        pd, pv = prescribed
-        pd = np.asarray(pd, dtype=np.int64)
-        D = np.union1d(D0, pd)
-        uD[pd] = pv
-    else:
-        D = D0
-    free = np.setdiff1d(np.arange(nu), D)
-    Aff = A[free][:, free]
-    ru = sys_.f[free] - A[free][:, D] @ uD[D]
-    rp = g - B[:, D] @ uD[D]
-    if pressure_mean is None:
-        nd = spaces.ubasis.dofs.nodal_dofs  # (2, n)
-        bn = np.unique(spaces.mesh.facets[:, spaces.mesh.boundary_facets()])
-        fixed = np.zeros(nu, dtype=bool)
-        fixed[D] = True
-        pressure_mean = bool(np.all(fixed[nd[0, bn]] | fixed[nd[1, bn]]))
-    Bf = B[:, free]
-    blocks = [[Aff, Bf.T], [Bf, -S]]
-    rhs = [ru, rp]
-    if pressure_mean:
-        m = sys_.m
-        blocks = [[Aff, Bf.T, None], [Bf, -S, sp.csr_matrix(m[:, None])],
-                  [None, sp.csr_matrix(m[None, :]), None]]
-        rhs.append([0.0])
-    K = sp.bmat(blocks, format="csc")
-    x = spla.spsolve(K, np.concatenate(rhs))
-    if not np.all(np.isfinite(x)):
-        raise RuntimeError("the Stokes system is singular: check the wall conditions "
-                           "(a rigid-body motion left free?)")
-    u = uD.copy()
-    u[free] = x[:free.size]
-    p = x[free.size:free.size + npr]
-    r = (A @ u + B.T @ p - sys_.f) * scale
-    res_free = np.linalg.norm(r[free]) / max(np.linalg.norm(sys_.f * scale), np.linalg.norm(r),
-                                             1e-300)
-    reaction = np.zeros(nu)
-    reaction[D] = r[D]
-    info = {"fixed": D, "reaction": reaction, "pressure_mean": pressure_mean,
-            "fixed_velocity_dofs": int(D.size)}
-    bub = getattr(sys_, "bubble", None)
-    if bub is not None:
-        Ainv, Abn, Bb, fb = bub
-        info["bubble"] = Ainv @ (fb - Abn @ u - Bb.T @ p)
-    return StokesSolution(spaces, u, p * scale, "direct", 1, float(res_free), info)
+    return solve_stokes(spaces, eta, f, tau0, free_slip=free_slip, no_slip=no_slip,
+                        prescribed=prescribed, pressure_mean=pressure_mean, solver=solver,
+                        tol=tol)
 
 
 def velocity_gradient(spaces: StokesSpaces, sol: StokesSolution) -> np.ndarray:

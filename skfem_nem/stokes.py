@@ -40,8 +40,9 @@ Spaces
     classical baseline on the same triangles.
 
 For the natural-neighbour methods the pressure term is written as
-``b(v, q) = (v, grad q)`` (``-(div v, q)`` integrated by parts, with
-``v . n = 0`` on the walls). The two agree for exact integration, but
+``b(v, q) = (v, grad q) - oint q v . n`` (``-(div v, q)`` integrated by
+parts; the boundary term is exact, and vanishes for test functions of
+free-slip and no-slip walls). The two agree for exact integration, but
 natural-neighbour functions are not polynomials and Gauss quadrature is not
 exact for them; in the gradient form a hydrostatic pressure balances a
 piecewise-constant body force exactly at every quadrature point, so
@@ -347,6 +348,33 @@ def wall_dofs(spaces: StokesSpaces, free_slip: Union[str, Sequence[str], None] =
     return np.unique(np.concatenate(fixed))
 
 
+def boundary_flux(spaces: StokesSpaces) -> sp.csr_matrix:
+    """(np, nu) matrix of ``oint q_i (u . n) ds`` over the boundary facets.
+
+    Exact: on convex-hull edges both the natural-neighbour velocity and the
+    P1 pressure are linear between the edge's two nodes (Simpson weights).
+    """
+    mesh, ub, pb = spaces.mesh, spaces.ubasis, spaces.pbasis
+    bf = mesh.boundary_facets()
+    a, b = mesh.facets[:, bf]
+    d = mesh.p[:, b] - mesh.p[:, a]
+    mid = 0.5 * (mesh.p[:, a] + mesh.p[:, b])
+    c = mesh.p[:, mesh.t[:, mesh.f2t[0, bf]]].mean(axis=1)
+    n = np.array([d[1], -d[0]])                       # normal times length
+    n *= np.where(np.einsum("ij,ij->j", n, mid - c) < 0, -1.0, 1.0)  # outward
+    pn = pb.dofs.nodal_dofs[0]
+    un = ub.dofs.nodal_dofs
+    rows, cols, vals = [], [], []
+    for qi, qj in ((a, a), (a, b), (b, a), (b, b)):
+        w = np.where(qi == qj, 1.0 / 3.0, 1.0 / 6.0)   # int phi_i phi_j ds / length
+        for comp in (0, 1):
+            rows.append(pn[qi])
+            cols.append(un[comp, qj])
+            vals.append(w * n[comp])
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(pb.N, ub.N))
+
+
 def _stabilisation(spaces: StokesSpaces, inv_eta: np.ndarray) -> sp.csr_matrix:
     """Dohrmann-Bochev projection matrix ((p - P0 p)/eta, q - P0 q)."""
     pb, p0 = spaces.pbasis, spaces.p0basis
@@ -405,6 +433,10 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     A = viscous.assemble(ub, eta=e).tocsr()
     bform = divergence if spaces.method == "taylor-hood" else weak_divergence
     B = bform.assemble(ub, pb).tocsr()
+    if bform is weak_divergence:
+        # the boundary term of the integration by parts, exactly: B is then
+        # -(div u, q) also where the normal wall velocity is not zero
+        B = (B - boundary_flux(spaces)).tocsr()
     b = loads(ub)
     inv = 1.0 / e
     Mp = weighted_mass.assemble(pb, c=inv).tocsr()
@@ -450,7 +482,12 @@ def _rigid_modes(spaces: StokesSpaces, free: np.ndarray) -> np.ndarray:
     ub = spaces.ubasis
     loc = ub.doflocs  # (2, nu)
     comp = np.zeros(ub.N, dtype=int)
-    comp[ub.get_dofs().all("u^2")] = 1
+    if hasattr(ub.dofs, "nodal_dofs") and ub.dofs.nodal_dofs.shape[0] == 2 and \
+            ub.dofs.nodal_dofs.size * 1 == ub.N:
+        comp[ub.dofs.nodal_dofs[1]] = 1
+    else:  # Taylor-Hood: nodal and edge dofs, named u^1 / u^2
+        for dofs_ in (ub.dofs.nodal_dofs, ub.dofs.facet_dofs):
+            comp[dofs_[1::2].ravel()] = 1
     Bm = np.zeros((ub.N, 3))
     Bm[comp == 0, 0] = 1.0
     Bm[comp == 1, 1] = 1.0
@@ -464,7 +501,9 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
                  free_slip: Union[str, Sequence[str], None] = "all",
                  no_slip: Union[str, Sequence[str], None] = None,
                  solver: str = "schur", tol: float = 1e-10, maxiter: int = 2000,
-                 system: Optional[StokesSystem] = None) -> StokesSolution:
+                 system: Optional[StokesSystem] = None,
+                 prescribed: Optional[tuple] = None,
+                 pressure_mean: Optional[bool] = None) -> StokesSolution:
     """Solve the Stokes problem (see the module docstring).
 
     Parameters
@@ -488,12 +527,22 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     system
         A :class:`StokesSystem` assembled before (then eta, f, tau0 are not
         read).
+    prescribed
+        ``(dofs, values)``: velocity dofs with given (non-zero) values, e.g.
+        moving walls; they override the wall conditions on the same dofs.
+    pressure_mean
+        Fix the pressure by its mean (zero). Default: when every boundary
+        node has a constrained velocity component (no open boundary, so the
+        pressure is otherwise determined only up to a constant).
 
     Returns
     -------
     StokesSolution
         Velocity dof vector (ordered as ``spaces.ubasis``), pressure dof
-        vector of mean zero, iteration count and relative residual.
+        vector (mean zero if fixed so), iteration count and relative
+        residual; ``info["reaction"]`` (nu,) the forces the constrained dofs
+        exert on the fluid (zero elsewhere), ``info["fixed"]`` those dofs, and
+        ``info["bubble"]`` the condensed bubble dofs (``spaces.bbasis``).
 
     Raises
     ------
@@ -508,38 +557,74 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     sys_ = assemble_stokes(spaces, eta, f, tau0) if system is None else system
     nu, npr = spaces.n_velocity, spaces.n_pressure
     D = wall_dofs(spaces, free_slip, no_slip)
+    uD = np.zeros(nu)
+    if prescribed is not None:
+        pd_, pv = prescribed
+        pd_ = np.asarray(pd_, dtype=np.int64).ravel()
+        pv = np.broadcast_to(np.asarray(pv, dtype=float), pd_.shape)
+        if pd_.size and (pd_.min() < 0 or pd_.max() >= nu):
+            raise ValueError(f"prescribed dof {int(pd_[(pd_ < 0) | (pd_ >= nu)][0])} is not a "
+                             f"velocity dof (0..{nu - 1})")
+        if not np.isfinite(pv).all():
+            raise ValueError(f"prescribed velocity of dof {int(pd_[~np.isfinite(pv)][0])} is "
+                             f"not finite")
+        D = np.union1d(D, pd_)
+        uD[pd_] = pv
+    if pressure_mean is None:
+        nd = spaces.ubasis.dofs.nodal_dofs
+        bn = np.unique(spaces.mesh.facets[:, spaces.mesh.boundary_facets()])
+        fixed_ = np.zeros(nu, dtype=bool)
+        fixed_[D] = True
+        pressure_mean = bool(np.all(fixed_[nd[0, bn]] | fixed_[nd[1, bn]]))
     free = np.setdiff1d(np.arange(nu), D)
-    A = sys_.A[free][:, free].tocsc()
-    B = sys_.B[:, free].tocsr()
-    fu = sys_.f[free]
-    gp = np.zeros(npr) if sys_.g is None else sys_.g
-    u = np.zeros(nu)
-    info = {"fixed_velocity_dofs": int(D.size)}
+    Afull, Bfull = sys_.A.tocsr(), sys_.B.tocsr()
+    A = Afull[free][:, free].tocsc()
+    B = Bfull[:, free].tocsr()
+    fu = sys_.f[free] - Afull[free][:, D] @ uD[D]
+    gp = (np.zeros(npr) if sys_.g is None else sys_.g) - Bfull[:, D] @ uD[D]
+    u = uD.copy()
+    info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean}
     mvec = sys_.m
     area = float(mvec.sum())
     Sb = sys_.S
     n1 = free.size
 
+    def finish(xu, p, name, its, res):
+        u[free] = xu
+        r = Afull @ u + Bfull.T @ p - sys_.f
+        reaction = np.zeros(nu)
+        reaction[D] = r[D]
+        info["reaction"] = reaction
+        if sys_.bubble is not None:
+            Ainv, Abn, Bb, fb = sys_.bubble
+            info["bubble"] = Ainv @ (fb - Abn @ u - Bb.T @ p)
+        return StokesSolution(spaces, u, p, name, its, res, info)
+
     def full_residual(xu, xp):
         r1 = A @ xu + B.T @ xp - fu
         r2 = B @ xu - Sb @ xp - gp
-        r2 = r2 - mvec * ((mvec @ r2) / (mvec @ mvec))  # the multiplier's share
-        return float(np.sqrt(r1 @ r1 + r2 @ r2) / max(np.linalg.norm(fu), 1e-300))
+        if pressure_mean:
+            r2 = r2 - mvec * ((mvec @ r2) / (mvec @ mvec))  # the multiplier's share
+        return float(np.sqrt(r1 @ r1 + r2 @ r2) / max(np.linalg.norm(fu), np.linalg.norm(gp),
+                                                      1e-300))
 
     if solver == "direct":
-        K = sp.bmat([[A, B.T, None],
-                     [B, -Sb, sp.csr_matrix(mvec[:, None])],
-                     [None, sp.csr_matrix(mvec[None, :]), None]], format="csc")
-        rhs = np.concatenate([fu, gp, [0.0]])
+        if pressure_mean:
+            K = sp.bmat([[A, B.T, None],
+                         [B, -Sb, sp.csr_matrix(mvec[:, None])],
+                         [None, sp.csr_matrix(mvec[None, :]), None]], format="csc")
+            rhs = np.concatenate([fu, gp, [0.0]])
+        else:
+            K = sp.bmat([[A, B.T], [B, -Sb]], format="csc")
+            rhs = np.concatenate([fu, gp])
         x = spla.spsolve(K, rhs)
         if not np.isfinite(x).all():
             raise RuntimeError("the Stokes system is singular: check the wall conditions "
                                "(a rigid-body motion left free?) and the viscosity")
-        u[free] = x[:n1]
         p = x[n1:n1 + npr]
-        return StokesSolution(spaces, u, p, "direct", 1, full_residual(x[:n1], p), info)
+        return finish(x[:n1], p, "direct", 1, full_residual(x[:n1], p))
     # the mean pressure is fixed by a rank-one term c m m^T of the size of 1/eta
-    c = float(sys_.Mp.diagonal().sum()) / area ** 2
+    c = float(sys_.Mp.diagonal().sum()) / area ** 2 if pressure_mean else 0.0
     dp = np.asarray(sys_.Mp.sum(axis=1)).ravel()  # lumped 1/eta-weighted mass
     count = [0]
 
@@ -565,9 +650,9 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
             raise RuntimeError(f"pressure CG did not converge: {count[0]} iterations, "
                                f"relative residual {r:.3e} > tol {tol:.1e} (raise maxiter)")
         xu = lu.solve(fu - B.T @ p)
-        u[free] = xu
-        p = p - (mvec @ p) / area
-        return StokesSolution(spaces, u, p, "schur", count[0], full_residual(xu, p), info)
+        if pressure_mean:
+            p = p - (mvec @ p) / area
+        return finish(xu, p, "schur", count[0], full_residual(xu, p))
     # MINRES with block-diagonal preconditioner
     import pyamg
     Bm = _rigid_modes(spaces, free)
@@ -590,11 +675,11 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         raise RuntimeError(f"MINRES did not converge: {count[0]} iterations, relative "
                            f"residual {res:.3e} (tol {tol:.1e}; raise maxiter, or use "
                            f"solver='schur' for strong viscosity contrasts)")
-    u[free] = x[:n1]
     p = x[n1:]
-    p = p - (mvec @ p) / area
+    if pressure_mean:
+        p = p - (mvec @ p) / area
     info["amg_levels"] = len(ml.levels)
-    return StokesSolution(spaces, u, p, "minres", count[0], res, info)
+    return finish(x[:n1], p, "minres", count[0], res)
 
 
 def inf_sup_constant(spaces: StokesSpaces, stabilised: Optional[bool] = None,

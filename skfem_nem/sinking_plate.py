@@ -1,0 +1,506 @@
+"""The paper's showcase (Fig. 6): an elasto-plastic plate sinking through a
+layered viscous fluid, on a Lagrangian natural-neighbour mesh.
+
+A box of height ``height`` and width ``width`` (default 1 x 10), free slip on
+all walls. The fluid has viscosity ``eta_upper`` above ``interface_z`` and
+``eta_lower`` below; the layer each node belongs to is carried by the node
+(its initial height), so the interface moves with the flow. A plate denser
+than the fluid by ``plate_density`` is a Maxwell visco-elastic, von Mises
+plastic solid (``plate_viscosity``, ``shear_modulus``, ``yield_stress``) that
+shares its boundary nodes with the fluid (no slip). Its outline nodes, in
+order, bound the plate as a polygon that moves with them; quadrature points
+inside it are plate. Initial nodes are random with density inversely
+proportional to the distance from the plate, so some Delaunay triangles are
+very elongated.
+
+Each step: a visco-elasto-plastic Stokes solve on natural-neighbour velocity
+(bubble-enriched, P1 pressure, 3-point rule so that the stress lives where
+the evolving mesh stores it), the plate's stress history rotated (Jaumann)
+and updated by return mapping, nodes moved by the iterative
+predictor-corrector, the triangulation repaired by Lawson flips with the
+stress remapped on every flip, and nodes injected where the mesh thins. No
+regridding.
+
+Outputs (in the output folder): ``plate_NNNNN.vtu`` per output step and
+``plate.pvd`` (ParaView), ``diagnostics.csv`` (one row per step),
+``fig6.png`` (the mesh coloured by the nodes' initial depth at the first
+output and at the end), ``diagnostics.png``, ``checkpoint.npz`` +
+``checkpoint.json`` (restart).
+"""
+from __future__ import annotations
+
+import json
+import math
+import time as _time
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Dict, Optional
+
+import numpy as np
+
+from .evolution import LagrangianMesh
+from .nodesets import box_nodes, polyline_nodes
+from .output import CSVLog, PVDWriter, atomic_write_text, write_vtu
+
+__all__ = ["PlateConfig", "SinkingPlate", "load_config", "run"]
+
+
+@dataclass
+class PlateConfig:
+    """Parameters of the sinking-plate run (nondimensional: L = 1, eta0 = 1,
+    buoyancy scale ``plate_density * gravity * L`` = 1 unless changed)."""
+
+    #: box height L
+    height: float = 1.0
+    #: box width W
+    width: float = 10.0
+    #: height of the fluid layer interface above the bottom
+    interface_z: float = 0.75
+    #: fluid viscosity above the interface
+    eta_upper: float = 1.0
+    #: fluid viscosity below the interface
+    eta_lower: float = 10.0
+    #: plate length (horizontal)
+    plate_length: float = 3.0
+    #: plate thickness
+    plate_thickness: float = 0.1
+    #: horizontal position of the plate centre
+    plate_x: float = 5.0
+    #: height of the plate centre above the bottom
+    plate_z: float = 0.85
+    #: density excess of the plate over the fluid
+    plate_density: float = 1.0
+    #: gravitational acceleration (downward)
+    gravity: float = 1.0
+    #: plate viscosity (Maxwell)
+    plate_viscosity: float = 1e4
+    #: plate shear modulus
+    shear_modulus: float = 2.0
+    #: plate von Mises yield stress (second invariant of the deviatoric stress)
+    yield_stress: float = 0.05
+    #: number of random interior nodes drawn (before thinning near lines)
+    nodes: int = 2500
+    #: random seed of the node set
+    seed: int = 0
+    #: node density ~ 1 / (1 + distance to the plate / density_length)
+    density_length: float = 0.15
+    #: spacing of the nodes on the plate outline (relative to plate_thickness)
+    outline_spacing: float = 0.25
+    #: end time
+    end_time: float = 1000.0
+    #: largest time step
+    max_dt: float = 10.0
+    #: largest node displacement per step, as a fraction of its shortest edge
+    cfl: float = 0.25
+    #: time between VTU outputs
+    output_interval: float = 100.0
+    #: inject nodes where a node's Voronoi area grew past this factor (0: never)
+    inject: float = 2.0
+    #: remap of the stress on flips: "conservative" or "average"
+    remap: str = "conservative"
+    #: Picard tolerance of the plastic iterations
+    picard_tol: float = 1e-4
+    #: write a checkpoint every this many steps
+    checkpoint_every: int = 10
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the first bad parameter."""
+        pos = ["height", "width", "eta_upper", "eta_lower", "plate_length", "plate_thickness",
+               "plate_density", "gravity", "plate_viscosity", "shear_modulus", "yield_stress",
+               "density_length", "outline_spacing", "end_time", "max_dt", "cfl",
+               "output_interval", "picard_tol"]
+        for k in pos:
+            v = getattr(self, k)
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) \
+                    and not (k in ("shear_modulus", "yield_stress") and v == math.inf) \
+                    or not v > 0:
+                raise ValueError(f"{k} must be a positive number, got {v!r}")
+        for k in ("nodes", "checkpoint_every"):
+            v = getattr(self, k)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+                raise ValueError(f"{k} must be a positive integer, got {v!r}")
+        if not isinstance(self.seed, int):
+            raise ValueError(f"seed must be an integer, got {self.seed!r}")
+        if not (isinstance(self.inject, (int, float)) and (self.inject == 0 or self.inject > 1)):
+            raise ValueError(f"inject must be 0 (off) or a factor above 1, got {self.inject!r}")
+        if self.remap not in ("conservative", "average"):
+            raise ValueError(f"remap must be 'conservative' or 'average', got {self.remap!r}")
+        if not 0 < self.interface_z < self.height:
+            raise ValueError(f"interface_z must lie inside the box (0, {self.height}), got "
+                             f"{self.interface_z!r}")
+        if self.cfl > 1:
+            raise ValueError(f"cfl must not exceed 1, got {self.cfl!r}")
+        x0, x1 = self.plate_x - self.plate_length / 2, self.plate_x + self.plate_length / 2
+        z0, z1 = self.plate_z - self.plate_thickness / 2, self.plate_z + self.plate_thickness / 2
+        margin = 0.5 * self.plate_thickness
+        if x0 < margin or x1 > self.width - margin:
+            raise ValueError(f"plate_x / plate_length: the plate spans x = {x0:g} .. {x1:g}, "
+                             f"which is not inside the box (0, {self.width:g}) with a margin "
+                             f"of {margin:g}")
+        if z0 < margin or z1 > self.height - margin:
+            raise ValueError(f"plate_z / plate_thickness: the plate spans z = {z0:g} .. {z1:g}, "
+                             f"which is not inside the box (0, {self.height:g}) with a margin "
+                             f"of {margin:g}")
+
+
+#: one line of help per parameter (the command line shows them)
+HELP = {
+    'height': 'box height L',
+    'width': 'box width W',
+    'interface_z': 'height of the fluid layer interface above the bottom',
+    'eta_upper': 'fluid viscosity above the interface',
+    'eta_lower': 'fluid viscosity below the interface',
+    'plate_length': 'plate length (horizontal)',
+    'plate_thickness': 'plate thickness',
+    'plate_x': 'horizontal position of the plate centre',
+    'plate_z': 'height of the plate centre above the bottom',
+    'plate_density': 'density excess of the plate over the fluid',
+    'gravity': 'gravitational acceleration (downward)',
+    'plate_viscosity': 'plate viscosity (Maxwell)',
+    'shear_modulus': 'plate shear modulus',
+    'yield_stress': 'plate von Mises yield stress (second invariant of the deviatoric stress)',
+    'nodes': 'number of random interior nodes drawn (before thinning near lines)',
+    'seed': 'random seed of the node set',
+    'density_length': 'node density ~ 1 / (1 + distance to the plate / density_length)',
+    'outline_spacing': 'spacing of the nodes on the plate outline (relative to plate_thickness)',
+    'end_time': 'end time',
+    'max_dt': 'largest time step',
+    'cfl': 'largest node displacement per step, as a fraction of its shortest edge',
+    'output_interval': 'time between VTU outputs',
+    'inject': "inject nodes where a node's Voronoi area grew past this factor (0: never)",
+    'remap': 'remap of the stress on flips: "conservative" or "average"',
+    'picard_tol': 'Picard tolerance of the plastic iterations',
+    'checkpoint_every': 'write a checkpoint every this many steps',
+}
+
+
+def load_config(path: Optional[str] = None, overrides: Optional[Dict] = None) -> PlateConfig:
+    """A validated :class:`PlateConfig` from a TOML file (optional) and
+    overrides; unknown keys raise ``ValueError`` naming the key."""
+    data: Dict = {}
+    if path is not None:
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python 3.10
+            import tomli as tomllib
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+        data = data.get("sinking-plate", data)
+    data.update({k: v for k, v in (overrides or {}).items() if v is not None})
+    known = {f.name: f for f in fields(PlateConfig)}
+    for k in data:
+        if k not in known:
+            raise ValueError(f"unknown configuration key {k!r} (known: {', '.join(known)})")
+    kw = {}
+    for k, v in data.items():
+        default = getattr(PlateConfig, k)
+        if isinstance(default, float) and isinstance(v, int) and not isinstance(v, bool):
+            v = float(v)
+        if isinstance(default, float) and isinstance(v, str) and v.lower() in ("inf", "infinity"):
+            v = math.inf
+        kw[k] = v
+    cfg = PlateConfig(**kw)
+    cfg.validate()
+    return cfg
+
+
+# ---------------------------------------------------------------------------
+# geometry helpers
+# ---------------------------------------------------------------------------
+
+def _polygon_area_centroid(P):
+    x, y = P[:, 0], P[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    c = x * yn - xn * y
+    A = 0.5 * c.sum()
+    return A, np.array([((x + xn) * c).sum(), ((y + yn) * c).sum()]) / (6 * A)
+
+
+def _inside(poly, pts):
+    from matplotlib.path import Path as MPath
+    return MPath(poly).contains_points(pts, radius=0.0)
+
+
+class SinkingPlate:
+    """State and time loop of a sinking-plate run (see the module docstring).
+
+    ``SinkingPlate(cfg, out)`` builds the initial node set; :meth:`run`
+    advances to ``cfg.end_time`` writing outputs; :meth:`restart` continues
+    from the checkpoint in ``out``.
+    """
+
+    def __init__(self, cfg: PlateConfig, out, _state=None):
+        cfg.validate()
+        self.cfg = cfg
+        self.out = Path(out)
+        self.out.mkdir(parents=True, exist_ok=True)
+        if _state is not None:
+            self.lm, meta = _state
+            self.outline = np.asarray(meta["outline"], dtype=np.int64)
+            self.next_output = meta["next_output"]
+            self.dt_next = meta["dt_next"]
+            self.outputs = meta["outputs"]
+            self.first_output = meta.get("first_output")
+            return
+        c = cfg
+        x0, x1 = c.plate_x - c.plate_length / 2, c.plate_x + c.plate_length / 2
+        z0, z1 = c.plate_z - c.plate_thickness / 2, c.plate_z + c.plate_thickness / 2
+        rect = [[x0, z0], [x1, z0], [x1, z1], [x0, z1]]
+        outline = polyline_nodes(rect, c.outline_spacing * c.plate_thickness, closed=True)
+
+        def dist(p):
+            dx = np.maximum(np.maximum(x0 - p[:, 0], p[:, 0] - x1), 0)
+            dz = np.maximum(np.maximum(z0 - p[:, 1], p[:, 1] - z1), 0)
+            return np.hypot(dx, dz)
+
+        def density(p):
+            return 1.0 / (1.0 + dist(p) / c.density_length)
+
+        nodes = box_nodes(c.nodes, c.width, c.height, density=density, seed=c.seed,
+                          lines=[np.r_[outline, outline[:1]]],
+                          boundary_spacing=max(c.width, c.height) / 60)
+        # the outline's node indices, in order along the polygon
+        from scipy.spatial import cKDTree
+        d, idx = cKDTree(nodes).query(outline)
+        if d.max() > 1e-12:
+            raise RuntimeError("plate outline nodes were not kept in the node set")
+        fields_ = {"x0": nodes[:, 0].copy(), "z0": nodes[:, 1].copy()}
+        lm = LagrangianMesh(nodes, node_fields=fields_, remap=c.remap)
+        nt = lm.triangles.shape[0]
+        lm.ip_fields["stress"] = np.zeros((nt, 3, 2, 2))
+        lm.ip_fields["plastic_strain"] = np.zeros((nt, 3))
+        self.lm = lm
+        self.outline = idx.astype(np.int64)
+        self.next_output = 0.0
+        self.dt_next = c.max_dt
+        self.outputs = 0
+        self.first_output = None
+
+    # -- state ------------------------------------------------------------------
+    @property
+    def plate_polygon(self) -> np.ndarray:
+        """(k, 2) current outline of the plate."""
+        return self.lm.nodes[self.outline]
+
+    def plate_area_centroid(self):
+        return _polygon_area_centroid(self.plate_polygon)
+
+    def _materials(self, spaces):
+        """Per-point material arrays and the plate mask."""
+        from .rheology import Material
+        c = self.cfg
+        X = spaces.quadrature_points
+        ne, nq = X.shape[1:]
+        plate = _inside(self.plate_polygon, X.reshape(2, -1).T).reshape(ne, nq)
+        # P1 dofs are the node indices: the nodes' initial heights at the points
+        z0 = np.asarray(spaces.pbasis.interpolate(self.lm.node_fields["z0"]))
+        eta_fluid = np.where(z0 > c.interface_z, c.eta_upper, c.eta_lower)
+        eta = np.where(plate, c.plate_viscosity, eta_fluid)
+        mu = np.where(plate, c.shear_modulus, np.inf)
+        Y = np.where(plate, c.yield_stress, np.inf)
+        force = np.zeros((2, ne, nq))
+        force[1] = -c.plate_density * c.gravity * plate
+        return Material(viscosity=eta, shear_modulus=mu, yield_stress=Y), force, plate
+
+    def step(self, dt: float) -> dict:
+        """One time step of length dt; returns the diagnostics row."""
+        from .rheology import from_ip_field, second_invariant, to_ip_field, vep_step
+        from .stokes import stokes_spaces
+        from .coordinates import sibson_coordinates
+        c = self.cfg
+        lm = self.lm
+        t0 = _time.perf_counter()
+        spaces = stokes_spaces(lm.mesh, "nem", npoints=3)
+        mat, force, plate = self._materials(spaces)
+        tau_old = from_ip_field(lm.ip_fields["stress"])
+        ps_old = lm.ip_fields["plastic_strain"]
+        r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
+                     tol=c.picard_tol)
+        lm.ip_fields["stress"] = to_ip_field(r.tau)
+        lm.ip_fields["plastic_strain"] = np.ascontiguousarray(r.plastic_strain)
+        v = r.solution.velocity_at_nodes()
+        t_solve = _time.perf_counter() - t0
+
+        def velocity(x):
+            return sibson_coordinates(lm.triangulation, x) @ v
+
+        rep = lm.advance(velocity, dt, inject=c.inject if c.inject else None)
+        # the next step's dt from this step's velocity
+        self.dt_next = min(c.max_dt, lm.max_dt(v, fraction=c.cfl)) if len(v) == lm.nodes.shape[0] \
+            else c.max_dt
+        A, cen = self.plate_area_centroid()
+        tauII = second_invariant(r.tau)
+        row = {"step": lm.step, "time": lm.time, "dt": dt,
+               "plate_depth": c.height - cen[1], "plate_x": cen[0],
+               "plate_area": A, "fluid_area": c.width * c.height - A,
+               "max_plastic_strain": float(r.plastic_strain.max()),
+               "yielded_points": int(r.yielded.sum()),
+               "max_plate_stress": float(tauII[plate].max()) if plate.any() else 0.0,
+               "max_speed": float(np.hypot(*v.T).max()),
+               "flips": rep["flips"], "injected": rep["injected"],
+               "relocated": rep["relocated"], "substeps": rep["substeps"],
+               "nodes": lm.nodes.shape[0], "min_angle": rep["min_angle"],
+               "picard_iterations": r.iterations, "solver_iterations": r.solution.iterations,
+               "solve_seconds": t_solve, "step_seconds": _time.perf_counter() - t0}
+        self._last = (spaces, r, plate)
+        return row
+
+    # -- outputs ----------------------------------------------------------------
+    def write_output(self, spaces=None, r=None, plate=None) -> str:
+        c = self.cfg
+        lm = self.lm
+        name = f"plate_{self.outputs:05d}.vtu"
+        P, T = lm.nodes, lm.triangles
+        pd = {"initial_depth": c.height - lm.node_fields["z0"],
+              "initial_x": lm.node_fields["x0"]}
+        on_plate = np.zeros(P.shape[0], dtype=bool)
+        on_plate[_inside(self.plate_polygon, P)] = True
+        on_plate[self.outline] = True
+        eta_n = np.where(on_plate, c.plate_viscosity,
+                         np.where(lm.node_fields["z0"] > c.interface_z, c.eta_upper, c.eta_lower))
+        pd["viscosity"] = eta_n
+        pd["density"] = np.where(on_plate, c.plate_density, 0.0)
+        pd["material"] = on_plate.astype(float)
+        if r is not None and r.solution.u.size == 2 * P.shape[0]:
+            pd["velocity"] = r.solution.velocity_at_nodes()
+            pd["pressure"] = r.solution.pressure_at_nodes()
+        S = lm.ip_fields["stress"]
+        tauII = np.sqrt(0.5 * (S ** 2).sum(axis=(2, 3))).mean(axis=1)
+        cd = {"stress_invariant": tauII,
+              "plastic_strain": lm.ip_fields["plastic_strain"].mean(axis=1)}
+        write_vtu(self.out / name, P, T, pd, cd)
+        self._pvd.add(lm.time, name)
+        if self.first_output is None and lm.time > 0:
+            self.first_output = lm.time
+            np.savez(self.out / "first_output.npz", nodes=P, triangles=T,
+                     depth=pd["initial_depth"], time=lm.time)
+        self.outputs += 1
+        return name
+
+    def checkpoint(self) -> None:
+        self.lm.save(self.out / "checkpoint.npz")
+        meta = {"config": asdict(self.cfg), "outline": self.outline.tolist(),
+                "next_output": self.next_output, "dt_next": self.dt_next,
+                "outputs": self.outputs, "first_output": self.first_output}
+        atomic_write_text(self.out / "checkpoint.json", json.dumps(meta))
+
+    @classmethod
+    def restart(cls, out, cfg: Optional[PlateConfig] = None) -> "SinkingPlate":
+        """Continue from the checkpoint in ``out`` (its configuration unless
+        ``cfg`` is given)."""
+        out = Path(out)
+        if not (out / "checkpoint.json").exists():
+            raise FileNotFoundError(f"no checkpoint in {out} (checkpoint.json missing)")
+        meta = json.loads((out / "checkpoint.json").read_text())
+        if cfg is None:
+            cfg = PlateConfig(**{k: (math.inf if v == "inf" else v)
+                                 for k, v in meta["config"].items()})
+        lm = LagrangianMesh.load(out / "checkpoint.npz")
+        return cls(cfg, out, _state=(lm, meta))
+
+    # -- the loop ---------------------------------------------------------------
+    def run(self, progress: bool = True, max_steps: Optional[int] = None) -> Path:
+        """Advance to ``end_time`` (or ``max_steps`` more steps); returns the
+        diagnostics CSV path."""
+        c = self.cfg
+        lm = self.lm
+        log = CSVLog(self.out / "diagnostics.csv", keep_until=lm.time if lm.step else None)
+        self._pvd = PVDWriter(self.out / "plate.pvd", keep_until=lm.time if lm.step else None)
+        if lm.step == 0:
+            self.write_output()
+            self.next_output = c.output_interval
+            self.checkpoint()
+        bar = None
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=c.end_time, initial=lm.time, unit="t", desc="sinking plate",
+                       bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]"
+                                  "{postfix}")
+        steps = 0
+        try:
+            while lm.time < c.end_time * (1 - 1e-12):
+                if max_steps is not None and steps >= max_steps:
+                    break
+                dt = min(self.dt_next, self.next_output - lm.time, c.end_time - lm.time)
+                if self.next_output - lm.time - dt < 1e-9 * c.max_dt:
+                    dt = self.next_output - lm.time
+                row = self.step(dt)
+                log.append(row)
+                steps += 1
+                if lm.time >= self.next_output * (1 - 1e-12) or lm.time >= c.end_time * (1 - 1e-12):
+                    self.write_output(*self._last)
+                    self.next_output += c.output_interval
+                if lm.step % c.checkpoint_every == 0:
+                    self.checkpoint()
+                if bar is not None:
+                    bar.update(lm.time - bar.n)
+                    bar.set_postfix_str(f"step {lm.step}, flips {row['flips']}, "
+                                        f"depth {row['plate_depth']:.3f}")
+        finally:
+            if bar is not None:
+                bar.close()
+        self.checkpoint()
+        return self.out / "diagnostics.csv"
+
+    # -- figures ----------------------------------------------------------------
+    def figures(self) -> list:
+        """fig6.png and diagnostics.png in the output folder; returns their paths."""
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        from .output import read_csv_columns
+        c = self.cfg
+        paths = []
+        panels = []
+        f0 = self.out / "first_output.npz"
+        if f0.exists():
+            d = np.load(f0)
+            panels.append((d["nodes"], d["triangles"], d["depth"], float(d["time"])))
+        lm = self.lm
+        panels.append((lm.nodes, lm.triangles, c.height - lm.node_fields["z0"], lm.time))
+        fig, ax = plt.subplots(len(panels), 1, figsize=(12, 2.2 * len(panels) + 0.6),
+                               squeeze=False)
+        for a, (P, T, depth, t) in zip(ax[:, 0], panels):
+            tp = a.tripcolor(P[:, 0], P[:, 1], T, depth, shading="gouraud", cmap="viridis_r")
+            a.triplot(P[:, 0], P[:, 1], T, lw=0.15, color="k", alpha=0.5)
+            a.set_aspect("equal")
+            a.set_xlim(0, c.width)
+            a.set_ylim(0, c.height)
+            a.set_title(f"t = {t:.4g}: mesh coloured by the nodes' initial depth")
+            fig.colorbar(tp, ax=a, fraction=0.02, pad=0.01, label="initial depth")
+        poly = self.plate_polygon
+        ax[-1, 0].plot(np.r_[poly[:, 0], poly[:1, 0]], np.r_[poly[:, 1], poly[:1, 1]], "r-",
+                       lw=0.8)
+        fig.tight_layout()
+        p = self.out / "fig6.png"
+        fig.savefig(p, dpi=150)
+        plt.close(fig)
+        paths.append(p)
+        csvp = self.out / "diagnostics.csv"
+        if csvp.exists():
+            d = read_csv_columns(csvp)
+            if d and len(d["time"]):
+                fig, ax = plt.subplots(2, 3, figsize=(13, 6))
+                keys = [("plate_depth", "plate centroid depth"),
+                        ("plate_area", "plate area"), ("max_plastic_strain", "max plastic strain"),
+                        ("flips", "flips per step"), ("nodes", "nodes (injection)"),
+                        ("min_angle", "minimum angle (deg)")]
+                for a, (k, lab) in zip(ax.ravel(), keys):
+                    a.plot(d["time"], d[k], "-")
+                    a.set_xlabel("t")
+                    a.set_title(lab)
+                fig.tight_layout()
+                p = self.out / "diagnostics.png"
+                fig.savefig(p, dpi=120)
+                plt.close(fig)
+                paths.append(p)
+        return paths
+
+
+def run(cfg: PlateConfig, out="out/sinking-plate", restart: bool = False,
+        progress: bool = True, max_steps: Optional[int] = None) -> SinkingPlate:
+    """Run (or continue) a sinking-plate simulation; writes all outputs."""
+    sim = SinkingPlate.restart(out, cfg) if restart else SinkingPlate(cfg, out)
+    sim.run(progress=progress, max_steps=max_steps)
+    sim.figures()
+    return sim

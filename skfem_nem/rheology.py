@@ -351,7 +351,7 @@ def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
                     free_slip: Union[str, Sequence[str], None] = "all",
                     no_slip: Union[str, Sequence[str], None] = None,
                     pressure_mean: Optional[bool] = None, solver: str = "schur",
-                    tol: float = 1e-10) -> StokesSolution:
+                    tol: float = 1e-10, constraints=None) -> StokesSolution:
     """Stokes solve with prescribed velocities: :func:`skfem_nem.stokes.solve_stokes`
     with ``prescribed`` (kept for its reaction forces and defaults).
 
@@ -380,7 +380,7 @@ def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
     """
     return solve_stokes(spaces, eta, f, tau0, free_slip=free_slip, no_slip=no_slip,
                         prescribed=prescribed, pressure_mean=pressure_mean, solver=solver,
-                        tol=tol)
+                        tol=tol, constraints=constraints)
 
 
 def velocity_gradient(spaces: StokesSpaces, sol: StokesSolution) -> np.ndarray:
@@ -447,8 +447,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
              pressure_mean: Optional[bool] = None,
              plastic_strain: Optional[np.ndarray] = None,
              rotation: str = "jaumann", tol: float = 1e-6, maxiter: int = 100,
-             min_viscosity: Optional[float] = None, u_guess: Optional[np.ndarray] = None
-             ) -> VEPStep:
+             min_viscosity: Optional[float] = None, u_guess: Optional[np.ndarray] = None,
+             constraints=None) -> VEPStep:
     """One visco-elasto-plastic time step (see the module docstring).
 
     Parameters
@@ -481,6 +481,10 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         ``1e-8`` times the smallest visco-elastic viscosity.
     u_guess
         Velocity dof vector to start from (e.g. the previous step's).
+    constraints
+        Extra linear constraints on the velocity, passed to
+        :func:`skfem_nem.stokes.solve_stokes` (e.g. zero net flux through a
+        material outline).
 
     Raises
     ------
@@ -532,7 +536,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     for it in range(1, maxiter + 1):
         tau_rot = rotated(G)
         sol = solve_stokes_bc(spaces, eta_eff, load, (eta_eff * chi)[None, None] * tau_rot,
-                              prescribed, free_slip, no_slip, pressure_mean)
+                              prescribed, free_slip, no_slip, pressure_mean,
+                              constraints=constraints)
         G = velocity_gradient(spaces, sol)
         eps = strain_rate(G)
         edot = eps + 0.5 * chi[None, None] * rotated(G)

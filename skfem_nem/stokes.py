@@ -90,7 +90,8 @@ from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from .basis import ElementNaturalNeighbour, NaturalNeighbourBasis
 
-__all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes",
+__all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes", "outline_flux",
+           "boundary_flux",
            "assemble_stokes", "inf_sup_constant", "quadrature_values", "wall_dofs"]
 
 Field = Union[float, np.ndarray, Callable]
@@ -375,6 +376,29 @@ def boundary_flux(spaces: StokesSpaces) -> sp.csr_matrix:
                          shape=(pb.N, ub.N))
 
 
+def outline_flux(spaces: StokesSpaces, outline: np.ndarray) -> sp.csr_matrix:
+    """(1, nu) row: the flux of the nodal velocities out of a closed polygon.
+
+    ``outline`` (k,) node indices in order around the polygon (either
+    orientation). The flux is that of the velocity interpolated linearly
+    between the outline nodes, i.e. the rate of change of the polygon's
+    area when its nodes move with their velocities; constraining it to zero
+    keeps a material region bounded by nodes incompressible as a whole.
+    """
+    outline = np.asarray(outline, dtype=np.int64)
+    P = spaces.mesh.p.T[outline]
+    Q = np.roll(P, -1, axis=0)
+    orient = np.sign(0.5 * np.sum(P[:, 0] * Q[:, 1] - Q[:, 0] * P[:, 1]))
+    d = Q - P
+    n = orient * np.c_[d[:, 1], -d[:, 0]]          # outward normal times length
+    nd = spaces.ubasis.dofs.nodal_dofs
+    nxt = np.roll(outline, -1)
+    cols = np.concatenate([nd[0, outline], nd[1, outline], nd[0, nxt], nd[1, nxt]])
+    vals = 0.5 * np.concatenate([n[:, 0], n[:, 1], n[:, 0], n[:, 1]])
+    return sp.csr_matrix((vals, (np.zeros(cols.size, dtype=np.int64), cols)),
+                         shape=(1, spaces.n_velocity))
+
+
 def _stabilisation(spaces: StokesSpaces, inv_eta: np.ndarray) -> sp.csr_matrix:
     """Dohrmann-Bochev projection matrix ((p - P0 p)/eta, q - P0 q)."""
     pb, p0 = spaces.pbasis, spaces.p0basis
@@ -503,7 +527,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
                  solver: str = "schur", tol: float = 1e-10, maxiter: int = 2000,
                  system: Optional[StokesSystem] = None,
                  prescribed: Optional[tuple] = None,
-                 pressure_mean: Optional[bool] = None) -> StokesSolution:
+                 pressure_mean: Optional[bool] = None,
+                 constraints: Optional[sp.spmatrix] = None) -> StokesSolution:
     """Solve the Stokes problem (see the module docstring).
 
     Parameters
@@ -534,6 +559,11 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         Fix the pressure by its mean (zero). Default: when every boundary
         node has a constrained velocity component (no open boundary, so the
         pressure is otherwise determined only up to a constant).
+    constraints
+        Optional (k, nu) sparse matrix C of extra linear constraints
+        ``C u = 0`` on the velocity dofs, imposed by Lagrange multipliers
+        (returned in ``info["multipliers"]``); e.g. zero net flux through a
+        material outline (:func:`outline_flux`).
 
     Returns
     -------
@@ -578,15 +608,31 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         pressure_mean = bool(np.all(fixed_[nd[0, bn]] | fixed_[nd[1, bn]]))
     free = np.setdiff1d(np.arange(nu), D)
     Afull, Bfull = sys_.A.tocsr(), sys_.B.tocsr()
+    g0 = np.zeros(npr) if sys_.g is None else sys_.g
+    mvec = sys_.m
+    Sb = sys_.S
+    dp = np.asarray(sys_.Mp.sum(axis=1)).ravel()  # lumped 1/eta-weighted mass
+    npr0 = npr
+    if constraints is not None:
+        C = sp.csr_matrix(constraints)
+        if C.shape[1] != nu:
+            raise ValueError(f"constraints have {C.shape[1]} columns, the velocity {nu} dofs")
+        k = C.shape[0]
+        Bfull = sp.vstack([Bfull, C]).tocsr()
+        g0 = np.concatenate([g0, np.zeros(k)])
+        mvec = np.concatenate([mvec, np.zeros(k)])
+        Sb = sp.block_diag([Sb, sp.csr_matrix((k, k))]).tocsr()
+        # Jacobi estimate of C A^-1 C^T for the multipliers' preconditioner
+        dA = Afull.diagonal()
+        dp = np.concatenate([dp, np.asarray(C.multiply(C) @ (1.0 / dA)).ravel()])
+        npr = npr + k
     A = Afull[free][:, free].tocsc()
     B = Bfull[:, free].tocsr()
     fu = sys_.f[free] - Afull[free][:, D] @ uD[D]
-    gp = (np.zeros(npr) if sys_.g is None else sys_.g) - Bfull[:, D] @ uD[D]
+    gp = g0 - Bfull[:, D] @ uD[D]
     u = uD.copy()
     info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean}
-    mvec = sys_.m
     area = float(mvec.sum())
-    Sb = sys_.S
     n1 = free.size
 
     def finish(xu, p, name, its, res):
@@ -595,6 +641,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         reaction = np.zeros(nu)
         reaction[D] = r[D]
         info["reaction"] = reaction
+        info["multipliers"] = p[npr0:]
+        p = p[:npr0]
         if sys_.bubble is not None:
             Ainv, Abn, Bb, fb = sys_.bubble
             info["bubble"] = Ainv @ (fb - Abn @ u - Bb.T @ p)
@@ -625,7 +673,6 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         return finish(x[:n1], p, "direct", 1, full_residual(x[:n1], p))
     # the mean pressure is fixed by a rank-one term c m m^T of the size of 1/eta
     c = float(sys_.Mp.diagonal().sum()) / area ** 2 if pressure_mean else 0.0
-    dp = np.asarray(sys_.Mp.sum(axis=1)).ravel()  # lumped 1/eta-weighted mass
     count = [0]
 
     def cb(*args):

@@ -1,0 +1,110 @@
+"""The sinking-plate application: a short coarse run, outputs, restart, bad configuration."""
+import json
+
+import meshio
+import numpy as np
+import pytest
+
+from skfem_nem.cli import main
+from skfem_nem.output import read_csv_columns
+from skfem_nem.sinking_plate import PlateConfig, SinkingPlate, load_config
+
+SMALL = dict(nodes=500, end_time=24.0, max_dt=4.0, output_interval=8.0, checkpoint_every=2)
+
+
+@pytest.fixture(scope="module")
+def coarse_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("plate")
+    sim = SinkingPlate(PlateConfig(**SMALL), out)
+    area0, _ = sim.plate_area_centroid()
+    sim.run(progress=False)
+    sim.figures()
+    return sim, out, area0
+
+
+def test_coarse_run_physics(coarse_run):
+    sim, out, area0 = coarse_run
+    d = read_csv_columns(out / "diagnostics.csv")
+    assert d["time"][-1] == pytest.approx(SMALL["end_time"])
+    # plate and fluid areas conserved (incompressible flow, Lagrangian outline)
+    assert np.abs(d["plate_area"] / area0 - 1).max() < 0.01
+    box = sim.cfg.width * sim.cfg.height
+    assert np.abs(d["fluid_area"] / (box - area0) - 1).max() < 0.01
+    # the plate sinks, monotonically
+    depth = d["plate_depth"]
+    assert np.all(np.diff(depth) > 0)
+    assert depth[-1] > depth[0]
+    # the mesh stays a valid Delaunay triangulation, and nothing was regridded
+    assert sim.lm.triangulation.is_delaunay()
+    assert d["min_angle"].min() > 0
+    assert d["flips"].sum() > 0
+    # the plate stresses up to the yield stress and no further
+    assert d["max_plate_stress"].max() <= sim.cfg.yield_stress * (1 + 1e-9)
+    assert d["max_plate_stress"].max() > 0.5 * sim.cfg.yield_stress
+
+
+def test_outputs(coarse_run):
+    sim, out, _ = coarse_run
+    text = (out / "plate.pvd").read_text()
+    files = [ln.split('file="')[1].split('"')[0] for ln in text.splitlines() if "file=" in ln]
+    assert len(files) == 4  # t = 0, 8, 16, 24
+    m = meshio.read(out / files[-1])
+    for k in ("velocity", "pressure", "viscosity", "density", "material", "initial_depth"):
+        assert k in m.point_data, k
+    for k in ("stress_invariant", "plastic_strain"):
+        assert k in m.cell_data, k
+    assert m.points.shape[0] == sim.lm.nodes.shape[0]
+    assert (out / "fig6.png").stat().st_size > 10000
+    assert (out / "diagnostics.png").stat().st_size > 10000
+    cols = read_csv_columns(out / "diagnostics.csv")
+    for k in ("plate_depth", "plate_area", "fluid_area", "max_plastic_strain", "flips",
+              "injected", "min_angle", "solver_iterations", "picard_iterations"):
+        assert k in cols, k
+
+
+def test_restart_continues_identically(tmp_path):
+    cfg = PlateConfig(**{**SMALL, "end_time": 16.0, "checkpoint_every": 1})
+    a = SinkingPlate(cfg, tmp_path / "a")
+    a.run(progress=False)
+    b = SinkingPlate(cfg, tmp_path / "b")
+    b.run(progress=False, max_steps=2)
+    assert b.lm.time < cfg.end_time
+    c = SinkingPlate.restart(tmp_path / "b")
+    c.run(progress=False)
+    assert np.array_equal(a.lm.nodes, c.lm.nodes)
+    assert np.array_equal(a.lm.triangles, c.lm.triangles)
+    assert np.array_equal(a.lm.ip_fields["stress"], c.lm.ip_fields["stress"])
+    da = read_csv_columns(tmp_path / "a" / "diagnostics.csv")
+    dc = read_csv_columns(tmp_path / "b" / "diagnostics.csv")
+    assert np.array_equal(da["plate_depth"], dc["plate_depth"])
+
+
+def test_bad_configuration(tmp_path):
+    with pytest.raises(ValueError, match="plate_x"):
+        load_config(overrides={"plate_x": 0.3})
+    with pytest.raises(ValueError, match="eta_lower"):
+        load_config(overrides={"eta_lower": -1.0})
+    with pytest.raises(ValueError, match="yield_stress"):
+        load_config(overrides={"yield_stress": float("nan")})
+    p = tmp_path / "c.toml"
+    p.write_text("[sinking-plate]\nnodes = 800\nplate_viscosty = 3.0\n")
+    with pytest.raises(ValueError, match="plate_viscosty"):
+        load_config(str(p))
+    p.write_text("nodes = 800\nend_time = 50\n")
+    cfg = load_config(str(p))
+    assert cfg.nodes == 800 and cfg.end_time == 50.0
+    with pytest.raises(SystemExit, match="plate_z"):
+        main(["sinking-plate", "-o", str(tmp_path / "x"), "--plate-z", "0.99", "--quiet"])
+    assert not (tmp_path / "x").exists()   # rejected before anything runs
+    with pytest.raises(SystemExit, match="no checkpoint"):
+        main(["sinking-plate", "-o", str(tmp_path / "none"), "--restart", "--quiet"])
+
+
+def test_command_line_short_run(tmp_path):
+    out = tmp_path / "cli"
+    rc = main(["sinking-plate", "-o", str(out), "--nodes", "400", "--end-time", "6",
+               "--max-dt", "3", "--output-interval", "3", "--quiet"])
+    assert rc == 0
+    meta = json.loads((out / "checkpoint.json").read_text())
+    assert meta["config"]["nodes"] == 400
+    assert (out / "plate.pvd").exists() and (out / "fig6.png").exists()

@@ -448,7 +448,7 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
              plastic_strain: Optional[np.ndarray] = None,
              rotation: str = "jaumann", tol: float = 1e-6, maxiter: int = 100,
              min_viscosity: Optional[float] = None, u_guess: Optional[np.ndarray] = None,
-             constraints=None) -> VEPStep:
+             constraints=None, eta_guess: Optional[np.ndarray] = None) -> VEPStep:
     """One visco-elasto-plastic time step (see the module docstring).
 
     Parameters
@@ -481,6 +481,10 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         ``1e-8`` times the smallest visco-elastic viscosity.
     u_guess
         Velocity dof vector to start from (e.g. the previous step's).
+    eta_guess
+        Effective viscosity (ne, nq) to start the Picard iterations from
+        (e.g. the previous step's ``eta_eff``, carried by the evolving mesh);
+        clipped to ``[min_viscosity, eta_ve]``. Default ``eta_ve``.
     constraints
         Extra linear constraints on the velocity, passed to
         :func:`skfem_nem.stokes.solve_stokes` (e.g. zero net flux through a
@@ -530,6 +534,12 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         return rotate_stress(tau_old, spin(Gv), dt, rotation)
 
     eta_eff = eta_ve.copy()
+    if eta_guess is not None:
+        eg = np.asarray(eta_guess, dtype=float)
+        if eg.shape != (ne, nq) or not np.isfinite(eg).all():
+            raise ValueError(f"eta_guess must be finite with shape ({ne}, {nq}), got "
+                             f"{eg.shape}")
+        eta_eff = np.clip(eg, eta_min, eta_ve)
     plastic = bool(np.isfinite(Y).any())
     history = []
     res = np.inf

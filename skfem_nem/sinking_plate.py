@@ -77,7 +77,7 @@ class PlateConfig:
     #: plate shear modulus
     shear_modulus: float = 2.0
     #: plate von Mises yield stress (second invariant of the deviatoric stress)
-    yield_stress: float = 0.05
+    yield_stress: float = 0.12
     #: number of random interior nodes drawn (before thinning near lines)
     nodes: int = 1500
     #: random seed of the node set
@@ -285,13 +285,16 @@ class SinkingPlate:
     def plate_area_centroid(self):
         return _polygon_area_centroid(self.plate_polygon)
 
-    def _materials(self, spaces):
-        """Per-point material arrays and the plate mask."""
+    def materials(self, spaces, polygon: Optional[np.ndarray] = None):
+        """Per-point :class:`~skfem_nem.rheology.Material`, body force
+        (2, ne, nq) and plate mask (ne, nq) at the quadrature points of
+        ``spaces`` (plate: inside ``polygon``, default the current outline)."""
         from .rheology import Material
         c = self.cfg
         X = spaces.quadrature_points
         ne, nq = X.shape[1:]
-        plate = _inside(self.plate_polygon, X.reshape(2, -1).T).reshape(ne, nq)
+        poly = self.plate_polygon if polygon is None else polygon
+        plate = _inside(poly, X.reshape(2, -1).T).reshape(ne, nq)
         # P1 dofs are the node indices: the nodes' initial heights at the points
         z0 = np.asarray(spaces.pbasis.interpolate(self.lm.node_fields["z0"]))
         eta_fluid = np.where(z0 > c.interface_z, c.eta_upper, c.eta_lower)
@@ -311,13 +314,18 @@ class SinkingPlate:
         lm = self.lm
         t0 = _time.perf_counter()
         spaces = stokes_spaces(lm.mesh, "nem", npoints=3)
-        mat, force, plate = self._materials(spaces)
+        mat, force, plate = self.materials(spaces)
         tau_old = from_ip_field(lm.ip_fields["stress"])
         ps_old = lm.ip_fields["plastic_strain"]
         # the plate is incompressible as a whole: zero net flux of the nodal
         # velocities through its outline (the polygon's area is kept)
+        # Picard iterations start from the effective viscosity of the previous
+        # step, carried (as its logarithm) by the mesh like the stress
+        guess = lm.ip_fields.get("log_eta_eff")
         r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
-                     tol=c.picard_tol, constraints=outline_flux(spaces, self.outline))
+                     tol=c.picard_tol, constraints=outline_flux(spaces, self.outline),
+                     eta_guess=None if guess is None else np.exp(guess))
+        lm.ip_fields["log_eta_eff"] = np.log(r.eta_eff)
         lm.ip_fields["stress"] = to_ip_field(r.tau)
         lm.ip_fields["plastic_strain"] = np.ascontiguousarray(r.plastic_strain)
         v = r.solution.velocity_at_nodes()
@@ -348,11 +356,18 @@ class SinkingPlate:
 
     def _stable_dt(self, v: np.ndarray) -> float:
         """Largest dt that moves no node by more than ``cfl`` times its local
-        spacing (the square root of its Voronoi area; slivers do not limit
+        spacing (the square root of its share of the triangle areas; slivers do not limit
         the step: flips repair them, and inverting moves are substepped)."""
         c = self.cfg
         n_old = v.shape[0]
-        h = np.sqrt(self.lm.node_areas()[:n_old])
+        P, T = self.lm.nodes, self.lm.triangles
+        a, b, cc = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+        ta = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (cc[:, 1] - a[:, 1])
+                          - (b[:, 1] - a[:, 1]) * (cc[:, 0] - a[:, 0]))
+        share = np.zeros(P.shape[0])
+        for k in range(3):
+            np.add.at(share, T[:, k], ta / 3.0)
+        h = np.sqrt(share[:n_old])
         speed = np.hypot(v[:, 0], v[:, 1])
         with np.errstate(divide="ignore"):
             lim = c.cfl * h / speed
@@ -421,7 +436,8 @@ class SinkingPlate:
         self._pvd = PVDWriter(self.out / "plate.pvd", keep_until=lm.time if lm.step else None)
         if lm.step == 0:
             self.write_output()
-            self.next_output = c.output_interval
+            # an early snapshot (t = 1, the paper's first panel), then every interval
+            self.next_output = min(1.0, c.output_interval)
             self.checkpoint()
         bar = None
         if progress:
@@ -442,7 +458,8 @@ class SinkingPlate:
                 steps += 1
                 if lm.time >= self.next_output * (1 - 1e-12) or lm.time >= c.end_time * (1 - 1e-12):
                     self.write_output(*self._last)
-                    self.next_output += c.output_interval
+                    self.next_output = (math.floor(lm.time / c.output_interval + 1e-9) + 1) \
+                        * c.output_interval
                 if lm.step % c.checkpoint_every == 0:
                     self.checkpoint()
                 if bar is not None:

@@ -40,7 +40,7 @@ from skfem.refdom import RefTet, RefTri
 
 from . import _assembly
 from .coordinates import natural_neighbour_coordinates
-from .lasserre import _check_delaunay, _triangulate
+from .lasserre import delaunay_of
 from .triangulation import Triangulation, _count_non_delaunay, validate_nodes
 
 __all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeighbourBasis",
@@ -105,7 +105,7 @@ def _element_for(mesh, elem, who):
     return elem
 
 
-def delaunay_mesh(points):
+def delaunay_mesh(points) -> MeshTri | MeshTet:
     """The Delaunay triangulation of points as a scikit-fem mesh.
 
     (n, 2) points give a ``MeshTri`` (robust 2D triangulation,
@@ -119,8 +119,7 @@ def delaunay_mesh(points):
     shape = np.shape(points)
     if len(shape) == 2 and shape[1] == 3:
         p = validate_nodes(points, dim=3, name="points")
-        tri = _triangulate(p)
-        _check_delaunay(tri, p)
+        tri = delaunay_of(p)
         mesh = MeshTet(np.ascontiguousarray(p.T),
                        np.ascontiguousarray(tri.simplices.T, dtype=np.int64))
         mesh._skfem_nem_triangulation = tri
@@ -147,8 +146,7 @@ def _tet_delaunay(mesh: MeshTet) -> Delaunay:
     co-spherical nodes, all give the same natural-neighbour coordinates)."""
     p, t = mesh.p.T, mesh.t.T
     _check_used(p, t, "tetrahedron")
-    tri = _triangulate(np.ascontiguousarray(p))
-    _check_delaunay(tri, np.ascontiguousarray(p))
+    tri = delaunay_of(np.ascontiguousarray(p))
     if tri.simplices.shape[0] == t.shape[0] and np.array_equal(
             np.unique(np.sort(tri.simplices, axis=1), axis=0), np.unique(np.sort(t, axis=1), axis=0)):
         return tri
@@ -528,8 +526,7 @@ def _adopt(mesh, method):
     if method == "lasserre" and isinstance(tri, Triangulation):
         cached = getattr(mesh, "_skfem_nem_delaunay", None)
         if cached is None:
-            cached = _triangulate(np.ascontiguousarray(tri.nodes))
-            _check_delaunay(cached, np.ascontiguousarray(tri.nodes))
+            cached = delaunay_of(np.ascontiguousarray(tri.nodes))
             mesh._skfem_nem_delaunay = cached
         return cached
     return tri

@@ -349,7 +349,9 @@ class _GroupBasis(AbstractBasis):
             for comp in range(dim):
                 sel = c == comp
                 val[comp, sel] = V[j[sel]]
-                grad[comp, :, sel] = G[:, j[sel]].transpose(1, 0, 2, 3)
+                js = j[sel]
+                for g in range(dim):
+                    grad[comp, g, sel] = G[g, js]
             return (DiscreteField(val.reshape(dim, -1, nq), grad.reshape(dim, dim, -1, nq)),)
         return (DiscreteField(V[idx].reshape(-1, nq), G[:, idx].reshape(G.shape[0], -1, nq)),)
 

@@ -173,7 +173,7 @@ def _tet_delaunay(mesh: MeshTet) -> Delaunay:
     return tri
 
 
-def triangulation_of(mesh):
+def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
     """The triangulation the coordinates of a mesh are computed on, checked to
     be Delaunay and cached on the mesh: for a ``MeshTri`` its
     :class:`~skfem_nem.Triangulation` (same triangle order), for a
@@ -569,7 +569,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     same mesh and quadrature.
     """
 
-    def __init__(self, mesh, elem: Optional[Element] = None,
+    def __init__(self, mesh: MeshTri | MeshTet, elem: Optional[Element] = None,
                  intorder: Optional[int] = None, quadrature: Optional[Tuple[ndarray, ndarray]] = None,
                  npoints: Optional[int] = None, coordinates: str = "sibson",
                  method: Optional[str] = None):
@@ -695,7 +695,7 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
     inside the domain.
     """
 
-    def __init__(self, mesh, elem: Optional[Element] = None, facets=None,
+    def __init__(self, mesh: MeshTri | MeshTet, elem: Optional[Element] = None, facets=None,
                  intorder: Optional[int] = None, quadrature=None, coordinates: str = "sibson",
                  side: int = 0, method: Optional[str] = None):
         elem = _element_for(mesh, elem, "NaturalNeighbourFacetBasis")

@@ -115,6 +115,11 @@ def delaunay_mesh(points) -> MeshTri | MeshTet:
     triangle or tetrahedron. Raises ``ValueError`` for bad points (non-finite,
     too few, duplicate, all collinear or coplanar) and for points Qhull would
     drop (nearly coincident with others), naming the point.
+
+    For co-spherical 3D points (lattices) Qhull glues its triangulations of
+    the co-spherical cells with flat (zero-volume) tetrahedra; they are kept
+    (the natural-neighbour basis gives their quadrature points zero weight),
+    but scikit-fem's Lagrange elements cannot be used on such a mesh.
     """
     shape = np.shape(points)
     if len(shape) == 2 and shape[1] == 3:
@@ -433,9 +438,26 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
         return cache[k]
 
     def _fix_undefined(self, pts, Phi, D):
-        raise ValueError("quadrature points at nodes or on the convex hull: gradients of "
-                         "natural-neighbour functions are undefined there; use a quadrature "
-                         "rule with interior points")
+        """Undefined gradients at quadrature points: allowed only in cells of
+        zero measure (Qhull's flat tetrahedra between co-spherical nodes, e.g.
+        lattices), whose points carry no weight; their gradients become 0."""
+        finite = np.ones(Phi.shape[0], dtype=bool)
+        for Dk in D:
+            finite &= np.isfinite(np.asarray(Dk.sum(axis=1)).ravel())
+        bad = np.flatnonzero(~finite)
+        weight = self.dx.reshape(-1)[bad]
+        if np.any(weight != 0.0):
+            e = int(bad[np.flatnonzero(weight != 0.0)[0]] // self.dx.shape[1])
+            raise ValueError(
+                f"quadrature points at nodes or on the convex hull (first in element {e}): "
+                f"gradients of natural-neighbour functions are undefined there; use a "
+                f"quadrature rule with interior points")
+        out = []
+        for Dk in D:
+            Dk = Dk.copy()
+            Dk.data[~np.isfinite(Dk.data)] = 0.0
+            out.append(Dk)
+        return Phi, out
 
     def _group(self, elems, stencils, V, G):
         return _GroupBasis(self, elems, stencils, V, G)
@@ -577,13 +599,16 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         self.method = _check_method(mesh, coordinates, method)
         self.triangulation = _adopt(mesh, self.method)
         self.coordinates = coordinates
-        super().__init__(mesh, elem, None, None,
-                         _quadrature(npoints, intorder, quadrature, mesh.refdom), mesh.refdom)
-        self.tind = None
-        self.nelems = mesh.nelements
-        self.dx = np.abs(self.mapping.detDF(self.X)) * np.broadcast_to(
-            self.W, (self.nelems, self.W.shape[-1]))
-        self._build(self.mapping.F(self.X), np.arange(self.nelems))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # (flat cells have no inverse mapping; only F and detDF are used)
+            super().__init__(mesh, elem, None, None,
+                             _quadrature(npoints, intorder, quadrature, mesh.refdom),
+                             mesh.refdom)
+            self.tind = None
+            self.nelems = mesh.nelements
+            self.dx = np.abs(self.mapping.detDF(self.X)) * np.broadcast_to(
+                self.W, (self.nelems, self.W.shape[-1]))
+            self._build(self.mapping.F(self.X), np.arange(self.nelems))
 
     def global_coordinates(self) -> DiscreteField:
         if self._global_coordinates is None:

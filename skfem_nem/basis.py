@@ -40,7 +40,7 @@ from skfem.refdom import RefTet, RefTri
 
 from . import _assembly
 from .coordinates import natural_neighbour_coordinates
-from .lasserre import _check_delaunay, _triangulate
+from .lasserre import delaunay_of
 from .triangulation import Triangulation, _count_non_delaunay, validate_nodes
 
 __all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeighbourBasis",
@@ -105,7 +105,7 @@ def _element_for(mesh, elem, who):
     return elem
 
 
-def delaunay_mesh(points):
+def delaunay_mesh(points) -> MeshTri | MeshTet:
     """The Delaunay triangulation of points as a scikit-fem mesh.
 
     (n, 2) points give a ``MeshTri`` (robust 2D triangulation,
@@ -115,12 +115,16 @@ def delaunay_mesh(points):
     triangle or tetrahedron. Raises ``ValueError`` for bad points (non-finite,
     too few, duplicate, all collinear or coplanar) and for points Qhull would
     drop (nearly coincident with others), naming the point.
+
+    For co-spherical 3D points (lattices) Qhull glues its triangulations of
+    the co-spherical cells with flat (zero-volume) tetrahedra; they are kept
+    (the natural-neighbour basis gives their quadrature points zero weight),
+    but scikit-fem's Lagrange elements cannot be used on such a mesh.
     """
     shape = np.shape(points)
     if len(shape) == 2 and shape[1] == 3:
         p = validate_nodes(points, dim=3, name="points")
-        tri = _triangulate(p)
-        _check_delaunay(tri, p)
+        tri = delaunay_of(p)
         mesh = MeshTet(np.ascontiguousarray(p.T),
                        np.ascontiguousarray(tri.simplices.T, dtype=np.int64))
         mesh._skfem_nem_triangulation = tri
@@ -147,8 +151,7 @@ def _tet_delaunay(mesh: MeshTet) -> Delaunay:
     co-spherical nodes, all give the same natural-neighbour coordinates)."""
     p, t = mesh.p.T, mesh.t.T
     _check_used(p, t, "tetrahedron")
-    tri = _triangulate(np.ascontiguousarray(p))
-    _check_delaunay(tri, np.ascontiguousarray(p))
+    tri = delaunay_of(np.ascontiguousarray(p))
     if tri.simplices.shape[0] == t.shape[0] and np.array_equal(
             np.unique(np.sort(tri.simplices, axis=1), axis=0), np.unique(np.sort(t, axis=1), axis=0)):
         return tri
@@ -175,7 +178,7 @@ def _tet_delaunay(mesh: MeshTet) -> Delaunay:
     return tri
 
 
-def triangulation_of(mesh):
+def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
     """The triangulation the coordinates of a mesh are computed on, checked to
     be Delaunay and cached on the mesh: for a ``MeshTri`` its
     :class:`~skfem_nem.Triangulation` (same triangle order), for a
@@ -351,7 +354,9 @@ class _GroupBasis(AbstractBasis):
             for comp in range(dim):
                 sel = c == comp
                 val[comp, sel] = V[j[sel]]
-                grad[comp, :, sel] = G[:, j[sel]].transpose(1, 0, 2, 3)
+                js = j[sel]
+                for g in range(dim):
+                    grad[comp, g, sel] = G[g, js]
             return (DiscreteField(val.reshape(dim, -1, nq), grad.reshape(dim, dim, -1, nq)),)
         return (DiscreteField(V[idx].reshape(-1, nq), G[:, idx].reshape(G.shape[0], -1, nq)),)
 
@@ -433,9 +438,26 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
         return cache[k]
 
     def _fix_undefined(self, pts, Phi, D):
-        raise ValueError("quadrature points at nodes or on the convex hull: gradients of "
-                         "natural-neighbour functions are undefined there; use a quadrature "
-                         "rule with interior points")
+        """Undefined gradients at quadrature points: allowed only in cells of
+        zero measure (Qhull's flat tetrahedra between co-spherical nodes, e.g.
+        lattices), whose points carry no weight; their gradients become 0."""
+        finite = np.ones(Phi.shape[0], dtype=bool)
+        for Dk in D:
+            finite &= np.isfinite(np.asarray(Dk.sum(axis=1)).ravel())
+        bad = np.flatnonzero(~finite)
+        weight = self.dx.reshape(-1)[bad]
+        if np.any(weight != 0.0):
+            e = int(bad[np.flatnonzero(weight != 0.0)[0]] // self.dx.shape[1])
+            raise ValueError(
+                f"quadrature points at nodes or on the convex hull (first in element {e}): "
+                f"gradients of natural-neighbour functions are undefined there; use a "
+                f"quadrature rule with interior points")
+        out = []
+        for Dk in D:
+            Dk = Dk.copy()
+            Dk.data[~np.isfinite(Dk.data)] = 0.0
+            out.append(Dk)
+        return Phi, out
 
     def _group(self, elems, stencils, V, G):
         return _GroupBasis(self, elems, stencils, V, G)
@@ -528,8 +550,7 @@ def _adopt(mesh, method):
     if method == "lasserre" and isinstance(tri, Triangulation):
         cached = getattr(mesh, "_skfem_nem_delaunay", None)
         if cached is None:
-            cached = _triangulate(np.ascontiguousarray(tri.nodes))
-            _check_delaunay(cached, np.ascontiguousarray(tri.nodes))
+            cached = delaunay_of(np.ascontiguousarray(tri.nodes))
             mesh._skfem_nem_delaunay = cached
         return cached
     return tri
@@ -570,7 +591,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     same mesh and quadrature.
     """
 
-    def __init__(self, mesh, elem: Optional[Element] = None,
+    def __init__(self, mesh: MeshTri | MeshTet, elem: Optional[Element] = None,
                  intorder: Optional[int] = None, quadrature: Optional[Tuple[ndarray, ndarray]] = None,
                  npoints: Optional[int] = None, coordinates: str = "sibson",
                  method: Optional[str] = None):
@@ -578,13 +599,16 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         self.method = _check_method(mesh, coordinates, method)
         self.triangulation = _adopt(mesh, self.method)
         self.coordinates = coordinates
-        super().__init__(mesh, elem, None, None,
-                         _quadrature(npoints, intorder, quadrature, mesh.refdom), mesh.refdom)
-        self.tind = None
-        self.nelems = mesh.nelements
-        self.dx = np.abs(self.mapping.detDF(self.X)) * np.broadcast_to(
-            self.W, (self.nelems, self.W.shape[-1]))
-        self._build(self.mapping.F(self.X), np.arange(self.nelems))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # (flat cells have no inverse mapping; only F and detDF are used)
+            super().__init__(mesh, elem, None, None,
+                             _quadrature(npoints, intorder, quadrature, mesh.refdom),
+                             mesh.refdom)
+            self.tind = None
+            self.nelems = mesh.nelements
+            self.dx = np.abs(self.mapping.detDF(self.X)) * np.broadcast_to(
+                self.W, (self.nelems, self.W.shape[-1]))
+            self._build(self.mapping.F(self.X), np.arange(self.nelems))
 
     def global_coordinates(self) -> DiscreteField:
         if self._global_coordinates is None:
@@ -696,7 +720,7 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
     inside the domain.
     """
 
-    def __init__(self, mesh, elem: Optional[Element] = None, facets=None,
+    def __init__(self, mesh: MeshTri | MeshTet, elem: Optional[Element] = None, facets=None,
                  intorder: Optional[int] = None, quadrature=None, coordinates: str = "sibson",
                  side: int = 0, method: Optional[str] = None):
         elem = _element_for(mesh, elem, "NaturalNeighbourFacetBasis")

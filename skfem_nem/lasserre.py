@@ -1306,6 +1306,14 @@ def _check_delaunay(tri, p):
             f"coincide with others)")
 
 
+def delaunay_of(p) -> Delaunay:
+    """Qhull's Delaunay triangulation of the checked (n, d) nodes p, with every
+    node a vertex (``ValueError`` naming the node otherwise)."""
+    tri = _triangulate(p)
+    _check_delaunay(tri, p)
+    return tri
+
+
 def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap):
     """Run the kernel on a batch; returns ((rows, cols, values, gradients),
     status, info)."""
@@ -1569,8 +1577,7 @@ def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
         _check_delaunay(delaunay, p)
         tri = delaunay
     else:
-        tri = _triangulate(p)
-        _check_delaunay(tri, p)
+        tri = delaunay_of(p)
     if not (isinstance(chunk, (int, np.integer)) and chunk > 0):
         raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
     return _coordinates(p, q, gradient, tri, undefined, 1 if _raw else 0, chunk=int(chunk))

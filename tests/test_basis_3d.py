@@ -205,3 +205,23 @@ def test_tet_coordinates_match_the_public_function(mesh, basis):
     Phi, D = sibson_coordinates(mesh.p.T, x, gradient=True)
     assert abs(Phi - basis._Phi).max() < 1e-14
     assert max(abs(a - b).max() for a, b in zip(D, basis._D)) < 1e-10
+
+
+def test_lattice_nodes_flat_tetrahedra_and_structured_meshes():
+    # co-spherical nodes: Qhull glues its triangulations of the cubes with flat
+    # tetrahedra; their quadrature points carry no weight and are skipped
+    s = np.linspace(0, 1, 5)
+    grid = MeshTet.init_tensor(s, s, s)
+    m = delaunay_mesh(grid.p.T)
+    P = m.p.T[m.t.T]
+    vol = np.abs(np.linalg.det(P[:, 1:] - P[:, :1])) / 6
+    assert np.count_nonzero(vol < 1e-14) > 0 and abs(vol.sum() - 1) < 1e-12
+    g = np.array([0.3, -1.7, 0.9])
+    for mesh in (m, grid):   # Qhull's tetrahedra, and scikit-fem's own (also Delaunay)
+        b = NaturalNeighbourBasis(mesh)
+        A = laplace.assemble(b)
+        u = g @ mesh.p
+        assert abs(u @ A @ u - g @ g) < 1e-12
+        assert abs(np.ones(b.N) @ mass.assemble(b) @ np.ones(b.N) - 1) < 1e-12
+        on = ((mesh.p == 0) | (mesh.p == 1)).any(axis=0)
+        assert set(b.get_dofs().flatten()) == set(np.flatnonzero(on))

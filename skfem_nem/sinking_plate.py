@@ -91,7 +91,7 @@ class PlateConfig:
     #: largest time step
     max_dt: float = 5.0
     #: largest node displacement per step, as a fraction of its local spacing
-    cfl: float = 0.2
+    cfl: float = 1.0
     #: time between VTU outputs
     output_interval: float = 100.0
     #: inject nodes where a node's Voronoi area grew past this factor (0: never)

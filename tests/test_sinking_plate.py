@@ -47,7 +47,7 @@ def test_outputs(coarse_run):
     sim, out, _ = coarse_run
     text = (out / "plate.pvd").read_text()
     files = [ln.split('file="')[1].split('"')[0] for ln in text.splitlines() if "file=" in ln]
-    assert len(files) == 4  # t = 0, 8, 16, 24
+    assert len(files) == 5  # t = 0, 1 (the early snapshot), 8, 16, 24
     m = meshio.read(out / files[-1])
     for k in ("velocity", "pressure", "viscosity", "density", "material", "initial_depth"):
         assert k in m.point_data, k
@@ -108,3 +108,22 @@ def test_command_line_short_run(tmp_path):
     meta = json.loads((out / "checkpoint.json").read_text())
     assert meta["config"]["nodes"] == 400
     assert (out / "plate.pvd").exists() and (out / "fig6.png").exists()
+
+
+def test_lagrangian_fem_inverts_where_nem_does_not(tmp_path):
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+    import ex10_lagrangian_fem_fails as ex10
+
+    cfg = PlateConfig(nodes=500, max_dt=4.0, end_time=200.0, output_interval=50.0)
+    fem = ex10.run_fem(cfg, out=tmp_path / "fem", verbose=False)
+    assert fem["inverted_at"] is not None and fem["inverted_at"] < cfg.end_time
+    nem_cfg = PlateConfig(**{**cfg.__dict__, "end_time": float(fem["inverted_at"])})
+    sim = SinkingPlate(nem_cfg, tmp_path / "nem")
+    sim.run(progress=False)
+    assert sim.lm.time == pytest.approx(fem["inverted_at"])
+    assert sim.lm.triangulation.is_delaunay() and sim.lm.min_angle() > 0
+    assert (sim.lm.triangulation.orientation() > 0).all()
+    png = ex10.visualize(fem, tmp_path / "nem", path=tmp_path / "ex10.png")
+    assert Path(png).stat().st_size > 10000

@@ -23,8 +23,9 @@ regridding.
 
 Outputs (in the output folder): ``plate_NNNNN.vtu`` per output step and
 ``plate.pvd`` (ParaView), ``diagnostics.csv`` (one row per step),
-``fig6.png`` (the mesh coloured by the nodes' initial depth at the first
-output and at the end), ``diagnostics.png``, ``checkpoint.npz`` +
+``fig6.png`` (the mesh coloured by the nodes' initial depth at t = 1 and
+at the end), ``plate_strain.png`` (the plate's plastic strain and stress at
+the end), ``diagnostics.png``, ``checkpoint.npz`` +
 ``checkpoint.json`` (restart).
 """
 from __future__ import annotations
@@ -216,6 +217,24 @@ def _polygon_area_centroid(P):
     return A, np.array([((x + xn) * c).sum(), ((y + yn) * c).sum()]) / (6 * A)
 
 
+def _self_intersections(P) -> int:
+    """Number of pairs of non-adjacent edges of the closed polygon P (k, 2) that cross."""
+    Q = np.roll(P, -1, axis=0)
+    k = P.shape[0]
+
+    def orient(a, b, c):
+        return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
+                       - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+
+    count = 0
+    for i in range(k - 2):
+        j = np.arange(i + 2, k if i else k - 1)
+        a, b, c, d = P[i], Q[i], P[j], Q[j]
+        count += int(((orient(a, b, c) * orient(a, b, d) < 0)
+                      & (orient(c, d, a) * orient(c, d, b) < 0)).sum())
+    return count
+
+
 def _inside(poly, pts):
     from matplotlib.path import Path as MPath
     return MPath(poly).contains_points(pts, radius=0.0)
@@ -334,7 +353,8 @@ class SinkingPlate:
         def velocity(x):
             return sibson_coordinates(lm.triangulation, x) @ v
 
-        rep = lm.advance(velocity, dt, inject=c.inject if c.inject else None)
+        rep = lm.advance(velocity, dt, tol=1e-8, maxiter=20,
+                         inject=c.inject if c.inject else None)
         # the next step's dt from this step's velocity
         self.dt_next = self._stable_dt(v)
         A, cen = self.plate_area_centroid()
@@ -342,6 +362,7 @@ class SinkingPlate:
         row = {"step": lm.step, "time": lm.time, "dt": dt,
                "plate_depth": c.height - cen[1], "plate_x": cen[0],
                "plate_area": A, "fluid_area": c.width * c.height - A,
+               "outline_crossings": _self_intersections(self.plate_polygon),
                "max_plastic_strain": float(r.plastic_strain.max()),
                "yielded_points": int(r.yielded.sum()),
                "max_plate_stress": float(tauII[plate].max()) if plate.any() else 0.0,
@@ -474,7 +495,8 @@ class SinkingPlate:
 
     # -- figures ----------------------------------------------------------------
     def figures(self) -> list:
-        """fig6.png and diagnostics.png in the output folder; returns their paths."""
+        """fig6.png, plate_strain.png and diagnostics.png in the output folder;
+        returns their paths."""
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
@@ -503,6 +525,31 @@ class SinkingPlate:
                        lw=0.8)
         fig.tight_layout()
         p = self.out / "fig6.png"
+        fig.savefig(p, dpi=150)
+        plt.close(fig)
+        paths.append(p)
+        # the plate at the end: accumulated plastic strain and stress invariant
+        P, T = lm.nodes, lm.triangles
+        cen = P[T].mean(axis=1)
+        inplate = _inside(poly, cen)
+        lo, hi = poly.min(axis=0), poly.max(axis=0)
+        pad = 0.3 * (hi - lo).max()
+        fig, ax = plt.subplots(2, 1, figsize=(10, 5.5))
+        S = lm.ip_fields["stress"]
+        vals = [(lm.ip_fields["plastic_strain"].mean(axis=1), "accumulated plastic strain",
+                 "magma_r"),
+                (np.sqrt(0.5 * (S ** 2).sum(axis=(2, 3))).mean(axis=1) / c.yield_stress,
+                 "stress invariant / yield stress", "viridis")]
+        for a, (v, lab, cmap) in zip(ax, vals):
+            tp = a.tripcolor(P[:, 0], P[:, 1], T[inplate], facecolors=v[inplate], cmap=cmap)
+            a.plot(np.r_[poly[:, 0], poly[:1, 0]], np.r_[poly[:, 1], poly[:1, 1]], "k-", lw=0.5)
+            a.set_xlim(lo[0] - pad, hi[0] + pad)
+            a.set_ylim(lo[1] - pad / 3, hi[1] + pad / 3)
+            a.set_aspect("equal")
+            a.set_title(f"t = {lm.time:.4g}: {lab}")
+            fig.colorbar(tp, ax=a, fraction=0.03, pad=0.01)
+        fig.tight_layout()
+        p = self.out / "plate_strain.png"
         fig.savefig(p, dpi=150)
         plt.close(fig)
         paths.append(p)

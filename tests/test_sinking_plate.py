@@ -38,6 +38,8 @@ def test_coarse_run_physics(coarse_run):
     assert sim.lm.triangulation.is_delaunay()
     assert d["min_angle"].min() > 0
     assert d["flips"].sum() > 0
+    # the outline polygon stays simple
+    assert d["outline_crossings"].max() == 0
     # the plate stresses up to the yield stress and no further
     assert d["max_plate_stress"].max() <= sim.cfg.yield_stress * (1 + 1e-9)
     assert d["max_plate_stress"].max() > 0.5 * sim.cfg.yield_stress

@@ -716,12 +716,31 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     M = spla.LinearOperator(K.shape, matvec=lambda x: np.concatenate([Pu @ x[:n1], x[n1:] / dp]),
                             dtype=float)
     rhs = np.concatenate([fu, gp])
-    x, flag = spla.minres(K, rhs, M=M, rtol=tol, maxiter=maxiter, callback=cb)
+    # MINRES's own residual estimate drifts from the true one on these badly
+    # conditioned systems: restart it on the true residual until the
+    # preconditioned residual norm (the norm MINRES minimises) meets tol
+    bnorm = float(np.sqrt(abs(rhs @ M.matvec(rhs)))) or 1.0
+    x = np.zeros_like(rhs)
+    r = rhs.copy()
+    res_m = 1.0
+    flag = 0
+    restarts = 0
+    while count[0] < maxiter:
+        res_m = float(np.sqrt(abs(r @ M.matvec(r)))) / bnorm
+        if res_m <= 10 * tol:
+            break
+        dx, flag = spla.minres(K, r, M=M, rtol=min(0.5, 0.5 * tol / res_m),
+                               maxiter=maxiter - count[0], callback=cb)
+        x = x + dx
+        r = rhs - matvec(x)
+        restarts += 1
     res = full_residual(x[:n1], x[n1:])
-    if flag != 0 or res > max(1e4 * tol, 1e-6):
+    info["preconditioned_residual"] = res_m
+    info["restarts"] = restarts
+    if not res_m <= 10 * tol:
         raise RuntimeError(f"MINRES did not converge: {count[0]} iterations, relative "
-                           f"residual {res:.3e} (tol {tol:.1e}; raise maxiter, or use "
-                           f"solver='schur' for strong viscosity contrasts)")
+                           f"preconditioned residual {res_m:.3e} > {10 * tol:.1e} (raise "
+                           f"maxiter, or use solver='schur' for strong viscosity contrasts)")
     p = x[n1:]
     if pressure_mean:
         p = p - (mvec @ p) / area

@@ -40,6 +40,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from .evolution import LagrangianMesh
+from .triangulation import _count_non_delaunay
 from .nodesets import box_nodes, polyline_nodes
 from .output import CSVLog, PVDWriter, atomic_write_text, write_vtu
 
@@ -363,6 +364,9 @@ class SinkingPlate:
                "plate_depth": c.height - cen[1], "plate_x": cen[0],
                "plate_area": A, "fluid_area": c.width * c.height - A,
                "outline_crossings": _self_intersections(self.plate_polygon),
+               "inverted_triangles": int(np.count_nonzero(lm.triangulation.orientation() <= 0)),
+               "non_delaunay_edges": int(_count_non_delaunay(lm.nodes, lm.triangles,
+                                                             lm.triangulation.neighbours)),
                "max_plastic_strain": float(r.plastic_strain.max()),
                "yielded_points": int(r.yielded.sum()),
                "max_plate_stress": float(tauII[plate].max()) if plate.any() else 0.0,

@@ -325,8 +325,29 @@ class SinkingPlate:
         force[1] = -c.plate_density * c.gravity * plate
         return Material(viscosity=eta, shear_modulus=mu, yield_stress=Y), force, plate
 
-    def step(self, dt: float) -> dict:
-        """One time step of length dt; returns the diagnostics row."""
+    def step(self, dt: float, retries: int = 4) -> dict:
+        """One time step of length dt (halved up to ``retries`` times if the
+        mesh cannot follow the move); returns the diagnostics row."""
+        saved = {k: v.copy() for k, v in self.lm.ip_fields.items()}
+        for attempt in range(retries + 1):
+            try:
+                row = self._step(dt)
+                row["retries"] = attempt
+                return row
+            except ValueError as err:
+                # the evolving mesh leaves itself unchanged on errors; restore
+                # the integration-point fields that the solve had updated
+                self.lm.ip_fields = {k: v.copy() for k, v in saved.items()}
+                self.lm._invalidate()
+                if attempt == retries or "reduce dt" not in str(err):
+                    raise
+                import warnings
+                warnings.warn(f"step {self.lm.step + 1} at t = {self.lm.time:.6g}: {err}; "
+                              f"retrying with dt = {dt / 2:.4g}", RuntimeWarning, stacklevel=2)
+                dt = dt / 2
+        raise AssertionError("unreachable")
+
+    def _step(self, dt: float) -> dict:
         from .rheology import from_ip_field, second_invariant, to_ip_field, vep_step
         from .stokes import outline_flux, stokes_spaces
         from .coordinates import sibson_coordinates

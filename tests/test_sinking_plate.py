@@ -130,3 +130,41 @@ def test_lagrangian_fem_inverts_where_nem_does_not(tmp_path):
     assert (sim.lm.triangulation.orientation() > 0).all()
     png = ex10.visualize(fem, tmp_path / "nem", path=tmp_path / "ex10.png")
     assert Path(png).stat().st_size > 10000
+
+
+def test_step_retried_with_half_dt_and_fields_restored(tmp_path):
+    sim = SinkingPlate(PlateConfig(**SMALL), tmp_path)
+    sim.step(2.0)
+    before = {k: v.copy() for k, v in sim.lm.ip_fields.items()}
+    nodes = sim.lm.nodes.copy()
+    real = sim.lm.advance
+    calls = []
+
+    def flaky(velocity, dt, **kw):
+        calls.append(dt)
+        if len(calls) == 1:
+            raise ValueError("triangle 0 inverts and none of its vertices can be relocated: "
+                             "reduce dt")
+        return real(velocity, dt, **kw)
+
+    sim.lm.advance = flaky
+    with pytest.warns(RuntimeWarning, match="retrying with dt = 1"):
+        row = sim.step(2.0)
+    assert calls == [2.0, 1.0] and row["retries"] == 1 and row["dt"] == 1.0
+    assert sim.lm.time == pytest.approx(3.0)
+    # the failed attempt left nothing behind: the retry started from the saved state
+    sim2 = SinkingPlate(PlateConfig(**SMALL), tmp_path / "b")
+    sim2.step(2.0)
+    assert np.array_equal(sim2.lm.nodes, nodes)
+    for k, v in before.items():
+        assert np.array_equal(sim2.lm.ip_fields[k], v)
+    sim2.step(1.0)
+    assert np.array_equal(sim2.lm.nodes, sim.lm.nodes)
+    sim.lm.advance = real
+
+    def broken(velocity, dt, **kw):
+        raise ValueError("velocity returned non-finite values at 1 node(s)")
+
+    sim.lm.advance = broken
+    with pytest.raises(ValueError, match="non-finite"):
+        sim.step(1.0)

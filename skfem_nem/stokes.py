@@ -582,7 +582,10 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         ``"schur"`` (default): sparse Cholesky-ordered LU of the viscous
         block and preconditioned conjugate gradients on the pressure Schur
         complement (preconditioner: the 1/eta-weighted, lumped pressure
-        mass); ``"direct"``: sparse LU of the whole saddle-point system;
+        mass); ``"schur-amg"``: the same outer iteration with the viscous
+        block solved by AMG-preconditioned CG instead of a factorisation
+        (memory linear in the problem size, for large problems);
+        ``"direct"``: sparse LU of the whole saddle-point system;
         ``"minres"``: MINRES with an AMG (pyamg) V-cycle on the viscous
         block and the lumped 1/eta-weighted pressure mass, for problems too
         large to factorise.
@@ -619,8 +622,9 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         If an iterative solver does not reach ``tol`` in ``maxiter``
         iterations (naming both), or the system is singular.
     """
-    if solver not in ("schur", "direct", "minres"):
-        raise ValueError(f"solver must be 'schur', 'direct' or 'minres', got {solver!r}")
+    if solver not in ("schur", "schur-amg", "direct", "minres"):
+        raise ValueError(f"solver must be 'schur', 'schur-amg', 'direct' or 'minres', got "
+                         f"{solver!r}")
     if not (np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive number, got {tol}")
     sys_ = assemble_stokes(spaces, eta, f, tau0) if system is None else system
@@ -717,12 +721,36 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     def cb(*args):
         count[0] += 1
 
-    if solver == "schur":
-        try:
-            lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True))
-        except RuntimeError as err:
-            raise RuntimeError(f"the viscous block is singular ({err}): check the wall "
-                               f"conditions (a rigid-body motion left free?)") from None
+    if solver in ("schur", "schur-amg"):
+        if solver == "schur":
+            try:
+                lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True))
+            except RuntimeError as err:
+                raise RuntimeError(f"the viscous block is singular ({err}): check the wall "
+                                   f"conditions (a rigid-body motion left free?)") from None
+        else:
+            # no factorisation: the viscous block is solved by CG with an AMG
+            # V-cycle, to a tolerance well below the outer one
+            import pyamg
+            ml = pyamg.smoothed_aggregation_solver(
+                A.tocsr(), B=_rigid_modes(spaces, free), symmetry="symmetric",
+                strength="symmetric", max_coarse=500)
+            Pa = ml.aspreconditioner(cycle="V")
+            inner = {"its": 0}
+
+            class _AMGSolve:
+                def solve(self, rhs_):
+                    its = [0]
+                    y, fl = spla.cg(A, rhs_, M=Pa, rtol=min(1e-3, tol * 1e-2),
+                                    maxiter=1000, callback=lambda *_: its.__setitem__(0, its[0] + 1))
+                    inner["its"] += its[0]
+                    if fl != 0:
+                        raise RuntimeError(f"inner AMG-CG solve of the viscous block did not "
+                                           f"converge in 1000 iterations")
+                    return y
+
+            lu = _AMGSolve()
+            info["inner_iterations"] = inner
 
         def schur(q):
             return B @ lu.solve(B.T @ q) + Sb @ q + c * mvec * (mvec @ q)
@@ -738,7 +766,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         xu = lu.solve(fu - B.T @ p)
         if pressure_mean:
             p = p - (mvec @ p) / area
-        return finish(xu, p, "schur", count[0], full_residual(xu, p))
+        return finish(xu, p, solver, count[0], full_residual(xu, p))
     # MINRES with block-diagonal preconditioner
     import pyamg
     Bm = _rigid_modes(spaces, free)

@@ -101,7 +101,7 @@ class PlateConfig:
     #: remap of the stress on flips: "conservative" or "average"
     remap: str = "conservative"
     #: Picard tolerance of the plastic iterations
-    picard_tol: float = 1e-4
+    picard_tol: float = 1e-3
     #: write a checkpoint every this many steps
     checkpoint_every: int = 10
 

@@ -17,11 +17,14 @@ import numpy as np
 from skfem.assembly import CellBasis
 from skfem.assembly.form import BilinearForm, Functional, LinearForm
 from skfem.assembly.form.form import FormExtraParams
-from skfem.element import DiscreteField
+from skfem.element import DiscreteField, ElementVector
 
 _INSTALLED = False
 #: element-pairs evaluated per form call in the stacked assembly
 STACK_SIZE = 1 << 16
+#: assemble natural-neighbour pairs from the form's coefficients (probed on
+#: unit fields) instead of calling the form on stacked pairs
+PROBE = True
 
 
 def _is_nn(basis) -> bool:
@@ -109,6 +112,53 @@ def _stackable(b):
     return hasattr(b, "stacked") and hasattr(b, "_raw")
 
 
+def _probes(g, ne, nq):
+    """Unit fields, one per scalar component of (value, gradient) of the
+    element of group basis g: (D, 1 + dim) of them for a D-vector element."""
+    dim = g._raw[1].shape[0]
+    vec = isinstance(g.elem, ElementVector)
+    D = g.elem.dim if vec else 1
+    out = []
+    for c in range(D):
+        for k in range(1 + dim):
+            val = np.zeros((D, ne, nq))
+            grad = np.zeros((D, dim, ne, nq))
+            if k == 0:
+                val[c] = 1.0
+            else:
+                grad[c, k - 1] = 1.0
+            out.append((DiscreteField(val, grad),) if vec
+                       else (DiscreteField(val[0], grad[0]),))
+    return out, D, dim
+
+
+def _probed_bilinear(form, u, v, kwargs):
+    """All local matrices of two group bases from the form's coefficients.
+
+    A bilinear form is linear in the components of (value, gradient) of u
+    and of v, so ``form(u, v) = sum_ab C_ab(x) u_a v_b``; ``C`` is read off by
+    calling the form on unit fields ((D (1 + dim))^2 calls, whatever the
+    stencil size) and contracted with the stored values and gradients."""
+    ne, nq = u.dx.shape
+    w = FormExtraParams({**u.default_parameters(), **form._normalize_asm_kwargs(kwargs, u)})
+    pu, Du, dim = _probes(u, ne, nq)
+    pv, Dv, _ = _probes(v, ne, nq)
+    C = np.empty((len(pu), len(pv), ne, nq), dtype=form.dtype)
+    for a, Ua in enumerate(pu):
+        for b, Vb in enumerate(pv):
+            C[a, b] = form.form(*Ua, *Vb, w)
+    C *= u.dx
+    Pu = np.concatenate([u._raw[0][None], u._raw[1]])   # (1 + dim, S_u, ne, nq)
+    Pv = np.concatenate([v._raw[0][None], v._raw[1]])
+    C = C.reshape(Du, 1 + dim, Dv, 1 + dim, ne, nq)
+    K = np.einsum("dlckeq,lteq,kseq->sctde", C, Pu, Pv, optimize=True)
+    Su, Sv = Pu.shape[1], Pv.shape[1]
+    K = K.reshape(Sv * Dv, Su * Du, ne)
+    rows = np.broadcast_to(v.element_dofs[:, None, :], K.shape).ravel()
+    cols = np.broadcast_to(u.element_dofs[None, :, :], K.shape).ravel()
+    return np.array([rows, cols]), K.ravel()
+
+
 def _stacked_bilinear(form, u, v, kwargs):
     """All local pairs (j, i) of two group bases in few form calls: the pairs
     are stacked along the element axis (scikit-fem calls the form once per
@@ -171,7 +221,9 @@ def install():
         shape = (vbasis.N, ubasis.N)
         for idx, u, v in _pairs(ubasis, vbasis):
             kw = _split_kwargs(kwargs, idx, nelems)
-            if STACK_SIZE > 0 and _stackable(u) and _stackable(v):
+            if PROBE and _stackable(u) and _stackable(v):
+                ind, d = _probed_bilinear(self, u, v, kw)
+            elif STACK_SIZE > 0 and _stackable(u) and _stackable(v):
                 ind, d = _stacked_bilinear(self, u, v, kw)
             else:
                 ind, d, _, _ = bil(self, u, v, **kw)

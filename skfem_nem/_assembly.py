@@ -132,6 +132,18 @@ def _probes(g, ne, nq):
     return out, D, dim
 
 
+def _probe_pays(u, v) -> bool:
+    """Probing costs (D (1 + dim))^2 form calls on one element's worth of
+    data each; stacking all pairs costs about one call per 65k element-pairs.
+    Probe when the saved pair evaluations outweigh the extra calls (small
+    groups are cheaper stacked: their cost is call overhead)."""
+    dim = u._raw[1].shape[0]
+    P = (u.elem.dim if isinstance(u.elem, ElementVector) else 1) * (1 + dim)
+    Q = (v.elem.dim if isinstance(v.elem, ElementVector) else 1) * (1 + dim)
+    pairs = u.Nbfun * v.Nbfun
+    return pairs > P * Q and u.nelems * (pairs - P * Q) > P * Q * 100
+
+
 def _probed_bilinear(form, u, v, kwargs):
     """All local matrices of two group bases from the form's coefficients.
 
@@ -221,7 +233,7 @@ def install():
         shape = (vbasis.N, ubasis.N)
         for idx, u, v in _pairs(ubasis, vbasis):
             kw = _split_kwargs(kwargs, idx, nelems)
-            if PROBE and _stackable(u) and _stackable(v):
+            if PROBE and _stackable(u) and _stackable(v) and _probe_pays(u, v):
                 ind, d = _probed_bilinear(self, u, v, kw)
             elif STACK_SIZE > 0 and _stackable(u) and _stackable(v):
                 ind, d = _stacked_bilinear(self, u, v, kw)

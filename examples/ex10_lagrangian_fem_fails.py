@@ -20,7 +20,7 @@ from skfem import MeshTri
 
 from skfem_nem.output import read_csv_columns
 from skfem_nem.rheology import vep_step
-from skfem_nem.sinking_plate import PlateConfig, SinkingPlate
+from skfem_nem.sinking_plate import PlateConfig, SinkingPlate, node_spacing
 from skfem_nem.stokes import outline_flux, stokes_spaces
 
 
@@ -62,13 +62,7 @@ def run_fem(cfg=None, out="out/ex10", max_steps=400, verbose=True):
         v = np.stack([r.solution.u[nd[0]], r.solution.u[nd[1]]], axis=1)
         on_wall = (P == P.min(0)) | (P == P.max(0))
         v = np.where(on_wall, 0.0, v)
-        area = np.zeros(P.shape[0])
-        a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
-        tri_area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
-                                - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-        for k in range(3):
-            np.add.at(area, T[:, k], tri_area / 3.0)
-        h = np.sqrt(area)
+        h = node_spacing(P, T)
         dt_next = min(cfg.max_dt, cfg.cfl * float((h / np.maximum(np.hypot(*v.T), 1e-300)).min()))
         P = P + dt * v
         t += dt

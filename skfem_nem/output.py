@@ -13,12 +13,12 @@ import csv
 import os
 import tempfile
 from pathlib import Path
-from typing import Dict, Iterable, Optional
+from typing import Dict, Optional
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-__all__ = ["write_vtu", "PVDWriter", "CSVLog", "atomic_write_text"]
+__all__ = ["write_vtu", "PVDWriter", "CSVLog", "atomic_write_text", "read_csv_columns"]
 
 
 def atomic_write_text(path, text: str) -> None:
@@ -147,21 +147,9 @@ class CSVLog:
             w.writerow(row)
             fh.flush()
 
-    def read(self) -> Dict[str, np.ndarray]:
-        """All rows as columns of floats."""
-        with open(self.path, newline="") as fh:
-            rows = list(csv.DictReader(fh))
-        return {k: np.array([float(r[k]) for r in rows]) for k in (rows[0] if rows else {})}
-
 
 def read_csv_columns(path) -> Dict[str, np.ndarray]:
     """Columns of a CSV log written by :class:`CSVLog`."""
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
     return {k: np.array([float(r[k]) for r in rows]) for k in (rows[0] if rows else {})}
-
-
-def _iter_pvd(path) -> Iterable:
-    import re
-    text = Path(path).read_text()
-    return [(float(t), f) for t, f in re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', text)]

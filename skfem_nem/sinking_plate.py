@@ -40,9 +40,12 @@ from typing import Dict, Optional
 import numpy as np
 
 from .evolution import LagrangianMesh
-from .triangulation import _count_non_delaunay
+from .coordinates import sibson_coordinates
 from .nodesets import box_nodes, polyline_nodes
-from .output import CSVLog, PVDWriter, atomic_write_text, write_vtu
+from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
+from .rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
+from .stokes import outline_flux, stokes_spaces
+from .triangulation import _count_non_delaunay
 
 __all__ = ["PlateConfig", "SinkingPlate", "load_config", "run"]
 
@@ -113,9 +116,9 @@ class PlateConfig:
                "output_interval", "picard_tol"]
         for k in pos:
             v = getattr(self, k)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) \
-                    and not (k in ("shear_modulus", "yield_stress") and v == math.inf) \
-                    or not v > 0:
+            may_be_inf = k in ("shear_modulus", "yield_stress")
+            number = isinstance(v, (int, float)) and not isinstance(v, bool)
+            if not (number and v > 0 and (math.isfinite(v) or may_be_inf)):
                 raise ValueError(f"{k} must be a positive number, got {v!r}")
         for k in ("nodes", "checkpoint_every"):
             v = getattr(self, k)
@@ -236,6 +239,18 @@ def _self_intersections(P) -> int:
     return count
 
 
+def node_spacing(P: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """(n,) local spacing of each node: the square root of its share (a third)
+    of the areas of its triangles. P (n, 2) nodes, T (nt, 3) triangles."""
+    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
+                        - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    share = np.zeros(P.shape[0])
+    for k in range(3):
+        np.add.at(share, T[:, k], area / 3.0)
+    return np.sqrt(share)
+
+
 def _inside(poly, pts):
     from matplotlib.path import Path as MPath
     return MPath(poly).contains_points(pts, radius=0.0)
@@ -309,7 +324,6 @@ class SinkingPlate:
         """Per-point :class:`~skfem_nem.rheology.Material`, body force
         (2, ne, nq) and plate mask (ne, nq) at the quadrature points of
         ``spaces`` (plate: inside ``polygon``, default the current outline)."""
-        from .rheology import Material
         c = self.cfg
         X = spaces.quadrature_points
         ne, nq = X.shape[1:]
@@ -348,9 +362,6 @@ class SinkingPlate:
         raise AssertionError("unreachable")
 
     def _step(self, dt: float) -> dict:
-        from .rheology import from_ip_field, second_invariant, to_ip_field, vep_step
-        from .stokes import outline_flux, stokes_spaces
-        from .coordinates import sibson_coordinates
         c = self.cfg
         lm = self.lm
         t0 = _time.perf_counter()
@@ -405,15 +416,7 @@ class SinkingPlate:
         spacing (the square root of its share of the triangle areas; slivers do not limit
         the step: flips repair them, and inverting moves are substepped)."""
         c = self.cfg
-        n_old = v.shape[0]
-        P, T = self.lm.nodes, self.lm.triangles
-        a, b, cc = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
-        ta = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (cc[:, 1] - a[:, 1])
-                          - (b[:, 1] - a[:, 1]) * (cc[:, 0] - a[:, 0]))
-        share = np.zeros(P.shape[0])
-        for k in range(3):
-            np.add.at(share, T[:, k], ta / 3.0)
-        h = np.sqrt(share[:n_old])
+        h = node_spacing(self.lm.nodes, self.lm.triangles)[:v.shape[0]]
         speed = np.hypot(v[:, 0], v[:, 1])
         with np.errstate(divide="ignore"):
             lim = c.cfl * h / speed
@@ -439,8 +442,7 @@ class SinkingPlate:
             pd["velocity"] = r.solution.velocity_at_nodes()
             pd["pressure"] = r.solution.pressure_at_nodes()
         S = lm.ip_fields["stress"]
-        tauII = np.sqrt(0.5 * (S ** 2).sum(axis=(2, 3))).mean(axis=1)
-        cd = {"stress_invariant": tauII,
+        cd = {"stress_invariant": second_invariant(from_ip_field(S)).mean(axis=1),
               "plastic_strain": lm.ip_fields["plastic_strain"].mean(axis=1)}
         write_vtu(self.out / name, P, T, pd, cd)
         self._pvd.add(lm.time, name)
@@ -467,8 +469,7 @@ class SinkingPlate:
             raise FileNotFoundError(f"no checkpoint in {out} (checkpoint.json missing)")
         meta = json.loads((out / "checkpoint.json").read_text())
         if cfg is None:
-            cfg = PlateConfig(**{k: (math.inf if v == "inf" else v)
-                                 for k, v in meta["config"].items()})
+            cfg = PlateConfig(**meta["config"])  # json keeps inf as Infinity
         lm = LagrangianMesh.load(out / "checkpoint.npz")
         return cls(cfg, out, _state=(lm, meta))
 
@@ -525,7 +526,6 @@ class SinkingPlate:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from .output import read_csv_columns
         c = self.cfg
         paths = []
         panels = []
@@ -563,7 +563,7 @@ class SinkingPlate:
         S = lm.ip_fields["stress"]
         vals = [(lm.ip_fields["plastic_strain"].mean(axis=1), "accumulated plastic strain",
                  "magma_r"),
-                (np.sqrt(0.5 * (S ** 2).sum(axis=(2, 3))).mean(axis=1) / c.yield_stress,
+                (second_invariant(from_ip_field(S)).mean(axis=1) / c.yield_stress,
                  "stress invariant / yield stress", "viridis")]
         for a, (v, lab, cmap) in zip(ax, vals):
             tp = a.tripcolor(P[:, 0], P[:, 1], T[inplate], facecolors=v[inplate], cmap=cmap)

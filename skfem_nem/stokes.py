@@ -545,12 +545,8 @@ def _rigid_modes(spaces: StokesSpaces, free: np.ndarray) -> np.ndarray:
     ub = spaces.ubasis
     loc = ub.doflocs  # (2, nu)
     comp = np.zeros(ub.N, dtype=int)
-    if hasattr(ub.dofs, "nodal_dofs") and ub.dofs.nodal_dofs.shape[0] == 2 and \
-            ub.dofs.nodal_dofs.size * 1 == ub.N:
-        comp[ub.dofs.nodal_dofs[1]] = 1
-    else:  # Taylor-Hood: nodal and edge dofs, named u^1 / u^2
-        for dofs_ in (ub.dofs.nodal_dofs, ub.dofs.facet_dofs):
-            comp[dofs_[1::2].ravel()] = 1
+    for dofs_ in (ub.dofs.nodal_dofs, ub.dofs.facet_dofs):  # rows: u^1, u^2
+        comp[dofs_[1::2].ravel()] = 1
     Bm = np.zeros((ub.N, 3))
     Bm[comp == 0, 0] = 1.0
     Bm[comp == 1, 1] = 1.0
@@ -745,8 +741,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
                                     maxiter=1000, callback=lambda *_: its.__setitem__(0, its[0] + 1))
                     inner["its"] += its[0]
                     if fl != 0:
-                        raise RuntimeError(f"inner AMG-CG solve of the viscous block did not "
-                                           f"converge in 1000 iterations")
+                        raise RuntimeError("inner AMG-CG solve of the viscous block did not "
+                                           "converge in 1000 iterations")
                     return y
 
             lu = _AMGSolve()
@@ -828,15 +824,12 @@ def inf_sup_constant(spaces: StokesSpaces, stabilised: Optional[bool] = None,
     nodes.
     """
     import scipy.linalg as sla
-    from skfem.helpers import grad
-    from skfem.helpers import ddot as _dd
-    from skfem.helpers import dot as _dot
     stab = spaces.stabilised if stabilised is None else stabilised
     ub, pb = spaces.ubasis, spaces.pbasis
 
     @BilinearForm
     def h1(u, v, w):
-        return _dd(grad(u), grad(v)) + _dot(u, v)
+        return ddot(grad(u), grad(v)) + dot(u, v)
 
     @BilinearForm
     def mass(p, q, w):

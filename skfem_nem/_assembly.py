@@ -2,18 +2,32 @@
 
 A :class:`~skfem_nem.NaturalNeighbourBasis` is a set of groups of triangles
 with equal stencil size; each group is an ordinary scikit-fem basis. The
-wrappers installed here make ``BilinearForm``, ``LinearForm`` and
-``Functional`` (and therefore ``asm``) loop over those groups and concatenate
+wrappers installed here make ``BilinearForm`` and ``LinearForm`` (and
+therefore ``asm``) loop over those groups and concatenate
 their COO contributions, so user code is unchanged. Forms on ordinary bases
 take scikit-fem's own code path untouched.
 
 Keyword arguments are split with the groups: dof vectors are interpolated by
 each group, arrays and ``DiscreteField`` objects defined over all elements
 (shape ``(..., nelems, nq)``) are restricted to the group's elements.
+
+Bilinear and linear forms on natural-neighbour bases whose trial and test
+functions share their stencils (the usual case: one basis, or a scalar and a
+vector basis on the same mesh) take a faster road that needs no groups at
+all: the form is linear in the components of (value, gradient) of u and of
+v, so ``form(u, v) = sum_ab C_ab(x) u_a v_b``; the coefficients ``C`` are read
+off by calling the form on unit fields (all of them stacked into one call per
+chunk of elements) and a numba kernel contracts them, element by element,
+with the values and gradients of the element's stencil functions. The form
+is called a fixed number of times whatever the stencil sizes, and the work is
+the sum over elements of the stencil size squared. Functionals need no
+wrapper: they read only the quadrature data, which a natural-neighbour basis
+has over all its elements.
 """
 from __future__ import annotations
 
 import numpy as np
+from numba import njit, prange
 from skfem.assembly import CellBasis
 from skfem.assembly.form import BilinearForm, Functional, LinearForm
 from skfem.assembly.form.form import FormExtraParams
@@ -25,10 +39,14 @@ STACK_SIZE = 1 << 16
 #: assemble natural-neighbour pairs from the form's coefficients (probed on
 #: unit fields) instead of calling the form on stacked pairs
 PROBE = True
+#: assemble forms on bases that share their functions over the whole mesh at
+#: once (coefficients probed once per chunk of elements, numba contraction)
+WHOLE = True
 
 
 def _is_nn(basis) -> bool:
-    return getattr(basis, "groups", None) is not None and hasattr(basis, "stencil_sizes")
+    # (reading ``groups`` would build them: test for the stencil arrays)
+    return hasattr(basis, "stencil_ptr") and hasattr(basis, "_grads")
 
 
 def _split_value(v, idx, nelems):
@@ -211,6 +229,452 @@ def _stacked_linear(form, v, kwargs):
     return np.array([v.element_dofs.ravel()]), data.ravel()
 
 
+# ---------------------------------------------------------------------------
+# the whole-mesh road: coefficients probed once, contracted by numba kernels
+# ---------------------------------------------------------------------------
+
+@njit(cache=True, inline="always")
+def _gather(e, ptr, sten, indptr, indices, vals, grads, nq, B):
+    """Values and gradients of element e's stencil functions at its
+    quadrature points: B (nq, 1 + dim, S), zero where a function vanishes."""
+    dim = grads.shape[0]
+    s0 = ptr[e]
+    S = ptr[e + 1] - s0
+    for q in range(nq):
+        r = e * nq + q
+        for kk in range(indptr[r], indptr[r + 1]):
+            c = indices[kk]
+            lo = 0
+            hi = S - 1
+            while lo < hi:  # binary search in the sorted stencil
+                mid = (lo + hi) // 2
+                if sten[s0 + mid] < c:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            B[q, 0, lo] = vals[kk]
+            for g in range(dim):
+                B[q, 1 + g, lo] = grads[g, kk]
+
+
+@njit(cache=True, parallel=True)
+def _contract_bilinear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, pa, pb,
+                       Du, Dv, off, K):
+    """Local matrices of elements e0..e1-1.
+
+    ``C`` (npairs, e1 - e0, nq): coefficient (times dx) of the pair
+    ``(pa[p], pb[p])`` of (component, value/gradient) indices of u and v,
+    ``a = c (1 + dim) + k`` with k = 0 for the value and 1 + g for d/dx_g.
+    Element e's matrix, (Dv S) rows (test function j, component cv at
+    ``Dv j + cv``) by (Du S) columns (``Du i + cu``), row-major, goes to
+    ``K[off[e]:off[e + 1]]``.
+    """
+    dim = grads.shape[0]
+    L = 1 + dim
+    npair = pa.shape[0]
+    for e in prange(e0, e1):
+        S = ptr[e + 1] - ptr[e]
+        B = np.zeros((nq, L, S))
+        _gather(e, ptr, sten, indptr, indices, vals, grads, nq, B)
+        nc = Du * S
+        o = off[e]
+        for r in range(Dv * S * nc):
+            K[o + r] = 0.0
+        for q in range(nq):
+            for p in range(npair):
+                coef = C[p, e - e0, q]
+                if coef == 0.0:
+                    continue
+                cu = pa[p] // L
+                k = pa[p] % L
+                cv = pb[p] // L
+                l_ = pb[p] % L
+                for i in range(S):
+                    t = coef * B[q, k, i]
+                    if t == 0.0:
+                        continue
+                    col = o + Du * i + cu
+                    for j in range(S):
+                        K[col + (Dv * j + cv) * nc] += t * B[q, l_, j]
+
+
+@njit(cache=True)
+def _incidence(ptr, sten, n):
+    """Node -> (element, local index) lists of the stencils: node v is
+    function ``inc_l[k]`` of element ``inc_e[k]`` for k in
+    ``inc_ptr[v]:inc_ptr[v + 1]``."""
+    ne = ptr.shape[0] - 1
+    inc_ptr = np.zeros(n + 1, np.int64)
+    for k in range(ptr[ne]):
+        inc_ptr[sten[k] + 1] += 1
+    for v in range(n):
+        inc_ptr[v + 1] += inc_ptr[v]
+    fill = inc_ptr[:-1].copy()
+    inc_e = np.empty(ptr[ne], np.int64)
+    inc_l = np.empty(ptr[ne], np.int64)
+    for e in range(ne):
+        for s in range(ptr[e], ptr[e + 1]):
+            v = sten[s]
+            inc_e[fill[v]] = e
+            inc_l[fill[v]] = s - ptr[e]
+            fill[v] += 1
+    return inc_ptr, inc_e, inc_l
+
+
+@njit(cache=True, parallel=True)
+def _node_pattern(ptr, sten, inc_ptr, inc_e, n, nblocks):
+    """Sparsity pattern between nodes: node v couples with the (sorted)
+    nodes ``cols[cptr[v]:cptr[v + 1]]``, the union of the stencils of the
+    elements whose stencil holds v."""
+    cnt = np.zeros(n, np.int64)
+    for blk in prange(nblocks):
+        mark = np.full(n, -1, np.int64)
+        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+            c = 0
+            for k in range(inc_ptr[v], inc_ptr[v + 1]):
+                e = inc_e[k]
+                for s in range(ptr[e], ptr[e + 1]):
+                    if mark[sten[s]] != v:
+                        mark[sten[s]] = v
+                        c += 1
+            cnt[v] = c
+    cptr = np.zeros(n + 1, np.int64)
+    for v in range(n):
+        cptr[v + 1] = cptr[v] + cnt[v]
+    cols = np.empty(cptr[n], np.int64)
+    for blk in prange(nblocks):
+        mark = np.full(n, -1, np.int64)
+        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+            c = cptr[v]
+            for k in range(inc_ptr[v], inc_ptr[v + 1]):
+                e = inc_e[k]
+                for s in range(ptr[e], ptr[e + 1]):
+                    if mark[sten[s]] != v:
+                        mark[sten[s]] = v
+                        cols[c] = sten[s]
+                        c += 1
+            cols[cptr[v]:cptr[v + 1]].sort()
+    return cptr, cols
+
+
+@njit(cache=True, parallel=True)
+def _sum_rows(ptr, sten, off, K, inc_ptr, inc_e, inc_l, cptr, cols, Du, Dv, ndu, ndv,
+              nblocks, rows_out, cols_out, data_out):
+    """Sum the local matrices ``K`` into the global matrix, row by row:
+    node v's rows (components cv) hold the entries with the nodes
+    ``cols[cptr[v]:cptr[v + 1]]`` (components cu) at
+    ``Dv Du cptr[v] + (cv n_v + k) Du + cu``; no two entries share a place,
+    and with dofs numbered ``D node + c`` the entries come out row-major
+    sorted (canonical CSR order)."""
+    n = cptr.shape[0] - 1
+    for blk in prange(nblocks):
+        pos = np.full(n, -1, np.int64)
+        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+            nv = cptr[v + 1] - cptr[v]
+            base = Dv * Du * cptr[v]
+            for k in range(nv):
+                pos[cols[cptr[v] + k]] = k
+            for cv in range(Dv):
+                for k in range(nv):
+                    for cu in range(Du):
+                        o = base + (cv * nv + k) * Du + cu
+                        rows_out[o] = ndv[cv, v]
+                        cols_out[o] = ndu[cu, cols[cptr[v] + k]]
+                        data_out[o] = 0.0
+            for t in range(inc_ptr[v], inc_ptr[v + 1]):
+                e = inc_e[t]
+                j = inc_l[t]
+                s0 = ptr[e]
+                S = ptr[e + 1] - s0
+                nc = Du * S
+                for cv in range(Dv):
+                    src = off[e] + (Dv * j + cv) * nc
+                    dst = base + cv * nv * Du
+                    for i in range(S):
+                        k = pos[sten[s0 + i]]
+                        for cu in range(Du):
+                            data_out[dst + k * Du + cu] += K[src + Du * i + cu]
+
+
+@njit(cache=True, parallel=True)
+def _contract_linear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, pb, Dv, ndv,
+                     off, rows, data):
+    """Local load vectors of elements e0..e1-1 (see :func:`_contract_bilinear`)."""
+    dim = grads.shape[0]
+    L = 1 + dim
+    npair = pb.shape[0]
+    for e in prange(e0, e1):
+        s0 = ptr[e]
+        S = ptr[e + 1] - s0
+        B = np.zeros((nq, L, S))
+        _gather(e, ptr, sten, indptr, indices, vals, grads, nq, B)
+        b = np.zeros((Dv, S))
+        for q in range(nq):
+            for p in range(npair):
+                coef = C[p, e - e0, q]
+                if coef == 0.0:
+                    continue
+                cv = pb[p] // L
+                l_ = pb[p] % L
+                for j in range(S):
+                    b[cv, j] += coef * B[q, l_, j]
+        o = off[e]
+        for j in range(S):
+            for cv in range(Dv):
+                rows[o] = ndv[cv, sten[s0 + j]]
+                data[o] = b[cv, j]
+                o += 1
+
+
+def _components(basis):
+    """(number of components D, space dimension) of a natural-neighbour basis."""
+    dim = basis.mesh.dim()
+    return (basis.elem.dim if isinstance(basis.elem, ElementVector) else 1), dim
+
+
+def _shares_functions(u, v) -> bool:
+    """Do two natural-neighbour bases evaluate the same scalar functions at
+    the same points (one basis, or e.g. a scalar and a vector basis on one
+    mesh with one quadrature and one kind of coordinates)?"""
+    if u is v:
+        return True
+    return (type(u) is type(v) and u.mesh is v.mesh and u.nelems == v.nelems
+            and u.coordinates == v.coordinates and u.method == v.method
+            and u.X.shape == v.X.shape and np.array_equal(u.X, v.X)
+            and np.array_equal(u.dx, v.dx)
+            and np.array_equal(u.stencil_ptr, v.stencil_ptr)
+            and np.array_equal(u.stencil_nodes, v.stencil_nodes))
+
+
+def _unit_fields(D, dim, reps, ne, nq, which):
+    """Unit fields stacked along the element axis: block r (of ``ne``
+    elements) of the result is the unit field ``which[r]``, the component
+    a = c (1 + dim) + k of (value, gradient) of a D-vector (k = 0) or its
+    derivative d/dx_{k-1}. Returns the form argument tuple."""
+    val = np.zeros((D, reps, ne, nq))
+    grad = np.zeros((D, dim, reps, ne, nq))
+    L = 1 + dim
+    for r, a in enumerate(which):
+        c, k = divmod(int(a), L)
+        if k == 0:
+            val[c, r] = 1.0
+        else:
+            grad[c, k - 1, r] = 1.0
+    val = val.reshape(D, reps * ne, nq)
+    grad = grad.reshape(D, dim, reps * ne, nq)
+    if D == 1:
+        return (DiscreteField(val[0], grad[0]),)
+    return (DiscreteField(val, grad),)
+
+
+def _chunks(ne, calls):
+    """Element ranges such that ``calls`` stacked copies stay near STACK_SIZE."""
+    step = max(1, (1 << 16) // max(1, calls))
+    return [(e0, min(ne, e0 + step)) for e0 in range(0, ne, step)]
+
+
+def _index_dtype(n):
+    return np.int32 if n < 2**31 - 1 else np.int64
+
+
+class _Watched(FormExtraParams):
+    """``w`` that notes whether the form reads it: a form that never does
+    has the same coefficients at every quadrature point of every element."""
+
+    read = False
+
+    def _note(self):
+        self.read = True
+
+    def __getitem__(self, key):
+        self._note()
+        return super().__getitem__(key)
+
+    def __getattr__(self, attr):
+        self._note()
+        return super().__getattr__(attr)
+
+    def __contains__(self, key):
+        self._note()
+        return super().__contains__(key)
+
+    def __iter__(self):
+        self._note()
+        return super().__iter__()
+
+    def __len__(self):
+        self._note()
+        return super().__len__()
+
+    def get(self, *args):
+        self._note()
+        return super().get(*args)
+
+    def keys(self):
+        self._note()
+        return super().keys()
+
+    def values(self):
+        self._note()
+        return super().values()
+
+    def items(self):
+        self._note()
+        return super().items()
+
+
+def _constant_coefficients(form_fn, Du, Dv, dim, which_u, which_v, nq, w):
+    """The coefficients of a form that ignores ``w``, as (pairs,) scalars,
+    from one call on one element; None if the form reads ``w`` (or gives
+    different values at the points)."""
+    reps = len(which_u)
+    W = _Watched({k: _tile(x, reps, 1) for k, x in w.items()})
+    W.read = False
+    U = _unit_fields(Du, dim, reps, 1, nq, which_u)
+    try:
+        if which_v is None:
+            out = form_fn(*U, W)
+        else:
+            out = form_fn(*U, *_unit_fields(Dv, dim, reps, 1, nq, which_v), W)
+    except (AttributeError, TypeError, IndexError, ValueError):
+        return None
+    if W.read:
+        return None
+    out = np.broadcast_to(np.asarray(out, dtype=np.float64), (reps, nq))
+    if not (out == out[:, :1]).all():
+        return None
+    return out[:, 0].copy()
+
+
+def _probe(form_fn, args_u, args_v, w, ne, reps, nq, dx, dtype):
+    """Call ``form_fn`` once on stacked unit fields; returns (reps, ne, nq)."""
+    W = FormExtraParams({k: _tile(x, reps, ne) for k, x in w.items()})
+    out = np.asarray(form_fn(*args_u, *args_v, W) if args_v is not None
+                     else form_fn(*args_u, W), dtype=dtype)
+    return np.broadcast_to(out, (reps * ne, nq)).reshape(reps, ne, nq) * dx[None]
+
+
+def _whole_bilinear(form, u, v, kwargs):
+    """COO data of a bilinear form on two natural-neighbour bases that share
+    their functions, without groups; None if the form cannot be probed."""
+    if form.dtype != np.float64:
+        return None
+    Du, dim = _components(u)
+    Dv, _ = _components(v)
+    L = 1 + dim
+    P, Q = Du * L, Dv * L
+    ne, nq = u.dx.shape
+    w = {**u.default_parameters(), **form._normalize_asm_kwargs(kwargs, u)}
+    pa, pb = (x.ravel() for x in np.meshgrid(np.arange(P), np.arange(Q), indexing="ij"))
+    Phi, G = u._Phi, u._grads
+    ptr, sten = u.stencil_ptr, u.stencil_nodes
+    S = np.diff(ptr)
+    off = np.zeros(ne + 1, dtype=np.int64)
+    np.cumsum(Du * Dv * S * S, out=off[1:])
+    K = np.empty(off[-1])
+    const = _constant_coefficients(form.form, Du, Dv, dim, pa, pb, nq,
+                                   _split_kwargs(w, slice(0, 1), ne))
+    fields = {}
+    for e0, e1 in _chunks(ne, 1 if const is not None else P * Q):
+        n = e1 - e0
+        if const is not None:
+            active = np.flatnonzero(const)
+            C = const[active, None, None] * u.dx[None, e0:e1]
+        else:
+            if n not in fields:
+                fields[n] = (_unit_fields(Du, dim, P * Q, n, nq, pa),
+                             _unit_fields(Dv, dim, P * Q, n, nq, pb))
+            Uf, Vf = fields[n]
+            wc = _split_kwargs(w, slice(e0, e1), ne)
+            try:
+                C = _probe(form.form, Uf, Vf, wc, n, P * Q, nq, u.dx[e0:e1], np.float64)
+            except (AttributeError, TypeError, IndexError):
+                if e0 == 0:
+                    return None  # e.g. a form reading u.hess: take the group road
+                raise
+            active = np.flatnonzero(np.any(C != 0.0, axis=(1, 2)))
+            C = np.ascontiguousarray(C[active])
+        _contract_bilinear(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
+                           C, pa[active], pb[active], Du, Dv, off, K)
+    return _global(u, v, Du, Dv, off, K)
+
+
+def _pattern(basis):
+    """The node incidence and node-node pattern of a basis' stencils (cached)."""
+    pat = basis.__dict__.get("_node_pattern")
+    if pat is None:
+        n = basis.mesh.p.shape[1]
+        ptr, sten = basis.stencil_ptr, basis.stencil_nodes
+        inc = _incidence(ptr, sten, n)
+        pat = inc + _node_pattern(ptr, sten, inc[0], inc[1], n, _blocks(n))
+        basis.__dict__["_node_pattern"] = pat
+    return pat
+
+
+def _blocks(n):
+    import numba
+    return max(1, min(n // 256, 4 * numba.get_num_threads()))
+
+
+def _global(u, v, Du, Dv, off, K):
+    """COO arrays of the summed local matrices (each entry once)."""
+    inc_ptr, inc_e, inc_l, cptr, cols = _pattern(u)
+    n = cptr.shape[0] - 1
+    nnz = Du * Dv * int(cptr[-1])
+    idt = _index_dtype(max(u.N, v.N))
+    rows_out = np.empty(nnz, dtype=idt)
+    cols_out = np.empty(nnz, dtype=idt)
+    data_out = np.empty(nnz)
+    ndu = np.ascontiguousarray(u.dofs.nodal_dofs[:Du], dtype=np.int64)
+    ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
+    _sum_rows(u.stencil_ptr, u.stencil_nodes, off, K, inc_ptr, inc_e, inc_l, cptr, cols,
+              Du, Dv, ndu, ndv, _blocks(n), rows_out, cols_out, data_out)
+    return np.array([rows_out, cols_out]), data_out
+
+
+def _whole_linear(form, v, kwargs):
+    """COO data of a linear form on a natural-neighbour basis, without
+    groups; None if the form cannot be probed."""
+    if form.dtype != np.float64:
+        return None
+    Dv, dim = _components(v)
+    Q = Dv * (1 + dim)
+    ne, nq = v.dx.shape
+    w = {**v.default_parameters(), **form._normalize_asm_kwargs(kwargs, v)}
+    pb = np.arange(Q)
+    Phi, G = v._Phi, v._grads
+    ptr, sten = v.stencil_ptr, v.stencil_nodes
+    off = np.zeros(ne + 1, dtype=np.int64)
+    np.cumsum(Dv * np.diff(ptr), out=off[1:])
+    rows = np.empty(off[-1], dtype=_index_dtype(v.N))
+    data = np.empty(off[-1])
+    ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
+    const = _constant_coefficients(form.form, Dv, Dv, dim, pb, None, nq,
+                                   _split_kwargs(w, slice(0, 1), ne))
+    fields = {}
+    for e0, e1 in _chunks(ne, 1 if const is not None else Q):
+        n = e1 - e0
+        if const is not None:
+            active = np.flatnonzero(const)
+            C = const[active, None, None] * v.dx[None, e0:e1]
+            _contract_linear(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
+                             C, pb[active], Dv, ndv, off, rows, data)
+            continue
+        if n not in fields:
+            fields[n] = _unit_fields(Dv, dim, Q, n, nq, pb)
+        wc = _split_kwargs(w, slice(e0, e1), ne)
+        try:
+            C = _probe(form.form, fields[n], None, wc, n, Q, nq, v.dx[e0:e1], np.float64)
+        except (AttributeError, TypeError, IndexError):
+            if e0 == 0:
+                return None
+            raise
+        active = np.flatnonzero(np.any(C != 0.0, axis=(1, 2)))
+        _contract_linear(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
+                         np.ascontiguousarray(C[active]), pb[active], Dv, ndv, off, rows, data)
+    return np.array([rows]), data
+
+
 def install():
     """Install the group-wise assembly wrappers (idempotent)."""
     global _INSTALLED
@@ -228,9 +692,12 @@ def install():
         if not (_is_nn(ubasis) or _is_nn(vbasis)):
             return bil(self, ubasis, vbasis, **kwargs)
         nelems = (ubasis if _is_nn(ubasis) else vbasis).nelems
-        rows, data = [], []
-        shape = None
         shape = (vbasis.N, ubasis.N)
+        if WHOLE and _is_nn(ubasis) and _is_nn(vbasis) and _shares_functions(ubasis, vbasis):
+            out = _whole_bilinear(self, ubasis, vbasis, dict(kwargs))
+            if out is not None:
+                return out[0], out[1], shape, None
+        rows, data = [], []
         for idx, u, v in _pairs(ubasis, vbasis):
             kw = _split_kwargs(kwargs, idx, nelems)
             if PROBE and _stackable(u) and _stackable(v) and _probe_pays(u, v):
@@ -246,9 +713,12 @@ def install():
     def linear_assemble(self, ubasis, vbasis=None, **kwargs):
         if not _is_nn(ubasis):
             return lin(self, ubasis, vbasis, **kwargs)
-        rows, data = [], []
-        shape = None
         shape = (ubasis.N,)
+        if WHOLE:
+            out = _whole_linear(self, ubasis, dict(kwargs))
+            if out is not None:
+                return out[0], out[1], shape, None
+        rows, data = [], []
         for g in ubasis.groups:
             kw = _split_kwargs(kwargs, g.tind, ubasis.nelems)
             if STACK_SIZE > 0:
@@ -259,17 +729,5 @@ def install():
             data.append(d)
         return np.concatenate(rows, axis=1), np.concatenate(data), shape, None
 
-    def functional_elemental(self, v, **kwargs):
-        if not _is_nn(v):
-            return fel(self, v, **kwargs)
-        out = None
-        for g in v.groups:
-            r = fel(self, g, **_split_kwargs(kwargs, g.tind, v.nelems))
-            if out is None:
-                out = np.zeros((v.nelems,) + np.shape(r)[1:], dtype=np.asarray(r).dtype)
-            out[g.tind] = r
-        return out
-
     BilinearForm._assemble = bilinear_assemble
     LinearForm._assemble = linear_assemble
-    Functional.elemental = functional_elemental

@@ -406,15 +406,29 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
         Phi, D = self._coordinates(pts, gradient=True, hint=np.repeat(hint, nq))
         if Phi.nnz and not all(np.isfinite(Dk.data).all() for Dk in D):
             Phi, D = self._fix_undefined(pts, Phi, D)
-        self._Phi, self._D = Phi, list(D)
+        # gradients as one (dim, nnz) array on Phi's pattern; the CSR
+        # matrices of the gradients are views of its rows
+        G = np.stack([Dk.data for Dk in D]) if len(D) else np.empty((0, Phi.nnz))
+        self._Phi, self._grads = Phi, G
+        self._D = [type(Phi)((G[k], Phi.indices, Phi.indptr), shape=Phi.shape)
+                   for k in range(G.shape[0])]
         ptr, sten = _stencils(Phi.indptr.astype(np.int64), Phi.indices.astype(np.int64), nq, ne)
         self.stencil_ptr, self.stencil_nodes = ptr, sten
-        sizes = np.diff(ptr)
-        self.stencil_sizes = sizes
-        order = np.argsort(sizes, kind="stable")
-        bounds = np.flatnonzero(np.diff(sizes[order])) + 1
-        self.groups = [self._make_group(elems) for elems in np.split(order, bounds)
-                       if elems.size]
+        self.stencil_sizes = np.diff(ptr)
+        self._groups = None
+
+    @property
+    def groups(self):
+        """The elements grouped by stencil size, each an ordinary basis with
+        a fixed ``Nbfun`` (built on first use: forms on bases that share
+        their functions assemble without them)."""
+        if self._groups is None:
+            sizes = self.stencil_sizes
+            order = np.argsort(sizes, kind="stable")
+            bounds = np.flatnonzero(np.diff(sizes[order])) + 1
+            self._groups = [self._make_group(elems) for elems in np.split(order, bounds)
+                            if elems.size]
+        return self._groups
 
     def _make_group(self, elems):
         """The basis of the elements ``elems`` (all of one stencil size)."""

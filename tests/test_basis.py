@@ -309,8 +309,11 @@ def test_stacked_assembly_equals_pairwise(mesh, basis, vbasis, monkeypatch):
 
     k = np.sin(3 * mesh.p[0]) + mesh.p[1]
     results = []
-    for size in (0, 1 << 19, 7):  # per pair, stacked, stacked in tiny chunks
+    # per pair, stacked, stacked in tiny chunks (by groups), then over the
+    # whole mesh at once
+    for size, whole in ((0, False), (1 << 19, False), (7, False), (0, True)):
         monkeypatch.setattr(assembly, "STACK_SIZE", size)
+        monkeypatch.setattr(assembly, "WHOLE", whole)
         A = weighted.assemble(basis, k=k)
         B = weighted.assemble(basis, k=basis.interpolate(k))
         f = load.assemble(basis, k=k)
@@ -343,6 +346,7 @@ def test_probed_assembly_equals_stacked_pairs():
                       + div(u) * div(v) + dot(u, v)), vb, {"eta": eta}),
     ]
     try:
+        _assembly.WHOLE = False
         for form, basis, kw in cases:
             _assembly.PROBE = False
             A1 = form.assemble(basis, **kw).tocsr()
@@ -351,3 +355,74 @@ def test_probed_assembly_equals_stacked_pairs():
             assert abs(A1 - A2).max() <= 1e-13 * abs(A1).max()
     finally:
         _assembly.PROBE = True
+        _assembly.WHOLE = True
+
+
+def test_whole_mesh_assembly_equals_pairwise(monkeypatch):
+    """Forms on bases that share their functions, assembled over the whole
+    mesh at once (probed coefficients, numba contraction, entries summed row
+    by row), equal scikit-fem's per-pair evaluation over the groups: forms
+    with and without coefficients (constant coefficients are read off one
+    element), w read in every way a dict offers, dof-vector and array
+    arguments, mixed scalar/vector pairs, facet bases, linear forms; and
+    the groups are never built."""
+    from skfem import BilinearForm, ElementVector, LinearForm
+    from skfem.helpers import ddot, div, dot, grad, sym_grad
+    from skfem.models.elasticity import lame_parameters, linear_elasticity
+
+    from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis,
+                           NaturalNeighbourFacetBasis, _assembly, delaunay_mesh)
+    rng = np.random.default_rng(5)
+    mesh = delaunay_mesh(np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], rng.random((250, 2))])
+    vec = ElementVector(ElementNaturalNeighbour())
+
+    def bases():
+        return (NaturalNeighbourBasis(mesh), NaturalNeighbourBasis(mesh, vec),
+                NaturalNeighbourFacetBasis(mesh, vec, facets=mesh.boundary_facets()),
+                NaturalNeighbourBasis(mesh, npoints=6))
+
+    k = np.cos(2 * mesh.p[0]) * mesh.p[1]
+    eta = 1 + mesh.p[0] ** 2
+    u0 = rng.standard_normal(2 * mesh.p.shape[1])
+
+    def cases(sb, vb, fb, sb6):
+        return [
+            (laplace, (sb,), {}),
+            (linear_elasticity(*lame_parameters(1e3, 0.3)), (vb,), {}),
+            (BilinearForm(lambda u, v, w: u.grad[0] * v + 2 * u * v.grad[1] + u * v), (sb6,), {}),
+            (BilinearForm(lambda u, v, w: (1 + w.x[0]) * dot(grad(u), grad(v))), (sb,), {}),
+            (BilinearForm(lambda u, v, w: w["k"] * u * v + w["k"].grad[1] * u.grad[0] * v),
+             (sb,), {"k": k}),
+            (BilinearForm(lambda u, v, w: (2.0 if "k" in w else 1.0) * u * v), (sb,), {"k": 1.0}),
+            (BilinearForm(lambda u, v, w: w.get("c", 3.0) * u * v), (sb,), {}),
+            (BilinearForm(lambda u, v, w: 2 * w["eta"] * ddot(sym_grad(u), sym_grad(v))
+                          + div(u) * div(v)), (vb,), {"eta": sb.interpolate(eta)}),
+            (BilinearForm(lambda u, v, w: dot(w["u0"], u) * dot(w["u0"], v)
+                          + ddot(grad(w["u0"]), grad(u)) * v[1]), (vb,), {"u0": u0}),
+            (BilinearForm(lambda u, v, w: div(u) * v), (vb, sb), {}),
+            (BilinearForm(lambda u, v, w: u * div(v) + u.grad[1] * v[0]), (sb, vb), {}),
+            (BilinearForm(lambda u, v, w: dot(u, w.n) * dot(v, w.n) * w.h), (fb,), {}),
+            (LinearForm(lambda v, w: w["k"] * v + w.x[1] * v.grad[0]), (sb,), {"k": k}),
+            (LinearForm(lambda v, w: v.grad[1] - 2 * v), (sb6,), {}),
+            (LinearForm(lambda v, w: dot(w.n, v) + div(v)), (fb,), {}),
+            (LinearForm(lambda v, w: dot(w.x, v) + grad(v)[0, 1]), (vb,), {}),
+        ]
+
+    out = {}
+    for whole in (False, True):
+        monkeypatch.setattr(_assembly, "WHOLE", whole)
+        monkeypatch.setattr(_assembly, "PROBE", False)
+        monkeypatch.setattr(_assembly, "STACK_SIZE", 0)
+        bs = bases()
+        out[whole] = [form.assemble(*b, **kw) for form, b, kw in cases(*bs)]
+        if whole:
+            assert all(b._groups is None for b in bs)
+    for A, B in zip(out[False], out[True]):
+        A = A.toarray() if hasattr(A, "toarray") else A
+        B = B.toarray() if hasattr(B, "toarray") else B
+        assert A.shape == B.shape
+        np.testing.assert_allclose(B, A, rtol=0, atol=1e-13 * max(1.0, abs(A).max()))
+    # scikit-fem's canonical CSR: one entry per (row, column), sorted
+    K = out[True][1]
+    assert K.has_canonical_format and K.nnz == np.unique(K.indices + K.shape[1] * np.repeat(
+        np.arange(K.shape[0]), np.diff(K.indptr))).size

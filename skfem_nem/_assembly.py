@@ -426,6 +426,22 @@ def _contract_linear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, pb,
                 o += 1
 
 
+# Serial twins of the parallel kernels: on small meshes waking the thread
+# pool costs more than the work (and OpenMP threads that spin between calls
+# compete with everything else on the machine).
+_contract_bilinear_serial = njit(cache=True)(_contract_bilinear.py_func)
+_contract_linear_serial = njit(cache=True)(_contract_linear.py_func)
+_node_pattern_serial = njit(cache=True)(_node_pattern.py_func)
+_sum_rows_serial = njit(cache=True)(_sum_rows.py_func)
+#: below this many stencil entries squared (times quadrature points) the
+#: kernels run on one thread
+PARALLEL_MIN = 1 << 21
+
+
+def _parallel(basis) -> bool:
+    return basis.nstencil_entries * basis.dx.shape[1] >= PARALLEL_MIN
+
+
 def _components(basis):
     """(number of components D, space dimension) of a natural-neighbour basis."""
     dim = basis.mesh.dim()
@@ -572,6 +588,7 @@ def _whole_bilinear(form, u, v, kwargs):
     off = np.zeros(ne + 1, dtype=np.int64)
     np.cumsum(Du * Dv * S * S, out=off[1:])
     K = np.empty(off[-1])
+    kernel = _contract_bilinear if _parallel(u) else _contract_bilinear_serial
     const = _constant_coefficients(form.form, Du, Dv, dim, pa, pb, nq,
                                    _split_kwargs(w, slice(0, 1), ne))
     fields = {}
@@ -594,8 +611,8 @@ def _whole_bilinear(form, u, v, kwargs):
                 raise
             active = np.flatnonzero(np.any(C != 0.0, axis=(1, 2)))
             C = np.ascontiguousarray(C[active])
-        _contract_bilinear(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
-                           C, pa[active], pb[active], Du, Dv, off, K)
+        kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
+               C, pa[active], pb[active], Du, Dv, off, K)
     return _global(u, v, Du, Dv, off, K)
 
 
@@ -606,7 +623,8 @@ def _pattern(basis):
         n = basis.mesh.p.shape[1]
         ptr, sten = basis.stencil_ptr, basis.stencil_nodes
         inc = _incidence(ptr, sten, n)
-        pat = inc + _node_pattern(ptr, sten, inc[0], inc[1], n, _blocks(n))
+        kernel = _node_pattern if _parallel(basis) else _node_pattern_serial
+        pat = inc + kernel(ptr, sten, inc[0], inc[1], n, _blocks(n))
         basis.__dict__["_node_pattern"] = pat
     return pat
 
@@ -627,8 +645,9 @@ def _global(u, v, Du, Dv, off, K):
     data_out = np.empty(nnz)
     ndu = np.ascontiguousarray(u.dofs.nodal_dofs[:Du], dtype=np.int64)
     ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
-    _sum_rows(u.stencil_ptr, u.stencil_nodes, off, K, inc_ptr, inc_e, inc_l, cptr, cols,
-              Du, Dv, ndu, ndv, _blocks(n), rows_out, cols_out, data_out)
+    kernel = _sum_rows if _parallel(u) else _sum_rows_serial
+    kernel(u.stencil_ptr, u.stencil_nodes, off, K, inc_ptr, inc_e, inc_l, cptr, cols,
+           Du, Dv, ndu, ndv, _blocks(n), rows_out, cols_out, data_out)
     return np.array([rows_out, cols_out]), data_out
 
 
@@ -649,6 +668,7 @@ def _whole_linear(form, v, kwargs):
     rows = np.empty(off[-1], dtype=_index_dtype(v.N))
     data = np.empty(off[-1])
     ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
+    kernel = _contract_linear if _parallel(v) else _contract_linear_serial
     const = _constant_coefficients(form.form, Dv, Dv, dim, pb, None, nq,
                                    _split_kwargs(w, slice(0, 1), ne))
     fields = {}
@@ -657,8 +677,8 @@ def _whole_linear(form, v, kwargs):
         if const is not None:
             active = np.flatnonzero(const)
             C = const[active, None, None] * v.dx[None, e0:e1]
-            _contract_linear(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
-                             C, pb[active], Dv, ndv, off, rows, data)
+            kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
+                   C, pb[active], Dv, ndv, off, rows, data)
             continue
         if n not in fields:
             fields[n] = _unit_fields(Dv, dim, Q, n, nq, pb)
@@ -670,8 +690,8 @@ def _whole_linear(form, v, kwargs):
                 return None
             raise
         active = np.flatnonzero(np.any(C != 0.0, axis=(1, 2)))
-        _contract_linear(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
-                         np.ascontiguousarray(C[active]), pb[active], Dv, ndv, off, rows, data)
+        kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
+               np.ascontiguousarray(C[active]), pb[active], Dv, ndv, off, rows, data)
     return np.array([rows]), data
 
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 from skfem.assembly import CellBasis
-from skfem.assembly.form import BilinearForm, Functional, LinearForm
+from skfem.assembly.form import BilinearForm, LinearForm
 from skfem.assembly.form.form import FormExtraParams
 from skfem.element import DiscreteField, ElementVector
 
@@ -704,7 +704,6 @@ def install():
 
     bil = BilinearForm._assemble
     lin = LinearForm._assemble
-    fel = Functional.elemental
 
     def bilinear_assemble(self, ubasis, vbasis=None, **kwargs):
         if vbasis is None:

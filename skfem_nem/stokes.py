@@ -454,7 +454,7 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
             b = b + stress_load.assemble(basis, tau=t)
         return b
 
-    A = _viscous_matrix(spaces, e)
+    A = viscous.assemble(spaces.ubasis, eta=e).tocsr()
     bform = divergence if spaces.method == "taylor-hood" else weak_divergence
     cache = spaces.__dict__.setdefault("_cache", {})
     if "B" not in cache:  # independent of the coefficients: once per spaces
@@ -491,38 +491,6 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         g = -(Bb @ (Ainv @ fb))
         bubble = (Ainv, Abn, Bb, fb)
     return StokesSystem(0.5 * (A + A.T), B, 0.5 * (S + S.T), Mp, m, b, e, g, bubble)
-
-
-def _viscous_matrix(spaces: StokesSpaces, eta: np.ndarray) -> sp.csr_matrix:
-    """``(2 eta eps(u), eps(v))`` on the velocity basis.
-
-    For a vector natural-neighbour basis the local matrices are contracted
-    group by group from the stored gradients (``2 eps(phi_j e_a) :
-    eps(phi_i e_b) = delta_ab grad phi_i . grad phi_j + d_a phi_i d_b phi_j``),
-    which is several times faster than calling the form per pair; equal to
-    ``viscous.assemble(ubasis, eta=eta)`` to round-off (tested).
-    """
-    ub = spaces.ubasis
-    groups = getattr(ub, "groups", None)
-    if groups is None or not isinstance(ub.elem, ElementVector) or ub.elem.dim != 2:
-        return viscous.assemble(ub, eta=eta).tocsr()
-    rows, cols, vals = [], [], []
-    for g in groups:
-        V, G = g._raw                       # G: (2, S, ne_g, nq)
-        W = g.dx * eta[g.tind]              # (ne_g, nq)
-        L = np.einsum("kieq,kjeq,eq->ije", G, G, W, optimize=True)
-        T = np.einsum("aieq,bjeq,eq->aibje", G, G, W, optimize=True)
-        S = G.shape[1]
-        K = np.einsum("aibje->ibjae", T).copy()  # [i, b, j, a] <- T[a, i, b, j]
-        for c in range(2):
-            K[:, c, :, c] += L
-        K = K.reshape(2 * S, 2 * S, -1)
-        ed = g.element_dofs                 # (2 S, ne_g): local index 2 j + c
-        rows.append(np.broadcast_to(ed[:, None, :], K.shape).ravel())
-        cols.append(np.broadcast_to(ed[None, :, :], K.shape).ravel())
-        vals.append(K.ravel())
-    return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                         shape=(ub.N, ub.N)).tocsr()
 
 
 def _block_inverse(A: sp.csr_matrix, element_dofs: np.ndarray) -> sp.csr_matrix:

@@ -173,15 +173,3 @@ def test_outline_flux_constraint_keeps_region_area():
     assert abs((C @ held.u)[0]) < 1e-12 * abs(vz)         # and is held with it
     assert held.velocity_at_nodes()[idx, 1].mean() == pytest.approx(vz, rel=0.05)
     assert held.info["multipliers"].shape == (1,)
-
-
-def test_fast_viscous_matrix_equals_form_assembly():
-    from skfem_nem.stokes import _viscous_matrix, viscous
-    mesh = delaunay_mesh(box_nodes(300, seed=6))
-    for npoints in (3, 6):
-        sp_ = stokes_spaces(mesh, "nem", npoints=npoints)
-        X = sp_.quadrature_points
-        eta = 1 + np.sin(3 * X[0]) ** 2 + 10 * (X[1] > 0.5)
-        A1 = viscous.assemble(sp_.ubasis, eta=eta).tocsr()
-        A2 = _viscous_matrix(sp_, eta)
-        assert abs(A1 - A2).max() < 1e-12 * abs(A1).max()

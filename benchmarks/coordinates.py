@@ -72,6 +72,9 @@ def _region_driver():
         bf = np.empty((2 * ccap, d), np.int64)
         nn = np.empty(ncap, np.int64)
         Tc = np.empty((4 * ccap, d + 1), np.int64)
+        zc = np.empty((ccap, d))
+        zq = np.empty(ccap)
+        sloc = np.empty(S.shape[0], np.int64)
         E = np.empty((d, d))
         Mn = np.empty((d, d))
         rhs = np.empty(d)
@@ -83,7 +86,8 @@ def _region_driver():
         for r in range(Q.shape[0]):
             st, info, ncav, K, nbf, deg = L._region(
                 P, S, NB, ctr, Q[r], start[r], d, r + 1, tols[2], tols[3], tols[4], tols[6],
-                smark, mark, cav, cst, live, bf, nn, Tc, E, Mn, rhs, lam, oi, ov, og)
+                smark, mark, cav, cst, live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, oi, ov,
+                og)
             total += K
         return total
 
@@ -130,7 +134,7 @@ def run_nd(n: int, d: int, repeat: int) -> dict:
         out["stage_start"] = (time.perf_counter() - s) / m * 1e6
         ncap, ccap = L._CAPS[d]
         tols = np.array([L._ZERO_ROW, L._TIE, L._INSPHERE, L._FLAT, L._HULL, L._LINEAR,
-                         L._WALK, L._VERTEX])
+                         L._WALK, L._VERTEX, L._SHAPE, L._LINEAR3, L._GRAD3])
         drv = _region_driver()
         drv(p, S, NB, q[:100], start[:100], ncap, ccap, tols)
         s = time.perf_counter()

@@ -149,6 +149,14 @@ _LINEAR = 1e-9
 _VERTEX = 1e-9
 # Barycentric coordinates above -_WALK count as inside a simplex (point location).
 _WALK = 1e-12
+# 3D cells from the known combinatorics (general position): a cell vertex whose
+# simplex has a shape measure (volume determinant over the product of its edge
+# lengths) below _SHAPE, a linear precision residual above _LINEAR3 (relative, as
+# _LINEAR) or a residual of its derivative sum_i q_i (x) grad V_i = V I above
+# _GRAD3 (relative to sum_i |q_i| |grad V_i|) leaves the query to the recursion.
+_SHAPE = 1e-3
+_LINEAR3 = 1e-12
+_GRAD3 = 1e-11
 
 # default buffer sizes (natural neighbours, conflict simplices) per dimension
 _CAPS = {2: (32, 64), 3: (96, 384), 4: (256, 2048)}
@@ -563,9 +571,12 @@ def _det_small(E, k):
 
 @njit(cache=True, error_model="numpy")
 def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
-    """Is x inside the circumsphere of simplex s? 2: strictly inside (the
-    circumcentre is a vertex of x's Voronoi cell); 1: on it within the
-    tolerance, or the simplex is flat; 0: outside."""
+    """Is x inside the circumsphere of simplex s? Returns ``(code, shape)``:
+    code 2: strictly inside (the circumcentre is a vertex of x's Voronoi
+    cell); 1: on it within the tolerance, or the simplex is flat; 0: outside.
+    Unless flat, ``rhs[:d]`` holds the circumcentre relative to the first
+    vertex and ``shape`` is the signed volume determinant over the product of
+    the edge lengths from the first vertex (sign: the simplex's orientation)."""
     v0 = S[s, 0]
     prod = 1.0
     for r in range(d):
@@ -588,16 +599,17 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
             for j in range(d):
                 E[c, j], E[p, j] = E[p, j], E[c, j]
             rhs[c], rhs[p] = rhs[p], rhs[c]
+            det = -det
         det *= E[c, c]
         if E[c, c] == 0.0:
-            return 1
+            return 1, 0.0
         for r in range(c + 1, d):
             f = E[r, c] / E[c, c]
             for j in range(c, d):
                 E[r, j] -= f * E[c, j]
             rhs[r] -= f * rhs[c]
     if abs(det) <= flat * prod:
-        return 1
+        return 1, 0.0
     for c in range(d - 1, -1, -1):
         acc = rhs[c]
         for j in range(c + 1, d):
@@ -613,11 +625,12 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
         c2 += rhs[k] * rhs[k]
     power = w2 - 2.0 * wc
     wn = np.sqrt(w2)
+    shape = det / prod
     if power < 0.0:
-        return 2
+        return 2, shape
     if power < tol * wn * (wn + 2.0 * np.sqrt(c2)):
-        return 1
-    return 0
+        return 1, shape
+    return 0, shape
 
 
 @njit(cache=True)
@@ -837,12 +850,15 @@ def _vertex_simplices(d, m, A, B, Tc, nT, rowof, E, rhs, lam, ztol, vtol):
 
 @njit(cache=True, error_model="numpy")
 def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, mark, cav, cst,
-            live, bf, nn, Tc, E, Mn, rhs, lam, out_i, out_v, out_g):
+            live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, out_i, out_v, out_g):
     """Locate x, grow its conflict region and collect the natural neighbours
     ``nn[:K]`` (``live`` marks those with cells of positive volume), the
-    boundary faces ``bf[:nbf]`` and the conflict simplices ``Tc[:ncav]`` in
-    local indices. Returns ``(status, info, ncav, K, nbf, degenerate)``; at a
-    node writes the Kronecker delta into ``out_*``."""
+    boundary faces ``bf[:nbf]`` and the conflict simplices ``cav[:ncav]``
+    (``Tc[:ncav]``: in local indices; ``zc[:ncav]``: their circumcentres
+    relative to x; ``zq[:ncav]``: their signed shape measures, see
+    :func:`_in_conflict`; ``sloc[cav[c]] = c``). Returns
+    ``(status, info, ncav, K, nbf, degenerate)``; at a node writes the
+    Kronecker delta into ``out_*``."""
     ccap = cav.shape[0]
     ncap = nn.shape[0]
     s0, st = _locate(P, S, NB, x, hint, d, ctr, E, Mn, rhs, lam, wtol, htol, flat)
@@ -870,7 +886,12 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
     IN = 2 * stamp_q
     OUT = IN + 1
     cav[0] = s0
-    cst[0] = max(1, _in_conflict(P, S, s0, x, d, E, rhs, itol, flat))
+    code, shape = _in_conflict(P, S, s0, x, d, E, rhs, itol, flat)
+    cst[0] = max(1, code)
+    zq[0] = shape
+    for k in range(d):
+        zc[0, k] = rhs[k] + (P[S[s0, 0], k] - x[k])
+    sloc[s0] = 0
     smark[s0] = IN
     ncav = 1
     head = 0
@@ -888,12 +909,16 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
                 continue
             if smark[t] == IN or smark[t] == OUT:
                 continue
-            code = _in_conflict(P, S, t, x, d, E, rhs, itol, flat)
+            code, shape = _in_conflict(P, S, t, x, d, E, rhs, itol, flat)
             if code > 0:
                 if ncav == ccap:
                     return OVERFLOW, 0, 0, 0, 0, False
                 cav[ncav] = t
                 cst[ncav] = code
+                zq[ncav] = shape
+                for k in range(d):
+                    zc[ncav, k] = rhs[k] + (P[S[t, 0], k] - x[k])
+                sloc[t] = ncav
                 ncav += 1
                 smark[t] = IN
             else:
@@ -944,6 +969,225 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
     for j in range(K):
         mark[nn[j]] = -1
     return OK, 0, ncav, K, nbf, degenerate
+
+
+@njit(cache=True, error_model="numpy")
+def _cells3(S, NB, cav, ncav, smark, IN, sloc, Tc, zc, zq, K, q, qq, want_grad, ftol, pid,
+            pu, pv, pS, pf, pt, zf, a0, vol, gv):
+    """Second-order volumes ``vol[:K]`` (and their gradients ``gv[:K]``) of a
+    3D query in general position, from the known combinatorics of its
+    conflict region. Returns False (and leaves the work to :func:`_cell`)
+    where a vertex would be ill-conditioned or the combinatorics are not
+    those of general position.
+
+    The faces of the cells are known: the cells of neighbours i < j share
+    the polygon P_ij on the bisector of p_i and p_j (dual to the Delaunay
+    edge ij of a conflict simplex), and cell i has the polygon F_i on the
+    bisector of x and p_i (row 0, dual to the new edge x p_i). Their edges
+    are dual to triangles: an interior face of the conflict region (from
+    the circumcentre of one conflict simplex to the other's), a boundary face
+    (from the conflict simplex's circumcentre to that of x and the face) and
+    a new triangle x u v on a boundary edge uv (between the circumcentres
+    of x and the two boundary faces holding uv). Every vertex is computed
+    once (``zc``: conflict simplices, from the in-sphere test; ``zf``: x and
+    a boundary face, by Cramer's rule); a vertex whose simplex has a shape
+    measure (volume determinant over the product of its edge lengths) below
+    ``ftol`` gives up.
+
+    Lasserre's sum, with the cell's origin o_i = (x + p_i) / 2 on row 0:
+    ``V_i = (1/3) sum_j beta_ij area(P_ij)``, ``beta_ij`` the distance of
+    o_i from the plane of P_ij (facet 0 has ``beta = 0``), and in each
+    polygon ``area = (1/2) sum_e gamma_e len_e`` over its edges, the base
+    case ``len_e`` read off the edge's two end vertices:
+    ``gamma_e len_e = n . ((v_1 - o) x (v_2 - o))`` (n: the polygon's unit
+    normal, edges counterclockwise about it; the sum does not depend on the
+    origin o in the plane, and the edge term ``v_1 x v_2`` is shared by the
+    three polygons on the edge, with the orientation of the triangle). The
+    gradient needs facet 0's area and first moment, by the same sum of
+    degree 1: ``integral (y - o) dS = (1/3) sum_e gamma_e len_e (v_1 + v_2 - 2 o) / 2``.
+
+    Shapes: ``Tc[:ncav]`` (ncav, 4) local node indices, ``zc``/``zq`` as
+    filled by :func:`_region`, ``q[:K]`` (K, 3) neighbours relative to x,
+    ``qq`` (K,) scratch; ``pid`` (ncap, ncap) all -1 (restored on return);
+    polygon buffers ``pu, pv, pf, pt`` (npcap,), ``pS`` (npcap, 3), ``zf``
+    (nfcap, 3); ``a0`` (K,) scratch.
+    """
+    ok = True
+    for i in range(K):
+        qq[i] = q[i, 0] * q[i, 0] + q[i, 1] * q[i, 1] + q[i, 2] * q[i, 2]
+        vol[i] = 0.0
+        a0[i] = 0.0
+        for k in range(3):
+            gv[i, k] = 0.0
+    ftol2 = ftol * ftol
+    npair = 0
+    nb = 0
+    pcap = pu.shape[0]
+    for c in range(ncav):
+        if not abs(zq[c]) > ftol:
+            ok = False
+            break
+        s = cav[c]
+        sgn = 1.0 if zq[c] > 0.0 else -1.0
+        for k in range(4):
+            t = NB[s, k]
+            inner = t >= 0 and smark[t] == IN
+            if inner and sloc[t] < c:
+                continue   # the other simplex did this face
+            # the face's nodes sorted, i < j < l, and the orientation
+            # eps of (p_i, p_j, p_l, p_a), p_a the simplex's other node
+            # (and x: on the same side of the face)
+            if k == 0:
+                i, j, l = Tc[c, 1], Tc[c, 2], Tc[c, 3]
+            elif k == 1:
+                i, j, l = Tc[c, 0], Tc[c, 2], Tc[c, 3]
+            elif k == 2:
+                i, j, l = Tc[c, 0], Tc[c, 1], Tc[c, 3]
+            else:
+                i, j, l = Tc[c, 0], Tc[c, 1], Tc[c, 2]
+            eps = sgn if k % 2 == 1 else -sgn
+            if i > j:
+                i, j = j, i
+                eps = -eps
+            if j > l:
+                j, l = l, j
+                eps = -eps
+            if i > j:
+                i, j = j, i
+                eps = -eps
+            if inner:
+                o = sloc[t]
+                y0, y1, y2 = zc[o, 0], zc[o, 1], zc[o, 2]
+            else:
+                # the circumcentre of x and the face (a new simplex)
+                c0 = q[j, 1] * q[l, 2] - q[j, 2] * q[l, 1]
+                c1 = q[j, 2] * q[l, 0] - q[j, 0] * q[l, 2]
+                c2 = q[j, 0] * q[l, 1] - q[j, 1] * q[l, 0]
+                det = q[i, 0] * c0 + q[i, 1] * c1 + q[i, 2] * c2
+                # orient(p_i, p_j, p_l, x) = -sign(det) must be eps
+                if not (det * det > ftol2 * qq[i] * qq[j] * qq[l] and det * eps < 0.0):
+                    ok = False
+                    break
+                d0 = q[l, 1] * q[i, 2] - q[l, 2] * q[i, 1]
+                d1 = q[l, 2] * q[i, 0] - q[l, 0] * q[i, 2]
+                d2 = q[l, 0] * q[i, 1] - q[l, 1] * q[i, 0]
+                e0 = q[i, 1] * q[j, 2] - q[i, 2] * q[j, 1]
+                e1 = q[i, 2] * q[j, 0] - q[i, 0] * q[j, 2]
+                e2 = q[i, 0] * q[j, 1] - q[i, 1] * q[j, 0]
+                h = 0.5 / det
+                y0 = (qq[i] * c0 + qq[j] * d0 + qq[l] * e0) * h
+                y1 = (qq[i] * c1 + qq[j] * d1 + qq[l] * e1) * h
+                y2 = (qq[i] * c2 + qq[j] * d2 + qq[l] * e2) * h
+                if nb == zf.shape[0]:
+                    ok = False
+                    break
+                zf[nb, 0] = y0
+                zf[nb, 1] = y1
+                zf[nb, 2] = y2
+            # the edge runs from this simplex's circumcentre away from p_a:
+            # counterclockwise in P_ij and P_jl iff eps < 0, reversed in P_il
+            x0, x1, x2 = zc[c, 0], zc[c, 1], zc[c, 2]
+            if eps > 0.0:
+                x0, x1, x2, y0, y1, y2 = y0, y1, y2, x0, x1, x2
+            r0 = x1 * y2 - x2 * y1
+            r1 = x2 * y0 - x0 * y2
+            r2 = x0 * y1 - x1 * y0
+            for e in range(3):
+                if e == 0:
+                    u, v, sg = i, j, 1.0
+                elif e == 1:
+                    u, v, sg = j, l, 1.0
+                else:
+                    u, v, sg = i, l, -1.0
+                p = pid[u, v]
+                if p < 0:
+                    if npair == pcap:
+                        ok = False
+                        break
+                    p = npair
+                    npair += 1
+                    pid[u, v] = p
+                    pu[p] = u
+                    pv[p] = v
+                    pf[p] = -1
+                    pS[p, 0] = 0.0
+                    pS[p, 1] = 0.0
+                    pS[p, 2] = 0.0
+                pS[p, 0] += sg * r0
+                pS[p, 1] += sg * r1
+                pS[p, 2] += sg * r2
+                if inner:
+                    continue
+                # the boundary edge uv: the new triangle x u v, between the
+                # circumcentres of x and the two boundary faces on uv;
+                # tau = orient(p_u, p_v, p_w, x), p_w the face's third node
+                tau = sg * eps
+                g = pf[p]
+                if g == -1:
+                    pf[p] = nb
+                    pt[p] = tau
+                    continue
+                if g < 0 or pt[p] == tau:
+                    ok = False  # a third face on the edge, or not a surface
+                    break
+                if pt[p] > 0.0:
+                    a, b = g, nb
+                else:
+                    a, b = nb, g
+                w0 = zf[a, 1] * zf[b, 2] - zf[a, 2] * zf[b, 1]
+                w1 = zf[a, 2] * zf[b, 0] - zf[a, 0] * zf[b, 2]
+                w2 = zf[a, 0] * zf[b, 1] - zf[a, 1] * zf[b, 0]
+                # counterclockwise in F_u: from the face with tau > 0; P_uv
+                # lies on x's side of this edge, so it runs the other way there
+                pS[p, 0] -= w0
+                pS[p, 1] -= w1
+                pS[p, 2] -= w2
+                pf[p] = -2
+                if want_grad:
+                    # facet 0 of cell u and (reversed) of cell v: area terms
+                    # n . (v_1 x v_2) with n || q
+                    wu = q[u, 0] * w0 + q[u, 1] * w1 + q[u, 2] * w2
+                    wv = q[v, 0] * w0 + q[v, 1] * w1 + q[v, 2] * w2
+                    a0[u] += wu
+                    a0[v] -= wv
+                    for kk in range(3):
+                        m = zf[a, kk] + zf[b, kk]
+                        gv[u, kk] += wu * m
+                        gv[v, kk] -= wv * m
+            if not ok:
+                break
+            if not inner:
+                nb += 1
+        if not ok:
+            break
+    for p in range(npair):
+        u = pu[p]
+        v = pv[p]
+        pid[u, v] = -1
+        if pf[p] >= 0:
+            ok = False  # a boundary edge on one face only
+    if not ok:
+        return False
+    # Lasserre's sum over the facets: V_u += beta_uv area(P_uv) / 3 with
+    # beta_uv = q_v . D / (2 |D|), D = q_v - q_u, area = D . S / (2 |D|)
+    for p in range(npair):
+        u = pu[p]
+        v = pv[p]
+        D0 = q[v, 0] - q[u, 0]
+        D1 = q[v, 1] - q[u, 1]
+        D2 = q[v, 2] - q[u, 2]
+        sD = (D0 * pS[p, 0] + D1 * pS[p, 1] + D2 * pS[p, 2]) / (
+            12.0 * (D0 * D0 + D1 * D1 + D2 * D2))
+        vol[u] += (q[v, 0] * D0 + q[v, 1] * D1 + q[v, 2] * D2) * sD
+        vol[v] -= (q[u, 0] * D0 + q[u, 1] * D1 + q[u, 2] * D2) * sD
+    if want_grad:
+        # grad V_i = (1 / |q_i|) integral over facet 0 of (y - x) dS
+        #          = (sum_e w_e (v_1 + v_2) + a0 q_i / 2) / (6 |q_i|^2)
+        for i in range(K):
+            f = 1.0 / (6.0 * qq[i])
+            for k in range(3):
+                gv[i, k] = (gv[i, k] + 0.5 * a0[i] * q[i, k]) * f
+    return True
 
 
 @njit(cache=True, error_model="numpy")
@@ -998,9 +1242,9 @@ def _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g):
 
 @njit(cache=True, error_model="numpy")
 def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mark,
-           cav, cst, live, rowof, bf, nn, q, Tc, tab, A, B, I, AX, BX, M, W, act, nact,
-           mrows, cur, tpiv, acc, wm, gs, gc, gp, gq, rep, gmark, stamp, sc, G, E, Mn, rhs,
-           lam, vol, gv, out_i, out_v, out_g):
+           cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, sloc, qq, pid, pu, pv, pS, pf, pt, zf,
+           a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
+           gq, rep, gmark, stamp, sc, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
     """Sibson coordinates of one point x, searched for from simplex ``hint``.
 
     Writes up to ``nn.shape[0]`` entries into ``out_*`` (sorted by node
@@ -1014,11 +1258,12 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mar
     """
     ztol, btol, itol, flat, htol, lintol, wtol, vtol = (tols[0], tols[1], tols[2], tols[3],
                                                         tols[4], tols[5], tols[6], tols[7])
+    shape, lintol3, gradtol3 = tols[8], tols[9], tols[10]
     raw = kind == 1
     hullw = kind == 2
     st, info, ncav, K, nbf, degenerate = _region(
         P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, mark, cav, cst,
-        live, bf, nn, Tc, E, Mn, rhs, lam, out_i, out_v, out_g)
+        live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, out_i, out_v, out_g)
     if st != OK:
         return (1 if st == AT_NODE else 0), st, info
     # coordinates relative to x
@@ -1036,6 +1281,41 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mar
             for k in range(d):
                 out_g[0, k] = np.nan
             return 1, AT_NODE, 0
+    if d == 3 and not hullw and not degenerate:
+        # general position: the cells' faces from the known combinatorics,
+        # accepted if linear precision (and its derivative, sum_i q_i (x)
+        # grad V_i = V I) hold tightly; otherwise the general recursion below
+        if _cells3(S, NB, cav, ncav, smark, 2 * stamp_q, sloc, Tc, zc, zq, K, q, qq, want_grad,
+                   shape, pid, pu, pv, pS, pf, pt, zf, a0, vol, gv):
+            # every neighbour has a cell of positive volume here (a vertex
+            # of a simplex strictly in conflict); one that rounds to zero
+            # or below is left to the recursion
+            total = 0.0
+            good = True
+            for i in range(K):
+                total += vol[i]
+                if not vol[i] > 0.0:
+                    good = False
+            for k in range(d):
+                s = 0.0
+                for i in range(K):
+                    s += vol[i] * q[i, k]
+                if not abs(s) <= lintol3 * total * L:
+                    good = False
+            if good and want_grad:
+                scale = 0.0
+                for i in range(K):
+                    scale += max(abs(q[i, 0]), abs(q[i, 1]), abs(q[i, 2])) * max(
+                        abs(gv[i, 0]), abs(gv[i, 1]), abs(gv[i, 2]))
+                for k in range(d):
+                    for kk in range(d):
+                        s = -total if k == kk else 0.0
+                        for i in range(K):
+                            s += q[i, k] * gv[i, kk]
+                        if not abs(s) <= gradtol3 * scale:
+                            good = False
+            if good:
+                return _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g)
     flag = np.zeros(1, np.int64)
     for mode in range(3):
         # strict combinatorial filter, relaxed filter, no filter (safety nets)
@@ -1208,6 +1488,18 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         nn = np.empty(ncap, np.int64)
         q = np.empty((ncap, d))
         Tc = np.empty((4 * ccap, d + 1), np.int64)
+        zc = np.empty((ccap, d))
+        zq = np.empty(ccap)
+        sloc = np.empty(ns, np.int64)
+        qq = np.empty(ncap)
+        pid = np.full((ncap, ncap), -1, np.int64)
+        pu = np.empty(6 * ccap, np.int64)
+        pv = np.empty(6 * ccap, np.int64)
+        pS = np.empty((6 * ccap, d))
+        pf = np.empty(6 * ccap, np.int64)
+        pt = np.empty(6 * ccap)
+        zf = np.empty((2 * ccap, d))
+        a0 = np.empty(ncap)
         tab = np.empty((ncap, ncap))
         A = np.empty((d, ncap + 1, d))
         B = np.empty((d, ncap + 1))
@@ -1244,7 +1536,8 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         for r in range(lo, hi):
             cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, kind,
                                   tols,
-                                  smark, mark, cav, cst, live, rowof, bf, nn, q, Tc, tab,
+                                  smark, mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq,
+                                  sloc, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab,
                                   A, B, I, AX, BX, M, W, act,
                                   nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq, rep,
                                   gmark, stamp, sc, G, E, Mn,
@@ -1325,7 +1618,8 @@ def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap):
     count = np.empty(m, np.int64)
     status = np.empty(m, np.int64)
     info = np.empty(m, np.int64)
-    tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, _FLAT, _HULL, _LINEAR, _WALK, _VERTEX])
+    tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, _FLAT, _HULL, _LINEAR, _WALK, _VERTEX,
+                     _SHAPE, _LINEAR3, _GRAD3])
     nblocks = max(1, min(m // 16, 4 * numba.get_num_threads()))
     # small batches run serially: waking the thread pool costs more than it saves
     kernel = _query_batch if m >= _PARALLEL_MIN else _query_batch_serial

@@ -166,7 +166,7 @@ _CAPS = {2: (32, 64), 3: (96, 384), 4: (256, 2048)}
 # numba kernels
 # ---------------------------------------------------------------------------
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _cell(d, m0, A, B, I, AX, BX, M, W, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
           gq, rep, gmark, stamp, sc, full, strict, want_grad, want_mom, G, ztol, btol,
           flag, cell, tab):
@@ -546,7 +546,7 @@ def _cell(d, m0, A, B, I, AX, BX, M, W, Tc, nT, act, nact, mrows, cur, tpiv, acc
         l = nl
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _det_small(E, k):
     """Determinant of the leading k x k block of E (destroyed), partial pivoting."""
     det = 1.0
@@ -569,7 +569,7 @@ def _det_small(E, k):
     return det
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
     """Is x inside the circumsphere of simplex s? Returns ``(code, shape)``:
     code 2: strictly inside (the circumcentre is a vertex of x's Voronoi
@@ -633,7 +633,7 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
     return 0, shape
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _hull_distance(P, S, s, k, x, d, ctr, E, Mn):
     """Signed distance of x from the plane of the hull facet opposite vertex k
     of simplex s (positive on the side of ``ctr``, the centroid of the nodes,
@@ -687,7 +687,7 @@ def _hull_distance(P, S, s, k, x, d, ctr, E, Mn):
     return dist / np.sqrt(nrm2), L
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _barycentric(P, S, s, x, d, E, rhs, lam, flat_tol):
     """Barycentric coordinates of x in simplex s into ``lam``; returns True
     (and leaves ``lam`` alone) if the simplex is (nearly) flat: its volume
@@ -734,7 +734,7 @@ def _barycentric(P, S, s, x, d, E, rhs, lam, flat_tol):
     return False
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol, flat_tol):
     """Visibility walk from simplex s to a simplex containing x (barycentric
     coordinates >= -tol). Returns ``(simplex, status)``: OK, OUTSIDE (beyond a
@@ -779,7 +779,7 @@ def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol, flat_tol):
     return s, OVERFLOW
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _locate_brute(P, S, x, d, E, rhs, lam, tol, flat_tol):
     """Exhaustive search for a simplex containing x (-1 if none)."""
     best = -1
@@ -797,7 +797,7 @@ def _locate_brute(P, S, x, d, E, rhs, lam, tol, flat_tol):
     return best, bestv
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _vertex_simplices(d, m, A, B, Tc, nT, rowof, E, rhs, lam, ztol, vtol):
     """Keep the rows of ``Tc[:nT]`` (d constraint ids each) whose d planes meet
     in a point that satisfies all m rows of ``A[0], B[0]`` within ``vtol``;
@@ -848,7 +848,7 @@ def _vertex_simplices(d, m, A, B, Tc, nT, rowof, E, rhs, lam, ztol, vtol):
     return kept
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, mark, cav, cst,
             live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, out_i, out_v, out_g):
     """Locate x, grow its conflict region and collect the natural neighbours
@@ -971,7 +971,7 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
     return OK, 0, ncav, K, nbf, degenerate
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _cells3(S, NB, cav, ncav, smark, IN, sloc, Tc, zc, zq, K, q, qq, want_grad, ftol, pid,
             pu, pv, pS, pf, pt, zf, a0, vol, gv):
     """Second-order volumes ``vol[:K]`` (and their gradients ``gv[:K]``) of a
@@ -1190,10 +1190,11 @@ def _cells3(S, NB, cav, ncav, smark, IN, sloc, Tc, zc, zq, K, q, qq, want_grad, 
     return True
 
 
-@njit(cache=True, error_model="numpy")
-def _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g):
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _finish(K, d, nn, vol, gv, want_grad, raw, gc, out_i, out_v, out_g):
     """Coordinates (or raw volumes) and gradients of the K neighbours into
-    ``out_*``, sorted by node index; returns ``(count, status, 0)``."""
+    ``out_*``, sorted by node index; returns ``(count, status, 0)``. ``gc``:
+    scratch of length d."""
     # The dominant neighbour gets its gradient from complement sums,
     #   grad phi_d = (grad V_d (1 - phi_d) - phi_d sum_{j != d} grad V_j) / V,
     # which avoids cancelling two large terms close to node d.
@@ -1202,7 +1203,8 @@ def _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g):
         if vol[i] > vol[dom]:
             dom = i
     rest = 0.0
-    gc = np.zeros(d)
+    for k in range(d):
+        gc[k] = 0.0
     for i in range(K):
         if i != dom:
             rest += vol[i]
@@ -1240,11 +1242,11 @@ def _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g):
     return cnt, OK, 0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mark,
            cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, sloc, qq, pid, pu, pv, pS, pf, pt, zf,
            a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
-           gq, rep, gmark, stamp, sc, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
+           gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
     """Sibson coordinates of one point x, searched for from simplex ``hint``.
 
     Writes up to ``nn.shape[0]`` entries into ``out_*`` (sorted by node
@@ -1315,8 +1317,7 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mar
                         if not abs(s) <= gradtol3 * scale:
                             good = False
             if good:
-                return _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g)
-    flag = np.zeros(1, np.int64)
+                return _finish(K, d, nn, vol, gv, want_grad, raw, rhs, out_i, out_v, out_g)
     for mode in range(3):
         # strict combinatorial filter, relaxed filter, no filter (safety nets)
         full = mode == 2
@@ -1458,7 +1459,7 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mar
             break
     if flag[0] != 0:
         return 0, UNBOUNDED, 0
-    return _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g)
+    return _finish(K, d, nn, vol, gv, want_grad, raw, rhs, out_i, out_v, out_g)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -1523,6 +1524,7 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         gmark = np.zeros(ncap + 1, np.int64)
         stamp = np.zeros(ncap + 1, np.int64)
         sc = np.zeros(1, np.int64)
+        flag = np.zeros(1, np.int64)
         G = np.empty(d + 1)
         E = np.empty((d, d))
         Mn = np.empty((d, d))
@@ -1540,7 +1542,7 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
                                   sloc, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab,
                                   A, B, I, AX, BX, M, W, act,
                                   nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq, rep,
-                                  gmark, stamp, sc, G, E, Mn,
+                                  gmark, stamp, sc, flag, G, E, Mn,
                                   rhs, lam, vol, gv, oi, ov, og)
             count[r] = cnt
             status[r] = st

@@ -158,6 +158,10 @@ _SHAPE = 1e-3
 _LINEAR3 = 1e-12
 _GRAD3 = 1e-11
 
+# The circumcentres of all simplices are computed once per call (in parallel)
+# when there are at least 1/_CACHE_QUERIES queries per simplex.
+_CACHE_QUERIES = 8
+
 # default buffer sizes (natural neighbours, conflict simplices) per dimension
 _CAPS = {2: (32, 64), 3: (96, 384), 4: (256, 2048)}
 
@@ -570,13 +574,13 @@ def _det_small(E, k):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
-    """Is x inside the circumsphere of simplex s? Returns ``(code, shape)``:
-    code 2: strictly inside (the circumcentre is a vertex of x's Voronoi
-    cell); 1: on it within the tolerance, or the simplex is flat; 0: outside.
-    Unless flat, ``rhs[:d]`` holds the circumcentre relative to the first
-    vertex and ``shape`` is the signed volume determinant over the product of
-    the edge lengths from the first vertex (sign: the simplex's orientation)."""
+def _circumcentre(P, S, s, d, E, rhs, flat):
+    """Circumcentre of simplex s relative to its first vertex into ``rhs[:d]``
+    (Gaussian elimination with partial pivoting; ``E`` (d, d) scratch).
+    Returns the shape measure: the signed volume determinant over the
+    product of the edge lengths from the first vertex (sign: the simplex's
+    orientation), or 0.0 for a (nearly) flat simplex, at most ``flat`` in
+    size (``rhs`` is then undefined)."""
     v0 = S[s, 0]
     prod = 1.0
     for r in range(d):
@@ -588,7 +592,6 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
             e2 += e * e
         rhs[r] = 0.5 * e2
         prod *= np.sqrt(e2)
-    # solve E c = rhs by Gaussian elimination with partial pivoting
     det = 1.0
     for c in range(d):
         p = c
@@ -602,19 +605,54 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
             det = -det
         det *= E[c, c]
         if E[c, c] == 0.0:
-            return 1, 0.0
+            return 0.0
         for r in range(c + 1, d):
             f = E[r, c] / E[c, c]
             for j in range(c, d):
                 E[r, j] -= f * E[c, j]
             rhs[r] -= f * rhs[c]
     if abs(det) <= flat * prod:
-        return 1, 0.0
+        return 0.0
     for c in range(d - 1, -1, -1):
         acc = rhs[c]
         for j in range(c + 1, d):
             acc -= E[c, j] * rhs[j]
         rhs[c] = acc / E[c, c]
+    return det / prod
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _circumcentres(P, S, flat, CC, SH):
+    """:func:`_circumcentre` of every simplex: ``CC`` (ns, d), ``SH`` (ns,)."""
+    ns = S.shape[0]
+    d = P.shape[1]
+    nblocks = max(1, min(ns // 256, 64))
+    for blk in prange(nblocks):
+        E = np.empty((d, d))
+        rhs = np.empty(d)
+        for s in range(blk * ns // nblocks, (blk + 1) * ns // nblocks):
+            SH[s] = _circumcentre(P, S, s, d, E, rhs, flat)
+            for k in range(d):
+                CC[s, k] = rhs[k]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _in_conflict(P, S, s, x, d, E, rhs, tol, flat, cached, CC, SH):
+    """Is x inside the circumsphere of simplex s? Returns ``(code, shape)``:
+    code 2: strictly inside (the circumcentre is a vertex of x's Voronoi
+    cell); 1: on it within the tolerance, or the simplex is flat; 0: outside.
+    Unless flat, ``rhs[:d]`` holds the circumcentre relative to the first
+    vertex; ``shape`` is :func:`_circumcentre`'s, which is computed here or
+    (``cached``) read from ``CC``, ``SH``."""
+    if cached:
+        shape = SH[s]
+        for k in range(d):
+            rhs[k] = CC[s, k]
+    else:
+        shape = _circumcentre(P, S, s, d, E, rhs, flat)
+    if shape == 0.0:
+        return 1, 0.0
+    v0 = S[s, 0]
     w2 = 0.0
     wc = 0.0
     c2 = 0.0
@@ -624,10 +662,9 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
         wc += w * rhs[k]
         c2 += rhs[k] * rhs[k]
     power = w2 - 2.0 * wc
-    wn = np.sqrt(w2)
-    shape = det / prod
     if power < 0.0:
         return 2, shape
+    wn = np.sqrt(w2)
     if power < tol * wn * (wn + 2.0 * np.sqrt(c2)):
         return 1, shape
     return 0, shape
@@ -849,8 +886,8 @@ def _vertex_simplices(d, m, A, B, Tc, nT, rowof, E, rhs, lam, ztol, vtol):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, mark, cav, cst,
-            live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, out_i, out_v, out_g):
+def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, CC, SH, smark,
+            mark, cav, cst, live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, out_i, out_v, out_g):
     """Locate x, grow its conflict region and collect the natural neighbours
     ``nn[:K]`` (``live`` marks those with cells of positive volume), the
     boundary faces ``bf[:nbf]`` and the conflict simplices ``cav[:ncav]``
@@ -886,7 +923,7 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
     IN = 2 * stamp_q
     OUT = IN + 1
     cav[0] = s0
-    code, shape = _in_conflict(P, S, s0, x, d, E, rhs, itol, flat)
+    code, shape = _in_conflict(P, S, s0, x, d, E, rhs, itol, flat, cached, CC, SH)
     cst[0] = max(1, code)
     zq[0] = shape
     for k in range(d):
@@ -909,7 +946,7 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
                 continue
             if smark[t] == IN or smark[t] == OUT:
                 continue
-            code, shape = _in_conflict(P, S, t, x, d, E, rhs, itol, flat)
+            code, shape = _in_conflict(P, S, t, x, d, E, rhs, itol, flat, cached, CC, SH)
             if code > 0:
                 if ncav == ccap:
                     return OVERFLOW, 0, 0, 0, 0, False
@@ -1243,7 +1280,7 @@ def _finish(K, d, nn, vol, gv, want_grad, raw, gc, out_i, out_v, out_g):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mark,
+def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC, SH, smark, mark,
            cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, sloc, qq, pid, pu, pv, pS, pf, pt, zf,
            a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
            gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
@@ -1264,8 +1301,8 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mar
     raw = kind == 1
     hullw = kind == 2
     st, info, ncav, K, nbf, degenerate = _region(
-        P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, mark, cav, cst,
-        live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, out_i, out_v, out_g)
+        P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, CC, SH, smark, mark,
+        cav, cst, live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, out_i, out_v, out_g)
     if st != OK:
         return (1 if st == AT_NODE else 0), st, info
     # coordinates relative to x
@@ -1463,7 +1500,7 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mar
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
+def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols, cached, CC, SH,
                  out_i, out_v, out_g, count, status, info):
     """Coordinates of m points into padded (m, ncap) arrays, parallel over blocks."""
     m = Q.shape[0]
@@ -1537,7 +1574,7 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         og = np.empty((ncap, d))
         for r in range(lo, hi):
             cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, kind,
-                                  tols,
+                                  tols, cached, CC, SH,
                                   smark, mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq,
                                   sloc, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab,
                                   A, B, I, AX, BX, M, W, act,
@@ -1609,11 +1646,27 @@ def delaunay_of(p) -> Delaunay:
     return tri
 
 
-def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap):
+def _circumcentre_cache(P, S, m):
+    """``(cached, CC, SH)`` for the kernels: the circumcentres and shape
+    measures of all simplices (:func:`_circumcentres`) when m queries will
+    probably test most of them (each tests ~40 in 3D), else empty arrays."""
+    ns, d = S.shape[0], P.shape[1]
+    if _CACHE_QUERIES * m < ns:
+        return False, np.empty((0, d)), np.empty(0)
+    CC = np.empty((ns, d))
+    SH = np.empty(ns)
+    _circumcentres(P, S, _FLAT, CC, SH)
+    return True, CC, SH
+
+
+def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap, cache=None):
     """Run the kernel on a batch; returns ((rows, cols, values, gradients),
-    status, info)."""
+    status, info). ``cache``: :func:`_circumcentre_cache` (computed here if
+    None)."""
     import numba
     m, d = Q.shape
+    if cache is None:
+        cache = _circumcentre_cache(P, S, m)
     out_i = np.empty((m, ncap), np.int64)
     out_v = np.empty((m, ncap))
     out_g = np.empty((d, m, ncap) if gradient else (d, 1, 1))
@@ -1625,7 +1678,7 @@ def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap):
     nblocks = max(1, min(m // 16, 4 * numba.get_num_threads()))
     # small batches run serially: waking the thread pool costs more than it saves
     kernel = _query_batch if m >= _PARALLEL_MIN else _query_batch_serial
-    kernel(P, S, NB, Q, start, gradient, kind, ncap, ccap, nblocks, tols,
+    kernel(P, S, NB, Q, start, gradient, kind, ncap, ccap, nblocks, tols, *cache,
            out_i, out_v, out_g, count, status, info)
     _, indices, data, grads = compress(count, out_i, out_v, out_g, gradient, P.shape[0])
     rows = np.repeat(np.arange(m), count)
@@ -1772,13 +1825,14 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
     status = np.full(m, OUTSIDE, np.int64)
     info = np.zeros(m, np.int64)
     parts = []
+    cache = _circumcentre_cache(p, S, m)
     # chunks bound the padded output buffers (d + 2 numbers per neighbour slot)
     for c0 in range(0, m, chunk):
         todo = np.arange(c0, min(m, c0 + chunk))
         ncap, ccap = _CAPS[d]
         while todo.size:
             (r, c, v, g), st, inf = _run(p, S, NB, np.ascontiguousarray(q[todo]), start[todo],
-                                         gradient, kind, ncap, ccap)
+                                         gradient, kind, ncap, ccap, cache)
             status[todo] = st
             info[todo] = inf
             parts.append((todo[r], c, v, g))

@@ -141,7 +141,7 @@ def run_nd(n: int, d: int, repeat: int) -> dict:
                                      dtype=np.int64)
         out["stage_cache"] = best_of(lambda: L._circumcentre_cache(p, S, m))
         cache = L._circumcentre_cache(p, S, m)
-        ncap, ccap = L._CAPS[d]
+        ncap, ccap, _ = L._CAPS[d]
         tols = np.array([L._ZERO_ROW, L._TIE, L._INSPHERE, L._FLAT, L._HULL, L._LINEAR,
                          L._WALK, L._VERTEX, L._SHAPE, L._LINEAR3, L._GRAD3])
         drv = _region_driver()
@@ -149,7 +149,7 @@ def run_nd(n: int, d: int, repeat: int) -> dict:
         out["stage_region"] = best_of(lambda: drv(p, S, NB, q, start, ncap, ccap, tols, *cache))
         for grad in (False, True):
             out[f"stage_kernel_{'grad' if grad else 'vals'}"] = best_of(
-                lambda: L._run(p, S, NB, q, start, grad, 0, ncap, ccap, cache))
+                lambda: L._run(p, S, NB, q, start, grad, 0, L._CAPS[d], cache))
     return out
 
 

@@ -162,8 +162,9 @@ _GRAD3 = 1e-11
 # when there are at least 1/_CACHE_QUERIES queries per simplex.
 _CACHE_QUERIES = 8
 
-# default buffer sizes (natural neighbours, conflict simplices) per dimension
-_CAPS = {2: (32, 64), 3: (96, 384), 4: (256, 2048)}
+# default buffer sizes (natural neighbours, conflict simplices, output entries
+# per query) per dimension
+_CAPS = {2: (32, 64, 24), 3: (96, 384, 64), 4: (256, 2048, 256)}
 
 
 # ---------------------------------------------------------------------------
@@ -1499,6 +1500,36 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC
     return _finish(K, d, nn, vol, gv, want_grad, raw, rhs, out_i, out_v, out_g)
 
 
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC, SH, smark,
+           mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, sloc, qq, pid, pu, pv, pS, pf, pt,
+           zf, a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
+           gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov, og, out_i,
+           out_v, out_g, count, status, info):
+    """Queries lo..hi-1 of ``Q`` with one set of buffers (see :func:`_query`)
+    into rows of the padded outputs; a query with more entries than a row
+    holds gets status OVERFLOW (redone with larger buffers)."""
+    width = out_i.shape[1]
+    for r in range(lo, hi):
+        cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, kind, tols,
+                              cached, CC, SH, smark, mark, cav, cst, live, rowof, bf, nn, q, Tc,
+                              zc, zq, sloc, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab, A, B, I,
+                              AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq,
+                              rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov,
+                              og)
+        if cnt > width:
+            cnt, st, inf = 0, OVERFLOW, 0
+        count[r] = cnt
+        status[r] = st
+        info[r] = inf
+        for j in range(cnt):
+            out_i[r, j] = oi[j]
+            out_v[r, j] = ov[j]
+            if want_grad:
+                for k in range(d):
+                    out_g[k, r, j] = og[j, k]
+
+
 @njit(cache=True, parallel=True, error_model="numpy")
 def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols, cached, CC, SH,
                  out_i, out_v, out_g, count, status, info):
@@ -1572,24 +1603,11 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         oi = np.empty(ncap, np.int64)
         ov = np.empty(ncap)
         og = np.empty((ncap, d))
-        for r in range(lo, hi):
-            cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, kind,
-                                  tols, cached, CC, SH,
-                                  smark, mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq,
-                                  sloc, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab,
-                                  A, B, I, AX, BX, M, W, act,
-                                  nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq, rep,
-                                  gmark, stamp, sc, flag, G, E, Mn,
-                                  rhs, lam, vol, gv, oi, ov, og)
-            count[r] = cnt
-            status[r] = st
-            info[r] = inf
-            for j in range(cnt):
-                out_i[r, j] = oi[j]
-                out_v[r, j] = ov[j]
-                if want_grad:
-                    for k in range(d):
-                        out_g[k, r, j] = og[j, k]
+        _block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC, SH, smark,
+               mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, sloc, qq, pid, pu, pv, pS, pf,
+               pt, zf, a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs,
+               gc, gp, gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov, og,
+               out_i, out_v, out_g, count, status, info)
 
 
 _query_batch_serial = njit(cache=True, error_model="numpy")(_query_batch.py_func)
@@ -1659,17 +1677,21 @@ def _circumcentre_cache(P, S, m):
     return True, CC, SH
 
 
-def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap, cache=None):
-    """Run the kernel on a batch; returns ((rows, cols, values, gradients),
-    status, info). ``cache``: :func:`_circumcentre_cache` (computed here if
-    None)."""
+def _run(P, S, NB, Q, start, gradient, kind, caps, cache=None, out=None):
+    """Run the kernel on a batch with buffer sizes ``caps`` (see ``_CAPS``);
+    returns ((rows, cols, values, gradients), status, info). ``cache``:
+    :func:`_circumcentre_cache` (computed here if None); ``out``: padded
+    output buffers ``(out_i, out_v, out_g)`` of at least m rows and the
+    width ``caps[2]`` to reuse (allocated here if None)."""
     import numba
     m, d = Q.shape
+    ncap, ccap, width = caps
     if cache is None:
         cache = _circumcentre_cache(P, S, m)
-    out_i = np.empty((m, ncap), np.int64)
-    out_v = np.empty((m, ncap))
-    out_g = np.empty((d, m, ncap) if gradient else (d, 1, 1))
+    if out is None or out[0].shape[0] < m or out[0].shape[1] != width:
+        out = _out_buffers(m, d, width, gradient)
+    out_i, out_v = out[0][:m], out[1][:m]
+    out_g = out[2][:d * m * width].reshape(d, m, width) if gradient else out[2]
     count = np.empty(m, np.int64)
     status = np.empty(m, np.int64)
     info = np.empty(m, np.int64)
@@ -1683,6 +1705,13 @@ def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap, cache=None):
     _, indices, data, grads = compress(count, out_i, out_v, out_g, gradient, P.shape[0])
     rows = np.repeat(np.arange(m), count)
     return (rows, indices, data, grads), status, info
+
+
+def _out_buffers(m, d, width, gradient):
+    """Padded kernel outputs for m queries of up to ``width`` entries (the
+    gradients' flat, viewed as (d, m', width) for m' <= m queries)."""
+    return (np.empty((m, width), np.int64), np.empty((m, width)),
+            np.empty(d * m * width if gradient else (d, 1, 1)))
 
 
 def _facet_planes(p, S, facets):
@@ -1826,20 +1855,22 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
     info = np.zeros(m, np.int64)
     parts = []
     cache = _circumcentre_cache(p, S, m)
-    # chunks bound the padded output buffers (d + 2 numbers per neighbour slot)
+    # chunks bound the padded output buffers (d + 2 numbers per neighbour slot),
+    # which the chunks reuse
+    out = _out_buffers(min(m, chunk), d, _CAPS[d][2], gradient)
     for c0 in range(0, m, chunk):
         todo = np.arange(c0, min(m, c0 + chunk))
-        ncap, ccap = _CAPS[d]
+        caps = _CAPS[d]
         while todo.size:
             (r, c, v, g), st, inf = _run(p, S, NB, np.ascontiguousarray(q[todo]), start[todo],
-                                         gradient, kind, ncap, ccap, cache)
+                                         gradient, kind, caps, cache, out)
             status[todo] = st
             info[todo] = inf
             parts.append((todo[r], c, v, g))
             # rare: more natural neighbours or conflict simplices than the buffers
             # hold (co-spherical clusters); redo those with larger buffers
             todo = todo[st == OVERFLOW]
-            ncap, ccap = 4 * ncap, 4 * ccap
+            caps = tuple(4 * c for c in caps)
     raise_outside(status, q)
     bad = np.flatnonzero(status == UNBOUNDED)
     if bad.size:  # pragma: no cover - a bounded cell is guaranteed inside the hull
@@ -1858,13 +1889,20 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
     if gradient:
         g = np.concatenate([a[3] for a in parts], axis=1) if parts else np.zeros((d, 0))
         vals += list(g)
-    order = np.lexsort((cols, rows))
     indptr = np.zeros(m + 1, np.int64)
     np.cumsum(np.bincount(rows, minlength=m), out=indptr[1:])
     idx_dtype = index_dtype(n, rows.size)
-    indices = cols[order].astype(idx_dtype)
     indptr = indptr.astype(idx_dtype)
-    mats = [sp.csr_matrix((v[order], indices, indptr), shape=(m, n)) for v in vals]
+    # every row comes from one part, sorted by column, and the kernel's rows
+    # come in order: only redone (overflow) and hull rows need moving, and a
+    # stable sort by row (nearly sorted data) does it
+    if np.all(rows[1:] >= rows[:-1]):
+        indices = cols.astype(idx_dtype, copy=False)
+    else:
+        order = np.argsort(rows, kind="stable")
+        indices = cols[order].astype(idx_dtype)
+        vals = [v[order] for v in vals]
+    mats = [sp.csr_matrix((v, indices, indptr), shape=(m, n)) for v in vals]
     if hull_status:
         return mats[0], status, info
     if gradient and undefined == "raise":

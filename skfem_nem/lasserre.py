@@ -928,13 +928,14 @@ def _vertex_simplices(d, m, A, B, Tc, nT, rowof, E, rhs, lam, ztol, vtol):
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, CC, SH, smark,
-            mark, cav, cst, live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, out_i, out_v, out_g):
+            mark, cav, cst, live, bf, nn, Tc, zc, zq, E, Mn, rhs, lam, out_i, out_v, out_g):
     """Locate x, grow its conflict region and collect the natural neighbours
     ``nn[:K]`` (``live`` marks those with cells of positive volume), the
     boundary faces ``bf[:nbf]`` and the conflict simplices ``cav[:ncav]``
     (``Tc[:ncav]``: in local indices; ``zc[:ncav]``: their circumcentres
     relative to x; ``zq[:ncav]``: their signed shape measures, see
-    :func:`_in_conflict`; ``sloc[cav[c]] = c``). Returns
+    :func:`_in_conflict`; ``smark[cav[c]] = stamp_q * (ccap + 1) + c``, ccap
+    the length of ``cav``). Returns
     ``(status, info, ncav, K, nbf, degenerate)``; at a node writes the
     Kronecker delta into ``out_*``."""
     ccap = cav.shape[0]
@@ -960,16 +961,16 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, 
             for k in range(d):
                 out_g[0, k] = np.nan
             return AT_NODE, 0, 0, 0, 0, False
-    # conflict region by breadth-first search; smark = 2 stamp (in), 2 stamp + 1 (out)
-    IN = 2 * stamp_q
-    OUT = IN + 1
+    # conflict region by breadth-first search; smark: IN + c for the conflict
+    # simplex c, OUT for a simplex tested and found out
+    IN = stamp_q * (ccap + 1)
+    OUT = IN + ccap
     cav[0] = s0
     code, shape = _in_conflict(P, S, s0, x, d, E, rhs, itol, flat, cached, CC, SH)
     cst[0] = max(1, code)
     zq[0] = shape
     for k in range(d):
         zc[0, k] = rhs[k] + (P[S[s0, 0], k] - x[k])
-    sloc[s0] = 0
     smark[s0] = IN
     ncav = 1
     head = 0
@@ -985,7 +986,7 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, 
                 if dist <= htol * L:
                     return ON_HULL, s * (d + 1) + k, 0, 0, 0, False
                 continue
-            if smark[t] == IN or smark[t] == OUT:
+            if IN <= smark[t] <= OUT:
                 continue
             code, shape = _in_conflict(P, S, t, x, d, E, rhs, itol, flat, cached, CC, SH)
             if code > 0:
@@ -996,9 +997,8 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, 
                 zq[ncav] = shape
                 for k in range(d):
                     zc[ncav, k] = rhs[k] + (P[S[t, 0], k] - x[k])
-                sloc[t] = ncav
+                smark[t] = IN + ncav
                 ncav += 1
-                smark[t] = IN
             else:
                 smark[t] = OUT
     # natural neighbours (local indices through mark); only the nodes of
@@ -1024,7 +1024,7 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, 
         s = cav[c]
         for k in range(d + 1):
             t = NB[s, k]
-            if t >= 0 and smark[t] == IN:
+            if t >= 0 and IN <= smark[t] < OUT:
                 continue
             if nbf == bf.shape[0]:
                 for jj in range(K):
@@ -1050,7 +1050,7 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, 
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _cells3(S, NB, cav, ncav, smark, IN, sloc, Tc, zc, zq, K, q, qq, want_grad, ftol, pid,
+def _cells3(S, NB, cav, ncav, smark, IN, Tc, zc, zq, K, q, qq, want_grad, ftol, pid,
             pu, pv, pS, pf, pt, zf, a0, vol, gv):
     """Second-order volumes ``vol[:K]`` (and their gradients ``gv[:K]``) of a
     3D query in general position, from the known combinatorics of its
@@ -1084,8 +1084,9 @@ def _cells3(S, NB, cav, ncav, smark, IN, sloc, Tc, zc, zq, K, q, qq, want_grad, 
     gradient needs facet 0's area and first moment, by the same sum of
     degree 1: ``integral (y - o) dS = (1/3) sum_e gamma_e len_e (v_1 + v_2 - 2 o) / 2``.
 
-    Shapes: ``Tc[:ncav]`` (ncav, 4) local node indices, ``zc``/``zq`` as
-    filled by :func:`_region`, ``q[:K]`` (K, 3) neighbours relative to x,
+    Shapes: ``Tc[:ncav]`` (ncav, 4) local node indices, ``zc``/``zq`` and
+    ``smark`` (``IN + c`` for the conflict simplex c) as filled by
+    :func:`_region`, ``q[:K]`` (K, 3) neighbours relative to x,
     ``qq`` (K,) scratch; ``pid`` (ncap, ncap) all -1 (restored on return);
     polygon buffers ``pu, pv, pf, pt`` (npcap,), ``pS`` (npcap, 3), ``zf``
     (nfcap, 3); ``a0`` (K,) scratch.
@@ -1109,8 +1110,9 @@ def _cells3(S, NB, cav, ncav, smark, IN, sloc, Tc, zc, zq, K, q, qq, want_grad, 
         sgn = 1.0 if zq[c] > 0.0 else -1.0
         for k in range(4):
             t = NB[s, k]
-            inner = t >= 0 and smark[t] == IN
-            if inner and sloc[t] < c:
+            o = smark[t] - IN if t >= 0 else -1
+            inner = 0 <= o < cav.shape[0]
+            if inner and o < c:
                 continue   # the other simplex did this face
             # the face's nodes sorted, i < j < l, and the orientation
             # eps of (p_i, p_j, p_l, p_a), p_a the simplex's other node
@@ -1134,7 +1136,6 @@ def _cells3(S, NB, cav, ncav, smark, IN, sloc, Tc, zc, zq, K, q, qq, want_grad, 
                 i, j = j, i
                 eps = -eps
             if inner:
-                o = sloc[t]
                 y0, y1, y2 = zc[o, 0], zc[o, 1], zc[o, 2]
             else:
                 # the circumcentre of x and the face (a new simplex)
@@ -1322,7 +1323,7 @@ def _finish(K, d, nn, vol, gv, want_grad, raw, gc, out_i, out_v, out_g):
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC, SH, smark, mark,
-           cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, sloc, qq, pid, pu, pv, pS, pf, pt, zf,
+           cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf, pt, zf,
            a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
            gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
     """Sibson coordinates of one point x, searched for from simplex ``hint``.
@@ -1345,7 +1346,7 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC
     hullw = kind == 2
     st, info, ncav, K, nbf, degenerate = _region(
         P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, CC, SH, smark, mark,
-        cav, cst, live, bf, nn, Tc, zc, zq, sloc, E, Mn, rhs, lam, out_i, out_v, out_g)
+        cav, cst, live, bf, nn, Tc, zc, zq, E, Mn, rhs, lam, out_i, out_v, out_g)
     if st != OK:
         return (1 if st == AT_NODE else 0), st, info
     # coordinates relative to x
@@ -1367,7 +1368,8 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC
         # general position: the cells' faces from the known combinatorics,
         # accepted if linear precision (and its derivative, sum_i q_i (x)
         # grad V_i = V I) hold tightly; otherwise the general recursion below
-        if _cells3(S, NB, cav, ncav, smark, 2 * stamp_q, sloc, Tc, zc, zq, K, q, qq, want_grad,
+        if _cells3(S, NB, cav, ncav, smark, stamp_q * (cav.shape[0] + 1), Tc, zc, zq, K, q, qq,
+                   want_grad,
                    shape, pid, pu, pv, pS, pf, pt, zf, a0, vol, gv):
             # every neighbour has a cell of positive volume here (a vertex
             # of a simplex strictly in conflict); one that rounds to zero
@@ -1544,7 +1546,7 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def _block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC, SH, smark,
-           mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, sloc, qq, pid, pu, pv, pS, pf, pt,
+           mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf, pt,
            zf, a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
            gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov, og, out_i,
            out_v, out_g, count, status, info):
@@ -1555,7 +1557,7 @@ def _block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC
     for r in range(lo, hi):
         cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, kind, tols,
                               cached, CC, SH, smark, mark, cav, cst, live, rowof, bf, nn, q, Tc,
-                              zc, zq, sloc, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab, A, B, I,
+                              zc, zq, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab, A, B, I,
                               AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq,
                               rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov,
                               og)
@@ -1601,7 +1603,6 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         Tc = np.empty((4 * ccap, d + 1), np.int64)
         zc = np.empty((ccap, d))
         zq = np.empty(ccap)
-        sloc = np.empty(ns, np.int64)
         qq = np.empty(ncap)
         pid = np.full((ncap, ncap), -1, np.int64)
         pu = np.empty(6 * ccap, np.int64)
@@ -1646,7 +1647,7 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         ov = np.empty(ncap)
         og = np.empty((ncap, d))
         _block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC, SH, smark,
-               mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, sloc, qq, pid, pu, pv, pS, pf,
+               mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf,
                pt, zf, a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs,
                gc, gp, gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov, og,
                out_i, out_v, out_g, count, status, info)

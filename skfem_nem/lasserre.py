@@ -1926,12 +1926,16 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
         parts.append((hull[H.row], H.col, H.data, np.full((d, H.nnz), np.nan)))
     # one COO -> CSR conversion per matrix from the same (row, col) arrays:
     # all matrices get the same pattern, rows sorted by column index
-    rows = np.concatenate([a[0] for a in parts]) if parts else np.zeros(0, np.int64)
-    cols = np.concatenate([a[1] for a in parts]) if parts else np.zeros(0, np.int64)
-    vals = [np.concatenate([a[2] for a in parts]) if parts else np.zeros(0)]
+    if not parts:
+        parts = [(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((d, 0)))]
+
+    def joined(k, axis=0):
+        return parts[0][k] if len(parts) == 1 else np.concatenate([a[k] for a in parts], axis)
+
+    rows, cols = joined(0), joined(1)
+    vals = [joined(2)]
     if gradient:
-        g = np.concatenate([a[3] for a in parts], axis=1) if parts else np.zeros((d, 0))
-        vals += list(g)
+        vals += list(joined(3, axis=1))
     indptr = np.zeros(m + 1, np.int64)
     np.cumsum(np.bincount(rows, minlength=m), out=indptr[1:])
     idx_dtype = index_dtype(n, rows.size)

@@ -142,7 +142,7 @@ def run_nd(n: int, d: int, repeat: int) -> dict:
         cache = L._circumcentre_cache(p, S, m)
         ncap, ccap, _ = L._CAPS[d]
         tols = np.array([L._ZERO_ROW, L._TIE, L._INSPHERE, L._FLAT, L._HULL, L._LINEAR,
-                         L._WALK, L._VERTEX, L._SHAPE, L._LINEAR3, L._GRAD3])
+                         L._WALK, L._VERTEX, L._SHAPE, L._LINEAR3, L._GRAD3, L._NEAR3])
         drv = _region_driver()
         drv(p, S, NB, q[:100], start[:100], ncap, ccap, tols, *cache)
         out["stage_region"] = best_of(lambda: drv(p, S, NB, q, start, ncap, ccap, tols, *cache))

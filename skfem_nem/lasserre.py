@@ -1091,7 +1091,10 @@ def _cells3(S, NB, cav, ncav, smark, IN, Tc, zc, zq, K, q, qq, want_grad, ftol, 
     origin o in the plane, and the edge term ``v_1 x v_2`` is shared by the
     three polygons on the edge, with the orientation of the triangle). The
     gradient needs facet 0's area and first moment, by the same sum of
-    degree 1: ``integral (y - o) dS = (1/3) sum_e gamma_e len_e (v_1 + v_2 - 2 o) / 2``.
+    degree 1: ``integral (y - o) dS = (1/3) sum_e gamma_e len_e m_e`` with
+    ``m_e = (v_1 + v_2) / 2 - o``; on facet 0 the normal is parallel to
+    ``o_i - x``, so there ``gamma_e len_e = n . (v_1 x v_2)`` with the
+    vertices relative to x.
 
     Shapes: ``Tc[:ncav]`` (ncav, 4) local node indices, ``zc``/``zq`` and
     ``smark`` (``IN + c`` for the conflict simplex c) as filled by

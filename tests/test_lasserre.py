@@ -411,7 +411,8 @@ def test_3d_faces_from_combinatorics_match_the_recursion(monkeypatch):
     inside = np.einsum("mk,mkd->md", rng.dirichlet(np.ones(4), 300), p[tri.simplices[s]])
     i = np.flatnonzero((np.abs(p - 0.5) < 0.4).all(1))[:60]
     v = rng.standard_normal((60, 3))
-    near = p[i] + np.repeat([1e-3, 1e-6, 1e-9], 20)[:, None] * v / np.linalg.norm(v, axis=1)[:, None]
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    near = p[i] + np.repeat([1e-3, 1e-6, 1e-9], 20)[:, None] * v
     hull = 0.05 + 0.9 * rng.random((40, 3))
     hull[:, 2] = np.repeat([1e-2, 1e-4, 1e-7, 1e-10], 10)
     q = np.r_[inside, on_faces(p, tri, 60, seed=30, dim=2), on_faces(p, tri, 60, seed=31, dim=1),

@@ -13,15 +13,20 @@ Natural neighbours
     transforms through LAPACK, which with a multithreaded BLAS took 32 s for
     1.3e5 simplices. The natural neighbours of x are the vertices of the
     simplices whose circumsphere contains x (the conflict region, grown
-    through ``neighbors``). In-sphere test: the circumcentre ``c`` is solved
-    relative to the simplex's first vertex ``v0`` (Gaussian elimination with
-    partial pivoting); the power ``|w|^2 - 2 w.c`` (``w = x - v0``) is
-    negative strictly inside. Simplices with a power below
+    through ``neighbors``). In-sphere test: the circumcentre is solved
+    relative to the simplex's first vertex (Gaussian elimination with
+    partial pivoting); the power ``|w|^2 - 2 w.c`` (``w = x - v``, ``c`` the
+    circumcentre relative to v, v the vertex nearest to x, so that the
+    round-off shrinks with the distance to a node) is negative strictly
+    inside. Simplices with a power below
     ``_INSPHERE * |w| (|w| + 2|c|)`` (a generous bound on its round-off),
     and (nearly) flat ones (Qhull's ``Qt`` makes them for co-spherical
     nodes, e.g. lattices), join the region too, so that it stays connected
     and no neighbour is lost; only the nodes of simplices strictly in
-    conflict get cells (the others' cells are empty). When a call has at
+    conflict get cells (the others' cells are empty). Should the walk's
+    tolerance have ended in a simplex whose circumsphere x is outside of
+    (x within ~1e-12 of a vertex), the walk goes on without tolerance to the
+    simplex that holds x. When a call has at
     least one query per ``_CACHE_QUERIES`` simplices, the circumcentres of
     all simplices are computed once beforehand (in parallel; each simplex
     is tested ~20 times by spatially sorted queries in 3D), with the same
@@ -702,15 +707,30 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat, cached, CC, SH):
         shape = _circumcentre(P, S, s, d, E, rhs, flat)
     if shape == 0.0:
         return 1, 0.0
+    # the power of x relative to the vertex nearest to it, whose round-off
+    # (and so the tolerance) shrinks with the distance: within ~1e-11 of a
+    # node every simplex around it is then still decided, not borderline
     v0 = S[s, 0]
+    vn = v0
+    best = np.inf
+    for j in range(d + 1):
+        v = S[s, j]
+        w2 = 0.0
+        for k in range(d):
+            w = x[k] - P[v, k]
+            w2 += w * w
+        if w2 < best:
+            best = w2
+            vn = v
     w2 = 0.0
     wc = 0.0
     c2 = 0.0
     for k in range(d):
-        w = x[k] - P[v0, k]
+        w = x[k] - P[vn, k]
+        cn = rhs[k] - (P[vn, k] - P[v0, k])
         w2 += w * w
-        wc += w * rhs[k]
-        c2 += rhs[k] * rhs[k]
+        wc += w * cn
+        c2 += cn * cn
     power = w2 - 2.0 * wc
     if power < 0.0:
         return 2, shape
@@ -974,8 +994,19 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, 
     # simplex c, OUT for a simplex tested and found out
     IN = stamp_q * (ccap + 1)
     OUT = IN + ccap
-    cav[0] = s0
     code, shape = _in_conflict(P, S, s0, x, d, E, rhs, itol, flat, cached, CC, SH)
+    if code == 0:
+        # x is outside the circumsphere of s0, so outside s0 itself, which the
+        # walk's tolerance accepted (within ~1e-12 of a vertex, closer than
+        # the in-sphere test's round-off bound): the region would not grow
+        # from there; walk on with no tolerance to the simplex holding x
+        s1, st = _locate(P, S, NB, x, s0, d, ctr, E, Mn, rhs, lam, 0.0, htol, flat)
+        if st == OVERFLOW:
+            s1, _ = _locate_brute(P, S, x, d, E, rhs, lam, 0.0, flat)
+        if st != OUTSIDE and s1 >= 0 and s1 != s0:
+            s0 = s1
+            code, shape = _in_conflict(P, S, s0, x, d, E, rhs, itol, flat, cached, CC, SH)
+    cav[0] = s0
     cst[0] = max(1, code)
     zq[0] = shape
     for k in range(d):

@@ -428,3 +428,20 @@ def test_3d_faces_from_combinatorics_match_the_recursion(monkeypatch):
     # most of these queries did take the faces from the combinatorics
     fast = np.asarray(abs(F - F0).max(axis=1).todense()).ravel() > 0
     assert fast.mean() > 0.5
+
+
+def test_3d_within_round_off_of_a_node():
+    """Within 1e-13 of a node the walk's tolerance can end in a simplex that
+    does not hold x and whose circumsphere x is outside of; the region must
+    still be found (this raised "came out unbounded" before)."""
+    p = cube_nodes(1000, 3, seed=32)
+    rng = np.random.default_rng(33)
+    i = np.flatnonzero((np.abs(p - 0.5) < 0.45).all(1))[:150]
+    v = rng.standard_normal((150, 3))
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    for r in (1e-13, 1e-14, 1e-15):
+        x = p[i] + r * v
+        F = dense(sibson_coordinates_nd(p, x))
+        np.testing.assert_allclose(F.sum(1), 1.0, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(F @ p, x, rtol=0, atol=1e-12)
+        assert np.all(F[np.arange(150), i] > 1 - 1e-9)

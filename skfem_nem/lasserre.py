@@ -16,9 +16,10 @@ Natural neighbours
     through ``neighbors``). In-sphere test: the circumcentre is solved
     relative to the simplex's first vertex (Gaussian elimination with
     partial pivoting); the power ``|w|^2 - 2 w.c`` (``w = x - v``, ``c`` the
-    circumcentre relative to v, v the vertex nearest to x, so that the
-    round-off shrinks with the distance to a node) is negative strictly
-    inside. Simplices with a power below
+    circumcentre relative to v, v that vertex; within its round-off bound
+    the power is recomputed relative to the vertex nearest to x, whose bound
+    shrinks with the distance to a node) is negative strictly inside.
+    Simplices with a power below
     ``_INSPHERE * |w| (|w| + 2|c|)`` (a generous bound on its round-off),
     and (nearly) flat ones (Qhull's ``Qt`` makes them for co-spherical
     nodes, e.g. lattices), join the region too, so that it stays connected
@@ -707,35 +708,49 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat, cached, CC, SH):
         shape = _circumcentre(P, S, s, d, E, rhs, flat)
     if shape == 0.0:
         return 1, 0.0
-    # the power of x relative to the vertex nearest to it, whose round-off
-    # (and so the tolerance) shrinks with the distance: within ~1e-11 of a
-    # node every simplex around it is then still decided, not borderline
     v0 = S[s, 0]
-    vn = v0
-    best = np.inf
-    for j in range(d + 1):
-        v = S[s, j]
-        w2 = 0.0
-        for k in range(d):
-            w = x[k] - P[v, k]
-            w2 += w * w
-        if w2 < best:
-            best = w2
-            vn = v
     w2 = 0.0
     wc = 0.0
     c2 = 0.0
     for k in range(d):
-        w = x[k] - P[vn, k]
-        cn = rhs[k] - (P[vn, k] - P[v0, k])
+        w = x[k] - P[v0, k]
         w2 += w * w
-        wc += w * cn
-        c2 += cn * cn
+        wc += w * rhs[k]
+        c2 += rhs[k] * rhs[k]
     power = w2 - 2.0 * wc
+    wn = np.sqrt(w2)
+    bound = tol * wn * (wn + 2.0 * np.sqrt(c2))
+    if abs(power) < bound:
+        # within the round-off bound: recompute relative to the vertex
+        # nearest to x, where the bound shrinks with the distance (within
+        # ~1e-11 of a node every simplex around it is then decided, not
+        # borderline, and the region stays connected)
+        vn = v0
+        best = w2
+        for j in range(1, d + 1):
+            v = S[s, j]
+            e2 = 0.0
+            for k in range(d):
+                e2 += (x[k] - P[v, k]) ** 2
+            if e2 < best:
+                best = e2
+                vn = v
+        if vn != v0:
+            w2 = 0.0
+            wc = 0.0
+            c2 = 0.0
+            for k in range(d):
+                w = x[k] - P[vn, k]
+                cn = rhs[k] - (P[vn, k] - P[v0, k])
+                w2 += w * w
+                wc += w * cn
+                c2 += cn * cn
+            power = w2 - 2.0 * wc
+            wn = np.sqrt(w2)
+            bound = tol * wn * (wn + 2.0 * np.sqrt(c2))
     if power < 0.0:
         return 2, shape
-    wn = np.sqrt(w2)
-    if power < tol * wn * (wn + 2.0 * np.sqrt(c2)):
+    if power < bound:
         return 1, shape
     return 0, shape
 

@@ -13,15 +13,25 @@ Natural neighbours
     transforms through LAPACK, which with a multithreaded BLAS took 32 s for
     1.3e5 simplices. The natural neighbours of x are the vertices of the
     simplices whose circumsphere contains x (the conflict region, grown
-    through ``neighbors``). In-sphere test: the circumcentre ``c`` is solved
-    relative to the simplex's first vertex ``v0`` (Gaussian elimination with
-    partial pivoting); the power ``|w|^2 - 2 w.c`` (``w = x - v0``) is
-    negative strictly inside. Simplices with a power below
+    through ``neighbors``). In-sphere test: the circumcentre is solved
+    relative to the simplex's first vertex (Gaussian elimination with
+    partial pivoting); the power ``|w|^2 - 2 w.c`` (``w = x - v``, ``c`` the
+    circumcentre relative to v, v that vertex; within its round-off bound
+    the power is recomputed relative to the vertex nearest to x, whose bound
+    shrinks with the distance to a node) is negative strictly inside.
+    Simplices with a power below
     ``_INSPHERE * |w| (|w| + 2|c|)`` (a generous bound on its round-off),
     and (nearly) flat ones (Qhull's ``Qt`` makes them for co-spherical
     nodes, e.g. lattices), join the region too, so that it stays connected
     and no neighbour is lost; only the nodes of simplices strictly in
-    conflict get cells (the others' cells are empty).
+    conflict get cells (the others' cells are empty). Should the walk's
+    tolerance have ended in a simplex whose circumsphere x is outside of
+    (x within ~1e-12 of a vertex), the walk goes on without tolerance to the
+    simplex that holds x. When a call has at
+    least one query per ``_CACHE_QUERIES`` simplices, the circumcentres of
+    all simplices are computed once beforehand (in parallel; each simplex
+    is tested ~20 times by spatially sorted queries in 3D), with the same
+    function and so the same bits as computing them per test.
 
 Second-order cells
     The cell of neighbour i is ``{y : |y - x| <= |y - p_i| <= |y - p_j|}``:
@@ -38,7 +48,42 @@ Lasserre's recursion
     ``V_n(A, b) = (1/n) sum_i (b_i / |a_it|) V_{n-1}(facet i)``: facet i is
     the system with ``a_i . u = b_i`` used to eliminate the variable t of
     largest ``|a_it|``; the base case n = 1 is the length of the feasible
-    interval. It runs iteratively (an explicit stack of one buffer level per
+    interval. With unit rows, ``(b_i / |a_it|) V_{n-1}`` is the distance of
+    the origin from facet i's plane times the facet's (n-1)-volume.
+
+3D in general position: the faces from the combinatorics (:func:`_cells3`)
+    Where the conflict region has no flat or borderline simplex (almost
+    every query), the faces of all cells are known before any volume is
+    computed: the cells of neighbours i < j share the polygon on the
+    bisector of p_i and p_j (dual to the Delaunay edge ij of a conflict
+    simplex), cell i has facet 0 on the bisector of x and p_i (dual to the
+    new edge x p_i), and every polygon edge is dual to a triangle -- an
+    interior face of the region, a boundary face, or x with a boundary edge
+    -- running between the circumcentres of the two simplices on either
+    side (conflict simplices; x and a boundary face). So each vertex is
+    computed once, each polygon's Lasserre sum takes its edges' lengths
+    (the base case) from their end vertices, the edge term is shared by the
+    three polygons on the edge, the polygon between cells i and j by both,
+    and ``V_i = (1/3) sum_j beta_ij area(P_ij)`` (facet 0 has ``beta = 0``
+    at the origin ``(x + p_i) / 2``); facet 0's area and first moment give
+    the gradient. No constraint is redundant and nothing is reduced or
+    eliminated. A simplex with a shape measure (volume determinant over
+    the product of its edge lengths) below ``_SHAPE``, combinatorics other
+    than those of general position, a cell whose volume rounds to zero or
+    below, or linear precision or its derivative
+    (``sum_i q_i (x) grad V_i = V I``) violated beyond ``_LINEAR3`` /
+    ``_GRAD3`` leave the query to the general recursion below, and so does
+    a query closer to a node than ``_NEAR3`` times its largest distance to a
+    neighbour (the other cells are then thin slabs, whose gradients the
+    recursion gets about twice as accurately). That is 3 in 1e5 random
+    queries; lattices and other co-spherical sets, points within ~1e-7 of
+    the hull and near nodes mostly. Elsewhere this path is as accurate as
+    the recursion or more: near thin hull simplices with huge
+    circumspheres the identities hold to ~1e-12 where the recursion gave
+    ~1e-10 (and ~1e-6 in rare cases).
+
+The general recursion
+    It runs iteratively (an explicit stack of one buffer level per
     dimension, in a numba kernel; numba cannot cache recursive functions).
 
     - Combinatorial filter: the vertices of cell i are the circumcentres of
@@ -99,12 +144,19 @@ Special points
     nodes or on the hull raise ``ValueError`` (``undefined="raise"``) or
     give NaN rows (``undefined="nan"``).
 
+Kernels
+    Every numba function below the parallel batch kernel is compiled
+    without reference counting (``_nrt=False``; they allocate nothing):
+    numba otherwise increments and decrements the count of every array
+    argument atomically on each call, which took a quarter of the 3D time.
+    The batch kernel allocates one set of buffers per block of queries.
+
 Accuracy (measured, see tests/test_lasserre.py)
     Values agree with the 2D area method to ~2e-15 and gradients to ~2e-13
     relative; in 3D the second-order volumes sum to the Voronoi cell volume
     (scipy/Qhull) to ~1e-15 relative; partition of unity and linear
     precision hold to ~5e-16 in 3D and 4D, also on lattices and within
-    1e-12 of a node. Gradients lose digits near a node like ``1e-17 / r``
+    1e-12 of a node (to ~1e-14 down to 1e-15 from one). Gradients lose digits near a node like ``1e-17 / r``
     (r the distance to it), as the area method does. Node sets that are
     nearly but not exactly co-spherical (lattices jittered by 1e-9) get
     errors of that size: Qhull's triangulation is then not Delaunay to that
@@ -149,16 +201,32 @@ _LINEAR = 1e-9
 _VERTEX = 1e-9
 # Barycentric coordinates above -_WALK count as inside a simplex (point location).
 _WALK = 1e-12
+# 3D cells from the known combinatorics (general position): a cell vertex whose
+# simplex has a shape measure (volume determinant over the product of its edge
+# lengths) below _SHAPE, a linear precision residual above _LINEAR3 (relative, as
+# _LINEAR) or a residual of its derivative sum_i q_i (x) grad V_i = V I above
+# _GRAD3 (relative to sum_i |q_i| |grad V_i|) leaves the query to the recursion.
+_SHAPE = 1e-6
+_LINEAR3 = 1e-12
+_GRAD3 = 1e-11
+# ... and so does a query closer to a node than _NEAR3 times its largest
+# distance to a natural neighbour.
+_NEAR3 = 1e-4
 
-# default buffer sizes (natural neighbours, conflict simplices) per dimension
-_CAPS = {2: (32, 64), 3: (96, 384), 4: (256, 2048)}
+# The circumcentres of all simplices are computed once per call (in parallel)
+# when there are at least 1/_CACHE_QUERIES queries per simplex.
+_CACHE_QUERIES = 8
+
+# default buffer sizes (natural neighbours, conflict simplices, output entries
+# per query) per dimension
+_CAPS = {2: (32, 64, 24), 3: (96, 384, 64), 4: (256, 2048, 256)}
 
 
 # ---------------------------------------------------------------------------
 # numba kernels
 # ---------------------------------------------------------------------------
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _cell(d, m0, A, B, I, AX, BX, M, W, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
           gq, rep, gmark, stamp, sc, full, strict, want_grad, want_mom, G, ztol, btol,
           flag, cell, tab):
@@ -538,7 +606,7 @@ def _cell(d, m0, A, B, I, AX, BX, M, W, Tc, nT, act, nact, mrows, cur, tpiv, acc
         l = nl
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _det_small(E, k):
     """Determinant of the leading k x k block of E (destroyed), partial pivoting."""
     det = 1.0
@@ -561,11 +629,14 @@ def _det_small(E, k):
     return det
 
 
-@njit(cache=True, error_model="numpy")
-def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
-    """Is x inside the circumsphere of simplex s? 2: strictly inside (the
-    circumcentre is a vertex of x's Voronoi cell); 1: on it within the
-    tolerance, or the simplex is flat; 0: outside."""
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _circumcentre(P, S, s, d, E, rhs, flat):
+    """Circumcentre of simplex s relative to its first vertex into ``rhs[:d]``
+    (Gaussian elimination with partial pivoting; ``E`` (d, d) scratch).
+    Returns the shape measure: the signed volume determinant over the
+    product of the edge lengths from the first vertex (sign: the simplex's
+    orientation), or 0.0 for a (nearly) flat simplex, at most ``flat`` in
+    size (``rhs`` is then undefined)."""
     v0 = S[s, 0]
     prod = 1.0
     for r in range(d):
@@ -577,7 +648,6 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
             e2 += e * e
         rhs[r] = 0.5 * e2
         prod *= np.sqrt(e2)
-    # solve E c = rhs by Gaussian elimination with partial pivoting
     det = 1.0
     for c in range(d):
         p = c
@@ -588,21 +658,57 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
             for j in range(d):
                 E[c, j], E[p, j] = E[p, j], E[c, j]
             rhs[c], rhs[p] = rhs[p], rhs[c]
+            det = -det
         det *= E[c, c]
         if E[c, c] == 0.0:
-            return 1
+            return 0.0
         for r in range(c + 1, d):
             f = E[r, c] / E[c, c]
             for j in range(c, d):
                 E[r, j] -= f * E[c, j]
             rhs[r] -= f * rhs[c]
     if abs(det) <= flat * prod:
-        return 1
+        return 0.0
     for c in range(d - 1, -1, -1):
         acc = rhs[c]
         for j in range(c + 1, d):
             acc -= E[c, j] * rhs[j]
         rhs[c] = acc / E[c, c]
+    return det / prod
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _circumcentres(P, S, flat, CC, SH):
+    """:func:`_circumcentre` of every simplex: ``CC`` (ns, d), ``SH`` (ns,)."""
+    ns = S.shape[0]
+    d = P.shape[1]
+    nblocks = max(1, min(ns // 256, 64))
+    for blk in prange(nblocks):
+        E = np.empty((d, d))
+        rhs = np.empty(d)
+        for s in range(blk * ns // nblocks, (blk + 1) * ns // nblocks):
+            SH[s] = _circumcentre(P, S, s, d, E, rhs, flat)
+            for k in range(d):
+                CC[s, k] = rhs[k]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _in_conflict(P, S, s, x, d, E, rhs, tol, flat, cached, CC, SH):
+    """Is x inside the circumsphere of simplex s? Returns ``(code, shape)``:
+    code 2: strictly inside (the circumcentre is a vertex of x's Voronoi
+    cell); 1: on it within the tolerance, or the simplex is flat; 0: outside.
+    Unless flat, ``rhs[:d]`` holds the circumcentre relative to the first
+    vertex; ``shape`` is :func:`_circumcentre`'s, which is computed here or
+    (``cached``) read from ``CC``, ``SH``."""
+    if cached:
+        shape = SH[s]
+        for k in range(d):
+            rhs[k] = CC[s, k]
+    else:
+        shape = _circumcentre(P, S, s, d, E, rhs, flat)
+    if shape == 0.0:
+        return 1, 0.0
+    v0 = S[s, 0]
     w2 = 0.0
     wc = 0.0
     c2 = 0.0
@@ -613,14 +719,43 @@ def _in_conflict(P, S, s, x, d, E, rhs, tol, flat):
         c2 += rhs[k] * rhs[k]
     power = w2 - 2.0 * wc
     wn = np.sqrt(w2)
+    bound = tol * wn * (wn + 2.0 * np.sqrt(c2))
+    if abs(power) < bound:
+        # within the round-off bound: recompute relative to the vertex
+        # nearest to x, where the bound shrinks with the distance (within
+        # ~1e-11 of a node every simplex around it is then decided, not
+        # borderline, and the region stays connected)
+        vn = v0
+        best = w2
+        for j in range(1, d + 1):
+            v = S[s, j]
+            e2 = 0.0
+            for k in range(d):
+                e2 += (x[k] - P[v, k]) ** 2
+            if e2 < best:
+                best = e2
+                vn = v
+        if vn != v0:
+            w2 = 0.0
+            wc = 0.0
+            c2 = 0.0
+            for k in range(d):
+                w = x[k] - P[vn, k]
+                cn = rhs[k] - (P[vn, k] - P[v0, k])
+                w2 += w * w
+                wc += w * cn
+                c2 += cn * cn
+            power = w2 - 2.0 * wc
+            wn = np.sqrt(w2)
+            bound = tol * wn * (wn + 2.0 * np.sqrt(c2))
     if power < 0.0:
-        return 2
-    if power < tol * wn * (wn + 2.0 * np.sqrt(c2)):
-        return 1
-    return 0
+        return 2, shape
+    if power < bound:
+        return 1, shape
+    return 0, shape
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _hull_distance(P, S, s, k, x, d, ctr, E, Mn):
     """Signed distance of x from the plane of the hull facet opposite vertex k
     of simplex s (positive on the side of ``ctr``, the centroid of the nodes,
@@ -674,7 +809,7 @@ def _hull_distance(P, S, s, k, x, d, ctr, E, Mn):
     return dist / np.sqrt(nrm2), L
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _barycentric(P, S, s, x, d, E, rhs, lam, flat_tol):
     """Barycentric coordinates of x in simplex s into ``lam``; returns True
     (and leaves ``lam`` alone) if the simplex is (nearly) flat: its volume
@@ -721,7 +856,7 @@ def _barycentric(P, S, s, x, d, E, rhs, lam, flat_tol):
     return False
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol, flat_tol):
     """Visibility walk from simplex s to a simplex containing x (barycentric
     coordinates >= -tol). Returns ``(simplex, status)``: OK, OUTSIDE (beyond a
@@ -766,7 +901,7 @@ def _locate(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol, flat_tol):
     return s, OVERFLOW
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _locate_brute(P, S, x, d, E, rhs, lam, tol, flat_tol):
     """Exhaustive search for a simplex containing x (-1 if none)."""
     best = -1
@@ -784,7 +919,7 @@ def _locate_brute(P, S, x, d, E, rhs, lam, tol, flat_tol):
     return best, bestv
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _vertex_simplices(d, m, A, B, Tc, nT, rowof, E, rhs, lam, ztol, vtol):
     """Keep the rows of ``Tc[:nT]`` (d constraint ids each) whose d planes meet
     in a point that satisfies all m rows of ``A[0], B[0]`` within ``vtol``;
@@ -835,14 +970,18 @@ def _vertex_simplices(d, m, A, B, Tc, nT, rowof, E, rhs, lam, ztol, vtol):
     return kept
 
 
-@njit(cache=True, error_model="numpy")
-def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, mark, cav, cst,
-            live, bf, nn, Tc, E, Mn, rhs, lam, out_i, out_v, out_g):
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, CC, SH, smark,
+            mark, cav, cst, live, bf, nn, Tc, zc, zq, E, Mn, rhs, lam, out_i, out_v, out_g):
     """Locate x, grow its conflict region and collect the natural neighbours
     ``nn[:K]`` (``live`` marks those with cells of positive volume), the
-    boundary faces ``bf[:nbf]`` and the conflict simplices ``Tc[:ncav]`` in
-    local indices. Returns ``(status, info, ncav, K, nbf, degenerate)``; at a
-    node writes the Kronecker delta into ``out_*``."""
+    boundary faces ``bf[:nbf]`` and the conflict simplices ``cav[:ncav]``
+    (``Tc[:ncav]``: in local indices; ``zc[:ncav]``: their circumcentres
+    relative to x; ``zq[:ncav]``: their signed shape measures, see
+    :func:`_in_conflict`; ``smark[cav[c]] = stamp_q * (ccap + 1) + c``, ccap
+    the length of ``cav``). Returns
+    ``(status, info, ncav, K, nbf, degenerate)``; at a node writes the
+    Kronecker delta into ``out_*``."""
     ccap = cav.shape[0]
     ncap = nn.shape[0]
     s0, st = _locate(P, S, NB, x, hint, d, ctr, E, Mn, rhs, lam, wtol, htol, flat)
@@ -866,11 +1005,27 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
             for k in range(d):
                 out_g[0, k] = np.nan
             return AT_NODE, 0, 0, 0, 0, False
-    # conflict region by breadth-first search; smark = 2 stamp (in), 2 stamp + 1 (out)
-    IN = 2 * stamp_q
-    OUT = IN + 1
+    # conflict region by breadth-first search; smark: IN + c for the conflict
+    # simplex c, OUT for a simplex tested and found out
+    IN = stamp_q * (ccap + 1)
+    OUT = IN + ccap
+    code, shape = _in_conflict(P, S, s0, x, d, E, rhs, itol, flat, cached, CC, SH)
+    if code == 0:
+        # x is outside the circumsphere of s0, so outside s0 itself, which the
+        # walk's tolerance accepted (within ~1e-12 of a vertex, closer than
+        # the in-sphere test's round-off bound): the region would not grow
+        # from there; walk on with no tolerance to the simplex holding x
+        s1, st = _locate(P, S, NB, x, s0, d, ctr, E, Mn, rhs, lam, 0.0, htol, flat)
+        if st == OVERFLOW:
+            s1, _ = _locate_brute(P, S, x, d, E, rhs, lam, 0.0, flat)
+        if st != OUTSIDE and s1 >= 0 and s1 != s0:
+            s0 = s1
+            code, shape = _in_conflict(P, S, s0, x, d, E, rhs, itol, flat, cached, CC, SH)
     cav[0] = s0
-    cst[0] = max(1, _in_conflict(P, S, s0, x, d, E, rhs, itol, flat))
+    cst[0] = max(1, code)
+    zq[0] = shape
+    for k in range(d):
+        zc[0, k] = rhs[k] + (P[S[s0, 0], k] - x[k])
     smark[s0] = IN
     ncav = 1
     head = 0
@@ -886,16 +1041,19 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
                 if dist <= htol * L:
                     return ON_HULL, s * (d + 1) + k, 0, 0, 0, False
                 continue
-            if smark[t] == IN or smark[t] == OUT:
+            if IN <= smark[t] <= OUT:
                 continue
-            code = _in_conflict(P, S, t, x, d, E, rhs, itol, flat)
+            code, shape = _in_conflict(P, S, t, x, d, E, rhs, itol, flat, cached, CC, SH)
             if code > 0:
                 if ncav == ccap:
                     return OVERFLOW, 0, 0, 0, 0, False
                 cav[ncav] = t
                 cst[ncav] = code
+                zq[ncav] = shape
+                for k in range(d):
+                    zc[ncav, k] = rhs[k] + (P[S[t, 0], k] - x[k])
+                smark[t] = IN + ncav
                 ncav += 1
-                smark[t] = IN
             else:
                 smark[t] = OUT
     # natural neighbours (local indices through mark); only the nodes of
@@ -921,7 +1079,7 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
         s = cav[c]
         for k in range(d + 1):
             t = NB[s, k]
-            if t >= 0 and smark[t] == IN:
+            if t >= 0 and IN <= smark[t] < OUT:
                 continue
             if nbf == bf.shape[0]:
                 for jj in range(K):
@@ -946,10 +1104,234 @@ def _region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, m
     return OK, 0, ncav, K, nbf, degenerate
 
 
-@njit(cache=True, error_model="numpy")
-def _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g):
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _cells3(S, NB, cav, ncav, smark, IN, Tc, zc, zq, K, q, qq, want_grad, ftol, pid,
+            pu, pv, pS, pf, pt, zf, a0, vol, gv):
+    """Second-order volumes ``vol[:K]`` (and their gradients ``gv[:K]``) of a
+    3D query in general position, from the known combinatorics of its
+    conflict region. Returns False (and leaves the work to :func:`_cell`)
+    where a vertex would be ill-conditioned or the combinatorics are not
+    those of general position.
+
+    The faces of the cells are known: the cells of neighbours i < j share
+    the polygon P_ij on the bisector of p_i and p_j (dual to the Delaunay
+    edge ij of a conflict simplex), and cell i has the polygon F_i on the
+    bisector of x and p_i (row 0, dual to the new edge x p_i). Their edges
+    are dual to triangles: an interior face of the conflict region (from
+    the circumcentre of one conflict simplex to the other's), a boundary face
+    (from the conflict simplex's circumcentre to that of x and the face) and
+    a new triangle x u v on a boundary edge uv (between the circumcentres
+    of x and the two boundary faces holding uv). Every vertex is computed
+    once (``zc``: conflict simplices, from the in-sphere test; ``zf``: x and
+    a boundary face, by Cramer's rule); a vertex whose simplex has a shape
+    measure (volume determinant over the product of its edge lengths) below
+    ``ftol`` gives up.
+
+    Lasserre's sum, with the cell's origin o_i = (x + p_i) / 2 on row 0:
+    ``V_i = (1/3) sum_j beta_ij area(P_ij)``, ``beta_ij`` the distance of
+    o_i from the plane of P_ij (facet 0 has ``beta = 0``), and in each
+    polygon ``area = (1/2) sum_e gamma_e len_e`` over its edges, the base
+    case ``len_e`` read off the edge's two end vertices:
+    ``gamma_e len_e = n . ((v_1 - o) x (v_2 - o))`` (n: the polygon's unit
+    normal, edges counterclockwise about it; the sum does not depend on the
+    origin o in the plane, and the edge term ``v_1 x v_2`` is shared by the
+    three polygons on the edge, with the orientation of the triangle). The
+    gradient needs facet 0's area and first moment, by the same sum of
+    degree 1: ``integral (y - o) dS = (1/3) sum_e gamma_e len_e m_e`` with
+    ``m_e = (v_1 + v_2) / 2 - o``; on facet 0 the normal is parallel to
+    ``o_i - x``, so there ``gamma_e len_e = n . (v_1 x v_2)`` with the
+    vertices relative to x.
+
+    Shapes: ``Tc[:ncav]`` (ncav, 4) local node indices, ``zc``/``zq`` and
+    ``smark`` (``IN + c`` for the conflict simplex c) as filled by
+    :func:`_region`, ``q[:K]`` (K, 3) neighbours relative to x,
+    ``qq`` (K,) scratch; ``pid`` (ncap, ncap) all -1 (restored on return);
+    polygon buffers ``pu, pv, pf, pt`` (npcap,), ``pS`` (npcap, 3), ``zf``
+    (nfcap, 3); ``a0`` (K,) scratch.
+    """
+    ok = True
+    for i in range(K):
+        qq[i] = q[i, 0] * q[i, 0] + q[i, 1] * q[i, 1] + q[i, 2] * q[i, 2]
+        vol[i] = 0.0
+        a0[i] = 0.0
+        for k in range(3):
+            gv[i, k] = 0.0
+    ftol2 = ftol * ftol
+    npair = 0
+    nb = 0
+    pcap = pu.shape[0]
+    for c in range(ncav):
+        if not abs(zq[c]) > ftol:
+            ok = False
+            break
+        s = cav[c]
+        sgn = 1.0 if zq[c] > 0.0 else -1.0
+        for k in range(4):
+            t = NB[s, k]
+            o = smark[t] - IN if t >= 0 else -1
+            inner = 0 <= o < cav.shape[0]
+            if inner and o < c:
+                continue   # the other simplex did this face
+            # the face's nodes sorted, i < j < l, and the orientation
+            # eps of (p_i, p_j, p_l, p_a), p_a the simplex's other node
+            # (and x: on the same side of the face)
+            if k == 0:
+                i, j, l = Tc[c, 1], Tc[c, 2], Tc[c, 3]
+            elif k == 1:
+                i, j, l = Tc[c, 0], Tc[c, 2], Tc[c, 3]
+            elif k == 2:
+                i, j, l = Tc[c, 0], Tc[c, 1], Tc[c, 3]
+            else:
+                i, j, l = Tc[c, 0], Tc[c, 1], Tc[c, 2]
+            eps = sgn if k % 2 == 1 else -sgn
+            if i > j:
+                i, j = j, i
+                eps = -eps
+            if j > l:
+                j, l = l, j
+                eps = -eps
+            if i > j:
+                i, j = j, i
+                eps = -eps
+            if inner:
+                y0, y1, y2 = zc[o, 0], zc[o, 1], zc[o, 2]
+            else:
+                # the circumcentre of x and the face (a new simplex)
+                c0 = q[j, 1] * q[l, 2] - q[j, 2] * q[l, 1]
+                c1 = q[j, 2] * q[l, 0] - q[j, 0] * q[l, 2]
+                c2 = q[j, 0] * q[l, 1] - q[j, 1] * q[l, 0]
+                det = q[i, 0] * c0 + q[i, 1] * c1 + q[i, 2] * c2
+                # orient(p_i, p_j, p_l, x) = -sign(det) must be eps
+                if not (det * det > ftol2 * qq[i] * qq[j] * qq[l] and det * eps < 0.0):
+                    ok = False
+                    break
+                d0 = q[l, 1] * q[i, 2] - q[l, 2] * q[i, 1]
+                d1 = q[l, 2] * q[i, 0] - q[l, 0] * q[i, 2]
+                d2 = q[l, 0] * q[i, 1] - q[l, 1] * q[i, 0]
+                e0 = q[i, 1] * q[j, 2] - q[i, 2] * q[j, 1]
+                e1 = q[i, 2] * q[j, 0] - q[i, 0] * q[j, 2]
+                e2 = q[i, 0] * q[j, 1] - q[i, 1] * q[j, 0]
+                h = 0.5 / det
+                y0 = (qq[i] * c0 + qq[j] * d0 + qq[l] * e0) * h
+                y1 = (qq[i] * c1 + qq[j] * d1 + qq[l] * e1) * h
+                y2 = (qq[i] * c2 + qq[j] * d2 + qq[l] * e2) * h
+                if nb == zf.shape[0]:
+                    ok = False
+                    break
+                zf[nb, 0] = y0
+                zf[nb, 1] = y1
+                zf[nb, 2] = y2
+            # the edge runs from this simplex's circumcentre away from p_a:
+            # counterclockwise in P_ij and P_jl iff eps < 0, reversed in P_il
+            x0, x1, x2 = zc[c, 0], zc[c, 1], zc[c, 2]
+            if eps > 0.0:
+                x0, x1, x2, y0, y1, y2 = y0, y1, y2, x0, x1, x2
+            r0 = x1 * y2 - x2 * y1
+            r1 = x2 * y0 - x0 * y2
+            r2 = x0 * y1 - x1 * y0
+            for e in range(3):
+                if e == 0:
+                    u, v, sg = i, j, 1.0
+                elif e == 1:
+                    u, v, sg = j, l, 1.0
+                else:
+                    u, v, sg = i, l, -1.0
+                p = pid[u, v]
+                if p < 0:
+                    if npair == pcap:
+                        ok = False
+                        break
+                    p = npair
+                    npair += 1
+                    pid[u, v] = p
+                    pu[p] = u
+                    pv[p] = v
+                    pf[p] = -1
+                    pS[p, 0] = 0.0
+                    pS[p, 1] = 0.0
+                    pS[p, 2] = 0.0
+                pS[p, 0] += sg * r0
+                pS[p, 1] += sg * r1
+                pS[p, 2] += sg * r2
+                if inner:
+                    continue
+                # the boundary edge uv: the new triangle x u v, between the
+                # circumcentres of x and the two boundary faces on uv;
+                # tau = orient(p_u, p_v, p_w, x), p_w the face's third node
+                tau = sg * eps
+                g = pf[p]
+                if g == -1:
+                    pf[p] = nb
+                    pt[p] = tau
+                    continue
+                if g < 0 or pt[p] == tau:
+                    ok = False  # a third face on the edge, or not a surface
+                    break
+                if pt[p] > 0.0:
+                    a, b = g, nb
+                else:
+                    a, b = nb, g
+                w0 = zf[a, 1] * zf[b, 2] - zf[a, 2] * zf[b, 1]
+                w1 = zf[a, 2] * zf[b, 0] - zf[a, 0] * zf[b, 2]
+                w2 = zf[a, 0] * zf[b, 1] - zf[a, 1] * zf[b, 0]
+                # counterclockwise in F_u: from the face with tau > 0; P_uv
+                # lies on x's side of this edge, so it runs the other way there
+                pS[p, 0] -= w0
+                pS[p, 1] -= w1
+                pS[p, 2] -= w2
+                pf[p] = -2
+                if want_grad:
+                    # facet 0 of cell u and (reversed) of cell v: area terms
+                    # n . (v_1 x v_2) with n || q
+                    wu = q[u, 0] * w0 + q[u, 1] * w1 + q[u, 2] * w2
+                    wv = q[v, 0] * w0 + q[v, 1] * w1 + q[v, 2] * w2
+                    a0[u] += wu
+                    a0[v] -= wv
+                    for kk in range(3):
+                        m = zf[a, kk] + zf[b, kk]
+                        gv[u, kk] += wu * m
+                        gv[v, kk] -= wv * m
+            if not ok:
+                break
+            if not inner:
+                nb += 1
+        if not ok:
+            break
+    for p in range(npair):
+        u = pu[p]
+        v = pv[p]
+        pid[u, v] = -1
+        if pf[p] >= 0:
+            ok = False  # a boundary edge on one face only
+    if not ok:
+        return False
+    # Lasserre's sum over the facets: V_u += beta_uv area(P_uv) / 3 with
+    # beta_uv = q_v . D / (2 |D|), D = q_v - q_u, area = D . S / (2 |D|)
+    for p in range(npair):
+        u = pu[p]
+        v = pv[p]
+        D0 = q[v, 0] - q[u, 0]
+        D1 = q[v, 1] - q[u, 1]
+        D2 = q[v, 2] - q[u, 2]
+        sD = (D0 * pS[p, 0] + D1 * pS[p, 1] + D2 * pS[p, 2]) / (
+            12.0 * (D0 * D0 + D1 * D1 + D2 * D2))
+        vol[u] += (q[v, 0] * D0 + q[v, 1] * D1 + q[v, 2] * D2) * sD
+        vol[v] -= (q[u, 0] * D0 + q[u, 1] * D1 + q[u, 2] * D2) * sD
+    if want_grad:
+        # grad V_i = (1 / |q_i|) integral over facet 0 of (y - x) dS
+        #          = (sum_e w_e (v_1 + v_2) + a0 q_i / 2) / (6 |q_i|^2)
+        for i in range(K):
+            f = 1.0 / (6.0 * qq[i])
+            for k in range(3):
+                gv[i, k] = (gv[i, k] + 0.5 * a0[i] * q[i, k]) * f
+    return True
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _finish(K, d, nn, vol, gv, want_grad, raw, gc, out_i, out_v, out_g):
     """Coordinates (or raw volumes) and gradients of the K neighbours into
-    ``out_*``, sorted by node index; returns ``(count, status, 0)``."""
+    ``out_*``, sorted by node index; returns ``(count, status, 0)``. ``gc``:
+    scratch of length d."""
     # The dominant neighbour gets its gradient from complement sums,
     #   grad phi_d = (grad V_d (1 - phi_d) - phi_d sum_{j != d} grad V_j) / V,
     # which avoids cancelling two large terms close to node d.
@@ -958,7 +1340,8 @@ def _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g):
         if vol[i] > vol[dom]:
             dom = i
     rest = 0.0
-    gc = np.zeros(d)
+    for k in range(d):
+        gc[k] = 0.0
     for i in range(K):
         if i != dom:
             rest += vol[i]
@@ -996,11 +1379,11 @@ def _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g):
     return cnt, OK, 0
 
 
-@njit(cache=True, error_model="numpy")
-def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mark,
-           cav, cst, live, rowof, bf, nn, q, Tc, tab, A, B, I, AX, BX, M, W, act, nact,
-           mrows, cur, tpiv, acc, wm, gs, gc, gp, gq, rep, gmark, stamp, sc, G, E, Mn, rhs,
-           lam, vol, gv, out_i, out_v, out_g):
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC, SH, smark, mark,
+           cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf, pt, zf,
+           a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
+           gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
     """Sibson coordinates of one point x, searched for from simplex ``hint``.
 
     Writes up to ``nn.shape[0]`` entries into ``out_*`` (sorted by node
@@ -1011,14 +1394,17 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mar
     facet's own coordinates). ``info`` is
     ``s * (d + 1) + k`` for the hull facet (s, k) of an ON_HULL point.
     ``stamp_q > 0`` must differ between the queries sharing ``smark``.
+    3D queries in general position are done by :func:`_cells3`, the others
+    (and those it gives up on) by the recursion of :func:`_cell`.
     """
     ztol, btol, itol, flat, htol, lintol, wtol, vtol = (tols[0], tols[1], tols[2], tols[3],
                                                         tols[4], tols[5], tols[6], tols[7])
+    shape, lintol3, gradtol3, near3 = tols[8], tols[9], tols[10], tols[11]
     raw = kind == 1
     hullw = kind == 2
     st, info, ncav, K, nbf, degenerate = _region(
-        P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, smark, mark, cav, cst,
-        live, bf, nn, Tc, E, Mn, rhs, lam, out_i, out_v, out_g)
+        P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, CC, SH, smark, mark,
+        cav, cst, live, bf, nn, Tc, zc, zq, E, Mn, rhs, lam, out_i, out_v, out_g)
     if st != OK:
         return (1 if st == AT_NODE else 0), st, info
     # coordinates relative to x
@@ -1036,7 +1422,49 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mar
             for k in range(d):
                 out_g[0, k] = np.nan
             return 1, AT_NODE, 0
-    flag = np.zeros(1, np.int64)
+    # near a node (closer than _NEAR3 L) the cells of the other neighbours are
+    # thin slabs: the recursion, with its origins on row 0 and vertices from
+    # pairs of lines, keeps about twice the digits of their gradients there
+    near = False
+    for j in range(K):
+        near = near or q[j, 0] * q[j, 0] + q[j, 1] * q[j, 1] + q[j, 2] * q[j, 2] < (
+            near3 * L) ** 2
+    if d == 3 and not hullw and not degenerate and not near:
+        # general position: the cells' faces from the known combinatorics,
+        # accepted if linear precision (and its derivative, sum_i q_i (x)
+        # grad V_i = V I) hold tightly; otherwise the general recursion below
+        if _cells3(S, NB, cav, ncav, smark, stamp_q * (cav.shape[0] + 1), Tc, zc, zq, K, q, qq,
+                   want_grad,
+                   shape, pid, pu, pv, pS, pf, pt, zf, a0, vol, gv):
+            # every neighbour has a cell of positive volume here (a vertex
+            # of a simplex strictly in conflict); one that rounds to zero
+            # or below is left to the recursion
+            total = 0.0
+            good = True
+            for i in range(K):
+                total += vol[i]
+                if not vol[i] > 0.0:
+                    good = False
+            for k in range(d):
+                s = 0.0
+                for i in range(K):
+                    s += vol[i] * q[i, k]
+                if not abs(s) <= lintol3 * total * L:
+                    good = False
+            if good and want_grad:
+                scale = 0.0
+                for i in range(K):
+                    scale += max(abs(q[i, 0]), abs(q[i, 1]), abs(q[i, 2])) * max(
+                        abs(gv[i, 0]), abs(gv[i, 1]), abs(gv[i, 2]))
+                for k in range(d):
+                    for kk in range(d):
+                        s = -total if k == kk else 0.0
+                        for i in range(K):
+                            s += q[i, k] * gv[i, kk]
+                        if not abs(s) <= gradtol3 * scale:
+                            good = False
+            if good:
+                return _finish(K, d, nn, vol, gv, want_grad, raw, rhs, out_i, out_v, out_g)
     for mode in range(3):
         # strict combinatorial filter, relaxed filter, no filter (safety nets)
         full = mode == 2
@@ -1178,11 +1606,41 @@ def _query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, smark, mar
             break
     if flag[0] != 0:
         return 0, UNBOUNDED, 0
-    return _finish(K, d, nn, vol, gv, want_grad, raw, out_i, out_v, out_g)
+    return _finish(K, d, nn, vol, gv, want_grad, raw, rhs, out_i, out_v, out_g)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC, SH, smark,
+           mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf, pt,
+           zf, a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
+           gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov, og, out_i,
+           out_v, out_g, count, status, info):
+    """Queries lo..hi-1 of ``Q`` with one set of buffers (see :func:`_query`)
+    into rows of the padded outputs; a query with more entries than a row
+    holds gets status OVERFLOW (redone with larger buffers)."""
+    width = out_i.shape[1]
+    for r in range(lo, hi):
+        cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, kind, tols,
+                              cached, CC, SH, smark, mark, cav, cst, live, rowof, bf, nn, q, Tc,
+                              zc, zq, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab, A, B, I,
+                              AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq,
+                              rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov,
+                              og)
+        if cnt > width:
+            cnt, st, inf = 0, OVERFLOW, 0
+        count[r] = cnt
+        status[r] = st
+        info[r] = inf
+        for j in range(cnt):
+            out_i[r, j] = oi[j]
+            out_v[r, j] = ov[j]
+            if want_grad:
+                for k in range(d):
+                    out_g[k, r, j] = og[j, k]
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
+def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols, cached, CC, SH,
                  out_i, out_v, out_g, count, status, info):
     """Coordinates of m points into padded (m, ncap) arrays, parallel over blocks."""
     m = Q.shape[0]
@@ -1208,6 +1666,17 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         nn = np.empty(ncap, np.int64)
         q = np.empty((ncap, d))
         Tc = np.empty((4 * ccap, d + 1), np.int64)
+        zc = np.empty((ccap, d))
+        zq = np.empty(ccap)
+        qq = np.empty(ncap)
+        pid = np.full((ncap, ncap), -1, np.int64)
+        pu = np.empty(6 * ccap, np.int64)
+        pv = np.empty(6 * ccap, np.int64)
+        pS = np.empty((6 * ccap, d))
+        pf = np.empty(6 * ccap, np.int64)
+        pt = np.empty(6 * ccap)
+        zf = np.empty((2 * ccap, d))
+        a0 = np.empty(ncap)
         tab = np.empty((ncap, ncap))
         A = np.empty((d, ncap + 1, d))
         B = np.empty((d, ncap + 1))
@@ -1231,6 +1700,7 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         gmark = np.zeros(ncap + 1, np.int64)
         stamp = np.zeros(ncap + 1, np.int64)
         sc = np.zeros(1, np.int64)
+        flag = np.zeros(1, np.int64)
         G = np.empty(d + 1)
         E = np.empty((d, d))
         Mn = np.empty((d, d))
@@ -1241,23 +1711,11 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
         oi = np.empty(ncap, np.int64)
         ov = np.empty(ncap)
         og = np.empty((ncap, d))
-        for r in range(lo, hi):
-            cnt, st, inf = _query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, kind,
-                                  tols,
-                                  smark, mark, cav, cst, live, rowof, bf, nn, q, Tc, tab,
-                                  A, B, I, AX, BX, M, W, act,
-                                  nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq, rep,
-                                  gmark, stamp, sc, G, E, Mn,
-                                  rhs, lam, vol, gv, oi, ov, og)
-            count[r] = cnt
-            status[r] = st
-            info[r] = inf
-            for j in range(cnt):
-                out_i[r, j] = oi[j]
-                out_v[r, j] = ov[j]
-                if want_grad:
-                    for k in range(d):
-                        out_g[k, r, j] = og[j, k]
+        _block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC, SH, smark,
+               mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf,
+               pt, zf, a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs,
+               gc, gp, gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov, og,
+               out_i, out_v, out_g, count, status, info)
 
 
 _query_batch_serial = njit(cache=True, error_model="numpy")(_query_batch.py_func)
@@ -1314,26 +1772,54 @@ def delaunay_of(p) -> Delaunay:
     return tri
 
 
-def _run(P, S, NB, Q, start, gradient, kind, ncap, ccap):
-    """Run the kernel on a batch; returns ((rows, cols, values, gradients),
-    status, info)."""
+def _circumcentre_cache(P, S, m):
+    """``(cached, CC, SH)`` for the kernels: the circumcentres and shape
+    measures of all simplices (:func:`_circumcentres`) when m queries will
+    probably test most of them (each tests ~40 in 3D), else empty arrays."""
+    ns, d = S.shape[0], P.shape[1]
+    if _CACHE_QUERIES * m < ns:
+        return False, np.empty((0, d)), np.empty(0)
+    CC = np.empty((ns, d))
+    SH = np.empty(ns)
+    _circumcentres(P, S, _FLAT, CC, SH)
+    return True, CC, SH
+
+
+def _run(P, S, NB, Q, start, gradient, kind, caps, cache=None, out=None):
+    """Run the kernel on a batch with buffer sizes ``caps`` (see ``_CAPS``);
+    returns ((rows, cols, values, gradients), status, info). ``cache``:
+    :func:`_circumcentre_cache` (computed here if None); ``out``: padded
+    output buffers ``(out_i, out_v, out_g)`` of at least m rows and the
+    width ``caps[2]`` to reuse (allocated here if None)."""
     import numba
     m, d = Q.shape
-    out_i = np.empty((m, ncap), np.int64)
-    out_v = np.empty((m, ncap))
-    out_g = np.empty((d, m, ncap) if gradient else (d, 1, 1))
+    ncap, ccap, width = caps
+    if cache is None:
+        cache = _circumcentre_cache(P, S, m)
+    if out is None or out[0].shape[0] < m or out[0].shape[1] != width:
+        out = _out_buffers(m, d, width, gradient)
+    out_i, out_v = out[0][:m], out[1][:m]
+    out_g = out[2][:d * m * width].reshape(d, m, width) if gradient else out[2]
     count = np.empty(m, np.int64)
     status = np.empty(m, np.int64)
     info = np.empty(m, np.int64)
-    tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, _FLAT, _HULL, _LINEAR, _WALK, _VERTEX])
+    tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, _FLAT, _HULL, _LINEAR, _WALK, _VERTEX,
+                     _SHAPE, _LINEAR3, _GRAD3, _NEAR3])
     nblocks = max(1, min(m // 16, 4 * numba.get_num_threads()))
     # small batches run serially: waking the thread pool costs more than it saves
     kernel = _query_batch if m >= _PARALLEL_MIN else _query_batch_serial
-    kernel(P, S, NB, Q, start, gradient, kind, ncap, ccap, nblocks, tols,
+    kernel(P, S, NB, Q, start, gradient, kind, ncap, ccap, nblocks, tols, *cache,
            out_i, out_v, out_g, count, status, info)
     _, indices, data, grads = compress(count, out_i, out_v, out_g, gradient, P.shape[0])
     rows = np.repeat(np.arange(m), count)
     return (rows, indices, data, grads), status, info
+
+
+def _out_buffers(m, d, width, gradient):
+    """Padded kernel outputs for m queries of up to ``width`` entries (the
+    gradients' flat, viewed as (d, m', width) for m' <= m queries)."""
+    return (np.empty((m, width), np.int64), np.empty((m, width)),
+            np.empty(d * m * width if gradient else (d, 1, 1)))
 
 
 def _facet_planes(p, S, facets):
@@ -1476,20 +1962,23 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
     status = np.full(m, OUTSIDE, np.int64)
     info = np.zeros(m, np.int64)
     parts = []
-    # chunks bound the padded output buffers (d + 2 numbers per neighbour slot)
+    cache = _circumcentre_cache(p, S, m)
+    # chunks bound the padded output buffers (d + 2 numbers per neighbour slot),
+    # which the chunks reuse
+    out = _out_buffers(min(m, chunk), d, _CAPS[d][2], gradient)
     for c0 in range(0, m, chunk):
         todo = np.arange(c0, min(m, c0 + chunk))
-        ncap, ccap = _CAPS[d]
+        caps = _CAPS[d]
         while todo.size:
             (r, c, v, g), st, inf = _run(p, S, NB, np.ascontiguousarray(q[todo]), start[todo],
-                                         gradient, kind, ncap, ccap)
+                                         gradient, kind, caps, cache, out)
             status[todo] = st
             info[todo] = inf
             parts.append((todo[r], c, v, g))
             # rare: more natural neighbours or conflict simplices than the buffers
             # hold (co-spherical clusters); redo those with larger buffers
             todo = todo[st == OVERFLOW]
-            ncap, ccap = 4 * ncap, 4 * ccap
+            caps = tuple(4 * c for c in caps)
     raise_outside(status, q)
     bad = np.flatnonzero(status == UNBOUNDED)
     if bad.size:  # pragma: no cover - a bounded cell is guaranteed inside the hull
@@ -1502,19 +1991,30 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
         parts.append((hull[H.row], H.col, H.data, np.full((d, H.nnz), np.nan)))
     # one COO -> CSR conversion per matrix from the same (row, col) arrays:
     # all matrices get the same pattern, rows sorted by column index
-    rows = np.concatenate([a[0] for a in parts]) if parts else np.zeros(0, np.int64)
-    cols = np.concatenate([a[1] for a in parts]) if parts else np.zeros(0, np.int64)
-    vals = [np.concatenate([a[2] for a in parts]) if parts else np.zeros(0)]
+    if not parts:
+        parts = [(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((d, 0)))]
+
+    def joined(k, axis=0):
+        return parts[0][k] if len(parts) == 1 else np.concatenate([a[k] for a in parts], axis)
+
+    rows, cols = joined(0), joined(1)
+    vals = [joined(2)]
     if gradient:
-        g = np.concatenate([a[3] for a in parts], axis=1) if parts else np.zeros((d, 0))
-        vals += list(g)
-    order = np.lexsort((cols, rows))
+        vals += list(joined(3, axis=1))
     indptr = np.zeros(m + 1, np.int64)
     np.cumsum(np.bincount(rows, minlength=m), out=indptr[1:])
     idx_dtype = index_dtype(n, rows.size)
-    indices = cols[order].astype(idx_dtype)
     indptr = indptr.astype(idx_dtype)
-    mats = [sp.csr_matrix((v[order], indices, indptr), shape=(m, n)) for v in vals]
+    # every row comes from one part, sorted by column, and the kernel's rows
+    # come in order: only redone (overflow) and hull rows need moving, and a
+    # stable sort by row (nearly sorted data) does it
+    if np.all(rows[1:] >= rows[:-1]):
+        indices = cols.astype(idx_dtype, copy=False)
+    else:
+        order = np.argsort(rows, kind="stable")
+        indices = cols[order].astype(idx_dtype)
+        vals = [v[order] for v in vals]
+    mats = [sp.csr_matrix((v, indices, indptr), shape=(m, n)) for v in vals]
     if hull_status:
         return mats[0], status, info
     if gradient and undefined == "raise":

@@ -390,3 +390,58 @@ def test_delaunay_reuse():
     np.testing.assert_array_equal(dense(A[0]), dense(B[0]))
     for a, b in zip(A[1], B[1]):
         np.testing.assert_array_equal(dense(a), dense(b))
+
+
+# ---------------------------------------------------------------------------
+# 3D: faces from the combinatorics against the general recursion
+# ---------------------------------------------------------------------------
+
+def test_3d_faces_from_combinatorics_match_the_recursion(monkeypatch):
+    """Queries in general position take the cells' faces from the conflict
+    region's combinatorics; with that path switched off (every simplex
+    counts as ill-shaped) the general recursion must give the same values,
+    gradients and sparsity pattern to round-off -- inside, on Delaunay faces
+    and edges, near nodes and near the hull."""
+    from skfem_nem import lasserre as L
+
+    p = cube_nodes(400, 3, seed=28)
+    tri = Delaunay(p)
+    rng = np.random.default_rng(29)
+    s = rng.integers(0, tri.nsimplex, 300)
+    inside = np.einsum("mk,mkd->md", rng.dirichlet(np.ones(4), 300), p[tri.simplices[s]])
+    i = np.flatnonzero((np.abs(p - 0.5) < 0.4).all(1))[:60]
+    v = rng.standard_normal((60, 3))
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    near = p[i] + np.repeat([1e-3, 1e-6, 1e-9], 20)[:, None] * v
+    hull = 0.05 + 0.9 * rng.random((40, 3))
+    hull[:, 2] = np.repeat([1e-2, 1e-4, 1e-7, 1e-10], 10)
+    q = np.r_[inside, on_faces(p, tri, 60, seed=30, dim=2), on_faces(p, tri, 60, seed=31, dim=1),
+              near, hull]
+    F, G = sibson_coordinates_nd(p, q, gradient=True, delaunay=tri)
+    monkeypatch.setattr(L, "_SHAPE", np.inf)
+    F0, G0 = sibson_coordinates_nd(p, q, gradient=True, delaunay=tri)
+    assert np.array_equal(F.indptr, F0.indptr) and np.array_equal(F.indices, F0.indices)
+    np.testing.assert_allclose(F.data, F0.data, rtol=0, atol=1e-13)
+    scale = max(np.abs(g.data).max() for g in G0)
+    for a, b in zip(G, G0):
+        np.testing.assert_allclose(a.data, b.data, rtol=0, atol=1e-11 * scale)
+    # most of these queries did take the faces from the combinatorics
+    fast = np.asarray(abs(F - F0).max(axis=1).todense()).ravel() > 0
+    assert fast.mean() > 0.5
+
+
+def test_3d_within_round_off_of_a_node():
+    """Within 1e-13 of a node the walk's tolerance can end in a simplex that
+    does not hold x and whose circumsphere x is outside of; the region must
+    still be found (this raised "came out unbounded" before)."""
+    p = cube_nodes(1000, 3, seed=32)
+    rng = np.random.default_rng(33)
+    i = np.flatnonzero((np.abs(p - 0.5) < 0.45).all(1))[:150]
+    v = rng.standard_normal((150, 3))
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    for r in (1e-13, 1e-14, 1e-15):
+        x = p[i] + r * v
+        F = dense(sibson_coordinates_nd(p, x))
+        np.testing.assert_allclose(F.sum(1), 1.0, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(F @ p, x, rtol=0, atol=1e-12)
+        assert np.all(F[np.arange(150), i] > 1 - 1e-9)

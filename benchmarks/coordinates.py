@@ -183,7 +183,7 @@ def run_size(n: int, repeat: int) -> dict:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", nargs="+", type=float, default=[1e4, 1e5, 1e6])
-    ap.add_argument("--sizes-nd", nargs="+", type=float, default=[1e4, 1e5])
+    ap.add_argument("--sizes-nd", nargs="*", type=float, default=[1e4, 1e5])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--dim", type=int, default=0, help=argparse.SUPPRESS)

@@ -61,7 +61,7 @@ def validate_nodes(nodes, dim: int = 2, name: str = "nodes") -> np.ndarray:
 # numba kernels
 # ---------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _locate(P, T, N, qx, qy, start):
     """Visibility walk from triangle ``start`` towards (qx, qy).
 
@@ -69,6 +69,9 @@ def _locate(P, T, N, qx, qy, start):
     with ``k = -1``; if the point is outside the convex hull, ``t`` is the hull
     triangle whose edge opposite its vertex ``k`` has the point strictly on its
     outer side.
+
+    (Inlined into its callers: numba reference-counts array arguments with
+    atomic operations, which would cost more than the walk itself.)
     """
     nt = T.shape[0]
     t = start
@@ -111,7 +114,7 @@ def _locate(P, T, N, qx, qy, start):
     return -1, -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _in_cavity(P, T, t, qx, qy):
     a = T[t, 0]
     b = T[t, 1]
@@ -204,6 +207,83 @@ def _cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_c, be_u):
                     be_u[i + 1], be_u[j] = be_u[j], be_u[i + 1]
                 break
     return nb
+
+
+@njit(cache=True, inline="always")
+def _conflict_cycle(P, T, N, qx, qy, t0, cav, cpar, cpa, cpb, cedge, cstep, stk, nn, be_u, be_c):
+    """The Bowyer--Watson cavity of (qx, qy) and its boundary, in one traversal.
+
+    ``t0`` must contain the point and the point must not be a node. In a
+    Delaunay triangulation the cavity is a triangulated disc without interior
+    vertices, so its triangles form a tree under edge adjacency: a
+    depth-first traversal from ``t0`` that visits the edges of each triangle
+    counter-clockwise, starting after the edge it came in by, meets the
+    boundary edges in counter-clockwise order, and no triangle is reached
+    twice (so no search is needed).
+
+    Outputs (``ncav`` cavity triangles, ``nb = ncav + 2`` boundary edges):
+
+    * ``cav[c]``: the cavity triangles, ``cav[0] = t0``, each after its parent;
+    * ``cpar[c]`` (c >= 1): the parent's index in ``cav``; the shared edge runs
+      from node ``nn[cpa[c]]`` to node ``nn[cpb[c]]`` as seen from the parent
+      (counter-clockwise in the parent);
+    * ``nn[j]``: boundary edge j runs from node ``nn[j]`` to ``nn[(j + 1) % nb]``,
+      lies in triangle ``cav[be_c[j]]`` and has the triangle ``be_u[j]`` (-1 on
+      the hull) outside;
+    * ``cedge``, ``cstep``, ``stk``: scratch of the size of ``cav``.
+
+    Returns ``(ncav, nb)``, or ``(-1, -1)`` if the buffers (``cav``: ccap,
+    ``nn``: bcap) are too small -- also the only possible outcome if the
+    triangulation is not Delaunay and the cavity is not a tree (the traversal
+    then goes round a cycle): :func:`_grow_cavity` handles that case.
+    """
+    ccap = cav.shape[0]
+    bcap = nn.shape[0]
+    cav[0] = t0
+    cpar[0] = -1
+    cedge[0] = 0
+    cstep[0] = 0
+    stk[0] = 0
+    depth = 1
+    ncav = 1
+    nb = 0
+    while depth > 0:
+        c = stk[depth - 1]
+        s = cstep[c]
+        if s == (3 if c == 0 else 2):
+            depth -= 1
+            cpb[c] = nb
+            continue
+        cstep[c] = s + 1
+        t = cav[c]
+        k = cedge[c] + s
+        if k >= 3:
+            k -= 3
+        u = N[t, k]
+        if u >= 0 and _in_cavity(P, T, u, qx, qy):
+            if ncav == ccap:
+                return -1, -1
+            l = 0 if N[u, 0] == t else (1 if N[u, 1] == t else 2)
+            cav[ncav] = u
+            cpar[ncav] = c
+            cpa[ncav] = nb
+            cedge[ncav] = l + 1 if l < 2 else 0
+            cstep[ncav] = 0
+            stk[depth] = ncav
+            depth += 1
+            ncav += 1
+        else:
+            if nb == bcap:
+                return -1, -1
+            nn[nb] = T[t, k + 1 if k < 2 else 0]
+            be_u[nb] = u
+            be_c[nb] = c
+            nb += 1
+    # the edge that closes the cycle ends where the first one starts
+    for c in range(1, ncav):
+        if cpb[c] == nb:
+            cpb[c] = 0
+    return ncav, nb
 
 
 @njit(cache=True)

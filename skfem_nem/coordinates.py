@@ -396,8 +396,8 @@ def _query_batch(P, T, N, C, Q, start, grid, nc, glo, gspan, kind, want_grad, ge
                     ncav, nb, nedge = _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn,
                                                       be_b, be_c, be_u, cpar, cchd, cpa, cpb)
                 else:
-                    ncav, nb = _conflict_cycle(P, T, N, qx, qy, t, cav, cpar, cpa, cpb, cedge,
-                                               cstep, stk, nn, be_u, be_c)
+                    ncav, nb = _conflict_cycle(P, T, N, C, qx, qy, t, cav, cpar, cpa, cpb,
+                                               cedge, cstep, stk, nn, be_u, be_c)
                     nedge = ncav - 1
                     for e in range(1, ncav):
                         cchd[e] = e
@@ -547,7 +547,6 @@ def natural_neighbour_coordinates(
     m = q.shape[0]
     n = tri.npoints
     P, T, N = tri.nodes, tri.triangles, tri.neighbours
-    C = tri.circumcentre_offsets
     ikind = SIBSON if kind == "sibson" else LAPLACE
     if hint is None:
         start = np.empty(0, dtype=np.int64)
@@ -645,7 +644,7 @@ def _run_chunk(tri, Qc, start, ikind, gradient, general, status, tloc, buffers):
     # batch is one block: waking the thread pool would cost more than it saves
     nblocks = max(1, min(mc // 256, 16 * _threads())) if mc >= _PARALLEL_MIN else 1
     with numba.parallel_chunksize(1):
-        _query_batch(tri.nodes, tri.triangles, tri.neighbours, tri.circumcentre_offsets, Qc,
+        _query_batch(tri.nodes, tri.triangles, tri.neighbours, tri.circumcircles, Qc,
                      start, grid, nc, lo, span, ikind, gradient, general, nblocks,
                      out_i[:mc], out_v[:mc], out_g[0, :mc], out_g[1, :mc], count, status, tloc)
     return count

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit, prange
+from numba import njit
 
 # status codes of the query kernels
 OK = 0
@@ -88,133 +88,67 @@ def csr_family(indptr, indices, values, shape):
     return mats
 
 
-@njit(cache=True, parallel=True)
-def _gather(count, offset, rows, out_i, out_v, out_g, ind0, ind1, ind2, val0, val1, val2,
-            nblocks):
-    """Padded rows -> flat arrays, in parallel blocks of rows.
-
-    Row ``rows[r]`` of ``out_i``, ``out_v`` (mc, cap) and ``out_g`` (2, mc,
-    cap) (all rows in order if ``rows`` is empty) has ``count[r]`` entries,
-    which go from position ``offset[r]`` on to ``ind0`` (column indices),
-    ``val0`` (values) and, if ``ind1`` is not empty, to ``ind1``, ``ind2``
-    (copies of the indices) and ``val1``, ``val2`` (gradients).
-    """
-    m = count.shape[0]
-    sel = rows.shape[0] > 0
-    grad = ind1.shape[0] > 0
-    for blk in prange(nblocks):
-        for r in range(blk * m // nblocks, (blk + 1) * m // nblocks):
-            src = rows[r] if sel else r
-            p0 = offset[r]
-            for j in range(count[r]):
-                ind0[p0 + j] = out_i[src, j]
-                val0[p0 + j] = out_v[src, j]
-                if grad:
-                    ind1[p0 + j] = out_i[src, j]
-                    ind2[p0 + j] = out_i[src, j]
-                    val1[p0 + j] = out_g[0, src, j]
-                    val2[p0 + j] = out_g[1, src, j]
-
-
 @njit(cache=True)
-def _move_rows(indptr, new_indptr, rows, arrays, new_arrays):
-    """Copy the entries of every row except ``rows`` (sorted) from each of
-    ``arrays`` (CSR layout ``indptr``) to ``new_arrays`` (layout ``new_indptr``)."""
+def _splice(indptr, arrays, rows, indptr2, arrays2, sel, new_indptr, new_arrays):
+    """CSR rows (``indptr``, ``arrays``) with the (sorted) rows ``rows``
+    replaced by the rows ``sel`` of (``indptr2``, ``arrays2``), written to
+    ``new_indptr`` (m + 1,) and ``new_arrays`` (tuples of flat arrays)."""
+    m = indptr.shape[0] - 1
+    new_indptr[0] = 0
     j = 0
-    for r in range(indptr.shape[0] - 1):
+    for r in range(m):
         if j < rows.shape[0] and rows[j] == r:
+            src, a, b = 1, indptr2[sel[j]], indptr2[sel[j] + 1]
             j += 1
-            continue
-        a = indptr[r]
-        b = new_indptr[r]
-        for e in range(indptr[r + 1] - a):
-            for k in range(len(arrays)):
-                new_arrays[k][b + e] = arrays[k][a + e]
-
-
-@njit(cache=True)
-def _touch(a):
-    """Write one element per 4 KiB page of the flat array ``a`` (fault its
-    pages in from one thread: concurrent first touches of the same pages from
-    several threads serialise in the kernel and cost far more)."""
-    step = max(1, 4096 // a.itemsize)
-    for i in range(0, a.shape[0], step):
-        a[i] = 0
+        else:
+            src, a, b = 0, indptr[r], indptr[r + 1]
+        p0 = new_indptr[r]
+        new_indptr[r + 1] = p0 + b - a
+        for k in range(len(new_arrays)):
+            if src:
+                new_arrays[k][p0:p0 + b - a] = arrays2[k][a:b]
+            else:
+                new_arrays[k][p0:p0 + b - a] = arrays[k][a:b]
 
 
 class RowStore:
-    """CSR matrices with one sparsity pattern: values and, optionally, two
-    gradient components, filled chunk by chunk from padded kernel rows with
-    sorted indices.
+    """CSR rows on one sparsity pattern: column indices ``indices`` and values
+    ``vals`` (lists of k flat arrays, ``nnz`` entries each, possibly with
+    slack after them) with row pointers ``indptr`` (m + 1,), ``n`` columns.
 
-    ``m`` rows, ``n`` columns, ``k`` = 1 or 3 matrices, each with its own
-    copy of the column indices (scipy may sort or prune one matrix in place).
-    The flat arrays grow by an estimate from the rows seen so far (in practice
-    they are allocated once), and rows are gathered into them in parallel.
+    One copy of the indices per matrix (scipy may sort or prune a matrix in
+    place); rows sorted by column.
     """
 
-    def __init__(self, m: int, n: int, k: int):
-        if k not in (1, 3):
-            raise ValueError(f"k must be 1 or 3, got {k}")
-        self.m, self.n, self.k = m, n, k
-        self.indptr = np.zeros(m + 1, dtype=np.int64)
-        self.nnz = 0
-        self.indices = [np.empty(0, dtype=index_dtype(n, 0)) for _ in range(k)]
-        self.vals = [np.empty(0) for _ in range(k)]
+    def __init__(self, n: int, indptr, indices, vals, nnz: int):
+        self.n = n
+        self.indptr = indptr
+        self.indices = list(indices)
+        self.vals = list(vals)
+        self.nnz = nnz
 
-    def _targets(self):
-        """The 6 flat arrays :func:`_gather` writes (empty ones for k = 1)."""
-        ind, val = self.indices, self.vals
-        if self.k == 1:
-            ind = ind + [ind[0][:0]] * 2
-            val = val + [val[0][:0]] * 2
-        return (*ind, *val)
+    @property
+    def m(self) -> int:
+        return self.indptr.shape[0] - 1
 
-    def _reserve(self, need: int, rows_done: int):
-        """Room for ``need`` entries; more for the rows still to come."""
-        if need <= self.indices[0].shape[0]:
-            return
-        rest = self.m - rows_done
-        cap = need + int(1.02 * rest * need / max(rows_done, 1)) + 1024
-        dtype = index_dtype(self.n, cap)
-        for lst, dt in ((self.indices, dtype), (self.vals, np.float64)):
-            for j in range(self.k):
-                a = np.empty(cap, dtype=dt)
-                _touch(a)
-                a[:self.nnz] = lst[j][:self.nnz]
-                lst[j] = a
-
-    def append(self, r0: int, count, buffers, nthreads: int = 1):
-        """Add rows r0, ..., r0 + mc - 1 (the next ones): ``count`` (mc,) entries
-        of the padded ``buffers`` = (out_i, out_v (mc', cap), out_g (2, mc', cap))."""
-        mc = count.shape[0]
-        offset = self.indptr[r0:r0 + mc + 1]
-        np.cumsum(count, out=offset[1:])
-        offset[1:] += self.nnz
-        need = int(offset[-1])
-        self._reserve(need, r0 + mc)
-        nblocks = max(1, min(mc // 1024, 8 * nthreads))
-        _gather(count, offset[:-1], np.empty(0, np.int64), *buffers, *self._targets(),
-                nblocks)
-        self.nnz = need
-
-    def replace(self, rows, sel, count, buffers):
-        """Replace the (sorted) rows ``rows`` by rows ``sel`` of the padded
-        ``buffers``, with ``count`` entries each (after all rows were added)."""
+    def replace(self, rows, other: "RowStore", sel):
+        """Replace the (sorted) rows ``rows`` by the rows ``sel`` of ``other``."""
         if not rows.size:
             return
-        sizes = np.diff(self.indptr)
-        sizes[rows] = count
-        indptr = np.zeros_like(self.indptr)
-        np.cumsum(sizes, out=indptr[1:])
-        nnz = int(indptr[-1])
+        counts = np.diff(self.indptr)
+        counts[rows] = np.diff(other.indptr)[sel]
+        nnz = int(counts.sum())
         dtype = index_dtype(self.n, nnz)
-        indices = [np.empty(nnz, dtype=dtype) for _ in range(self.k)]
-        vals = [np.empty(nnz) for _ in range(self.k)]
-        for new, old in ((indices, self.indices), (vals, self.vals)):
-            _move_rows(self.indptr, indptr, rows, tuple(old), tuple(new))
+        indptr = np.empty_like(self.indptr)
+        indices = [np.empty(nnz, dtype=dtype) for _ in self.indices]
+        vals = [np.empty(nnz) for _ in self.vals]
+        for new, old, old2 in ((indices, self.indices, other.indices),
+                               (vals, self.vals, other.vals)):
+            old = tuple(a.astype(dtype, copy=False) for a in old) if new is indices else tuple(old)
+            old2 = (tuple(a.astype(dtype, copy=False) for a in old2) if new is indices
+                    else tuple(old2))
+            _splice(self.indptr, old, rows, other.indptr, old2, sel, indptr, tuple(new))
         self.indptr, self.indices, self.vals, self.nnz = indptr, indices, vals, nnz
-        _gather(count, indptr[rows], sel, *buffers, *self._targets(), 1)
 
     def matrices(self):
         """The k CSR matrices (m, n), flagged as having sorted indices."""
@@ -226,7 +160,7 @@ class RowStore:
             val = [a[:nnz].copy() for a in val]
         indptr = self.indptr.astype(ind[0].dtype)
         mats = []
-        for j in range(self.k):
+        for j in range(len(ind)):
             M = sp.csr_matrix((val[j][:nnz], ind[j][:nnz],
                                indptr if j == 0 else indptr.copy()), shape=(self.m, self.n))
             M.has_sorted_indices = True

@@ -52,7 +52,7 @@ from numba import njit, prange
 from scipy.spatial import Delaunay
 
 from ._batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, RowStore, check_queries,
-                     raise_outside, raise_undefined)
+                     index_dtype, raise_outside, raise_undefined)
 from .lasserre import sibson_coordinates_nd
 from .predicates import orient2d
 from .triangulation import (Triangulation, _cavity_boundary, _conflict_cycle, _grow_cavity,
@@ -77,16 +77,17 @@ def _circumcentre_rel(ax, ay, bx, by, d):
 
 
 @njit(cache=True, inline="always")
-def _at_node(P, T, t, qx, qy, row, out_i, out_v, out_gx, out_gy, want_grad):
-    """1 (and the Kronecker-delta row) if the point is a vertex of triangle t, else 0."""
+def _at_node(P, T, t, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad):
+    """1 (and the Kronecker-delta row, written from ``pos`` on) if the point
+    is a vertex of triangle t, else 0."""
     for j in range(3):
         a = T[t, j]
         if P[a, 0] == qx and P[a, 1] == qy:
-            out_i[row, 0] = a
-            out_v[row, 0] = 1.0
+            s_i[pos] = a
+            s_v[pos] = 1.0
             if want_grad:
-                out_gx[row, 0] = np.nan
-                out_gy[row, 0] = np.nan
+                s_gx[pos] = np.nan
+                s_gy[pos] = np.nan
             return 1
     return 0
 
@@ -131,9 +132,9 @@ def _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn, be_b, be_c, be_u,
 
 
 @njit(cache=True, inline="always")
-def _on_hull(P, nn, be_u, nb, qx, qy, row, out_i, out_v, out_gx, out_gy, want_grad):
-    """2 (and the row of linear 1D weights) if the point lies, to round-off,
-    on a hull edge of the cavity boundary; else 0."""
+def _on_hull(P, nn, be_u, nb, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad):
+    """2 (and the row of linear 1D weights, written from ``pos`` on) if the
+    point lies, to round-off, on a hull edge of the cavity boundary; else 0."""
     for j in range(nb):
         if be_u[j] < 0:
             a = nn[j]
@@ -146,15 +147,15 @@ def _on_hull(P, nn, be_u, nb, qx, qy, row, out_i, out_v, out_gx, out_gy, want_gr
                 s = ((qx - P[a, 0]) * ex + (qy - P[a, 1]) * ey) / L2
                 s = min(max(s, 0.0), 1.0)
                 lo = min(a, b)
-                out_i[row, 0] = lo
-                out_i[row, 1] = a + b - lo
+                s_i[pos] = lo
+                s_i[pos + 1] = a + b - lo
                 v0 = 1.0 - s if lo == a else s
-                out_v[row, 0] = v0
-                out_v[row, 1] = 1.0 - v0
+                s_v[pos] = v0
+                s_v[pos + 1] = 1.0 - v0
                 if want_grad:
                     for jj in range(2):
-                        out_gx[row, jj] = np.nan
-                        out_gy[row, jj] = np.nan
+                        s_gx[pos + jj] = np.nan
+                        s_gy[pos + jj] = np.nan
                 return 2
     return 0
 
@@ -173,7 +174,7 @@ def _new_vertices(P, nn, nb, qx, qy, vx, vy, dv):
 
 
 @njit(cache=True, inline="always")
-def _sibson_areas(P, T, C, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb, nedge,
+def _sibson_areas(P, T, CC, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb, nedge,
                   vx, vy, ox, oy, area):
     """Twice the Sibson areas A_i, of the polygons (o_t1, ..., o_tr, v_{i-1}, v_i),
     into ``area[:nb]`` (every factor 1/2 cancels in phi and grad phi).
@@ -187,8 +188,8 @@ def _sibson_areas(P, T, C, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb, ne
     for c in range(ncav):
         tc = cav[c]
         a = T[tc, 0]
-        ox[c] = (P[a, 0] - qx) + C[tc, 0]
-        oy[c] = (P[a, 1] - qy) + C[tc, 1]
+        ox[c] = (P[a, 0] - qx) + CC[tc, 0]
+        oy[c] = (P[a, 1] - qy) + CC[tc, 1]
     for j in range(nb):
         jm = j - 1 if j > 0 else nb - 1
         area[j] = vx[jm] * vy[j] - vy[jm] * vx[j]
@@ -258,9 +259,9 @@ def _laplace_weights(P, nn, nb, qx, qy, vx, vy, dv, want_grad, area, gax, gay):
 
 
 @njit(cache=True, inline="always")
-def _write_row(nn, nb, area, gax, gay, want_grad, perm, row, out_i, out_v, out_gx, out_gy):
+def _write_row(nn, nb, area, gax, gay, want_grad, perm, pos, s_i, s_v, s_gx, s_gy):
     """phi_i = A_i / A and grad phi_i = (grad A_i - phi_i sum_j grad A_j) / A
-    into row ``row`` of the outputs, sorted by node index.
+    into the outputs from ``pos`` on, sorted by node index.
 
     The dominant neighbour d gets its gradient from complement sums,
     grad phi_d = (grad A_d (1 - phi_d) - phi_d sum_{j != d} grad A_j) / A,
@@ -295,133 +296,236 @@ def _write_row(nn, nb, area, gax, gay, want_grad, perm, row, out_i, out_v, out_g
     for r in range(nb):
         i = perm[r]
         phi = area[i] * inv
-        out_i[row, r] = nn[i]
-        out_v[row, r] = phi
+        s_i[pos + r] = nn[i]
+        s_v[pos + r] = phi
         if want_grad:
             if i == dom:
-                out_gx[row, r] = (gax[i] * (rest * inv) - phi * gcx) * inv
-                out_gy[row, r] = (gay[i] * (rest * inv) - phi * gcy) * inv
+                s_gx[pos + r] = (gax[i] * (rest * inv) - phi * gcx) * inv
+                s_gy[pos + r] = (gay[i] * (rest * inv) - phi * gcy) * inv
             else:
-                out_gx[row, r] = (gax[i] - phi * gsx) * inv
-                out_gy[row, r] = (gay[i] - phi * gsy) * inv
+                s_gx[pos + r] = (gax[i] - phi * gsx) * inv
+                s_gy[pos + r] = (gay[i] - phi * gsy) * inv
 
 
-@njit(cache=True, parallel=True)
-def _query_batch(P, T, N, C, Q, start, grid, nc, glo, gspan, kind, want_grad, general,
-                 nblocks, out_i, out_v, out_gx, out_gy, count, status, tri):
-    """Natural-neighbour coordinates of the m points Q (m, 2), in parallel blocks.
+@njit(cache=True, inline="always")
+def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, general, width,
+                 lo, hi, pos, end, s_i, s_v, s_gx, s_gy, count, status, tri):
+    """Natural-neighbour coordinates of the points Q[lo:hi], one after another.
 
     ``start`` (m,): the triangle each walk starts from, or empty: then the
     bucket grid ``grid`` (nc * nc,) over the box ``glo`` (2,) + ``gspan`` (2,)
     gives one (see :meth:`Triangulation._seeds`); consecutive queries also
-    try the previous query's triangle. ``general``: find cavities with
-    :func:`_grow_cavity` (any triangulation) instead of the traversal
-    :func:`_conflict_cycle` (Delaunay triangulations; the fast path).
+    try the previous query's triangle. ``CC``: :attr:`Triangulation.circumcircles`.
+    ``general``: find cavities with :func:`_grow_cavity` (any triangulation)
+    instead of the traversal :func:`_conflict_cycle` (Delaunay
+    triangulations; the fast path).
 
-    Outputs: row q of ``out_i`` (node indices, sorted), ``out_v`` (values),
-    ``out_gx``, ``out_gy`` (gradients, if ``want_grad``), all (m, width),
-    holds ``count[q]`` entries; ``status[q]`` is a status code and ``tri[q]``
-    a triangle containing the point. Rows with more than ``width`` natural
-    neighbours get status OVERFLOW.
+    Outputs: the rows, one after another from position ``pos`` on, in the
+    flat arrays ``s_i`` (node indices, sorted within each row), ``s_v``
+    (values), ``s_gx``, ``s_gy`` (gradients, if ``want_grad``); ``count[q]``
+    entries, ``status[q]`` a status code and ``tri[q]`` a triangle containing
+    the point, for q in [lo, hi). Rows with more than ``width`` natural
+    neighbours, and all rows once fewer than ``width`` positions are left
+    before ``end``, get status OVERFLOW and no entries. Returns the position
+    after the last entry.
 
-    Everything per query is inlined into this loop: numba reference-counts
-    the array arguments of the functions it calls with atomic operations,
-    which cost more than the geometry and stop threads from scaling.
+    Inlined, like everything it calls: numba reference-counts the array
+    arguments of the functions it calls with atomic operations, which cost
+    more than the geometry and keep threads from scaling.
+    """
+    ccap = width
+    cav = np.empty(ccap, np.int64)
+    cpar = np.empty(ccap, np.int64)
+    cchd = np.empty(ccap, np.int64)
+    cpa = np.empty(ccap, np.int64)
+    cpb = np.empty(ccap, np.int64)
+    cedge = np.empty(ccap, np.int64)
+    cstep = np.empty(ccap, np.int64)
+    stk = np.empty(ccap, np.int64)
+    cnb = np.empty((ccap, 3), np.int64)
+    rej = np.empty(ccap + 4, np.int64)
+    ox = np.empty(ccap)
+    oy = np.empty(ccap)
+    nn = np.empty(ccap + 2, np.int64)
+    be_b = np.empty(ccap + 2, np.int64)
+    be_u = np.empty(ccap + 2, np.int64)
+    be_c = np.empty(ccap + 2, np.int64)
+    perm = np.empty(ccap + 2, np.int64)
+    vx = np.empty(ccap + 2)
+    vy = np.empty(ccap + 2)
+    dv = np.empty(ccap + 2)
+    area = np.empty(ccap + 2)
+    gax = np.empty(ccap + 2)
+    gay = np.empty(ccap + 2)
+    prev = -1
+    for q in range(lo, hi):
+        count[q] = 0
+        if end - pos < width:
+            # out of room: left for a second pass
+            status[q] = OVERFLOW
+            tri[q] = prev if prev >= 0 else 0
+            continue
+        qx = Q[q, 0]
+        qy = Q[q, 1]
+        if start.shape[0]:
+            t0 = start[q]
+        else:
+            f0 = min(max((qx - glo[0]) / gspan[0] * nc, 0.0), nc - 1.0)
+            f1 = min(max((qy - glo[1]) / gspan[1] * nc, 0.0), nc - 1.0)
+            t0 = grid[int(f0) * nc + int(f1)]
+        if t0 < 0:
+            t0 = 0
+        # start the walk from the seed or from the previous query's
+        # triangle, whichever is nearer (sorted queries walk ~1 step)
+        if prev >= 0:
+            a = T[t0, 0]
+            b = T[prev, 0]
+            da = (P[a, 0] - qx) ** 2 + (P[a, 1] - qy) ** 2
+            db = (P[b, 0] - qx) ** 2 + (P[b, 1] - qy) ** 2
+            if db < da:
+                t0 = prev
+        t, k = _locate(P, T, N, qx, qy, t0)
+        tri[q] = t
+        cnt = 0
+        st = OK
+        if k >= 0 or t < 0:
+            st = OUTSIDE
+        else:
+            prev = t
+            cnt = _at_node(P, T, t, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad)
+            if cnt:
+                st = AT_NODE
+        if st == OK and cnt == 0:
+            # the cavity, its boundary as a counter-clockwise cycle
+            # nn[0..nb-1] around x, and its internal edges
+            if general:
+                ncav, nb, nedge = _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn,
+                                                  be_b, be_c, be_u, cpar, cchd, cpa, cpb)
+            else:
+                ncav, nb = _conflict_cycle(P, T, N, CC, qx, qy, t, cav, cpar, cpa, cpb,
+                                           cedge, cstep, stk, nn, be_u, be_c)
+                nedge = ncav - 1
+                for e in range(1, ncav):
+                    cchd[e] = e
+            if ncav < 0 or nb > width:
+                st = OVERFLOW
+            else:
+                cnt = _on_hull(P, nn, be_u, nb, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad)
+                if cnt:
+                    st = ON_HULL
+        if st == OK and cnt == 0:
+            _new_vertices(P, nn, nb, qx, qy, vx, vy, dv)
+            if kind == SIBSON:
+                _sibson_areas(P, T, CC, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb,
+                              nedge, vx, vy, ox, oy, area)
+                if want_grad:
+                    _sibson_gradients(P, nn, nb, qx, qy, vx, vy, gax, gay)
+            else:
+                _laplace_weights(P, nn, nb, qx, qy, vx, vy, dv, want_grad, area, gax, gay)
+            _write_row(nn, nb, area, gax, gay, want_grad, perm, pos, s_i, s_v, s_gx, s_gy)
+            cnt = nb
+        count[q] = cnt
+        status[q] = st
+        pos += cnt
+    return pos
+
+
+# below this many queries a batch runs as one block per piece: waking the
+# thread pool would cost more than it saves
+_PARALLEL_MIN = 2000
+
+
+@njit(cache=True, parallel=True)
+def _query_all(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, general, width,
+               room, chunk, block, nthreads, index_proto, status, tri, indptr):
+    """Natural-neighbour coordinates of the m points Q (m, 2) as CSR arrays.
+
+    Pieces of ``chunk`` queries go in parallel blocks of consecutive queries
+    (see :func:`_query_block`, which also describes ``start, grid, nc, glo,
+    gspan, general, width`` and the status codes), each block writing its rows
+    one after another into its own stretch of a staging buffer (``room``
+    entries per query); then the blocks' stretches are copied, in parallel,
+    to their places in the flat CSR arrays, which are allocated once from an
+    estimate after the first piece (and grown if it falls short). Two
+    parallel regions per piece; blocks go to threads as these come free (set
+    ``numba.parallel_chunksize(1)`` around the call).
+
+    Fills ``status``, ``tri`` (m,) and ``indptr`` (m + 1,); returns
+    ``(ind0, ind1, ind2, val0, val1, val2, nnz)``: column indices (dtype of
+    ``index_proto``) and values, then, if ``want_grad``, two more copies of
+    the indices and the x and y gradients (else empty arrays), each holding
+    ``nnz`` entries (and possibly some slack after them).
     """
     m = Q.shape[0]
-    width = out_i.shape[1]
-    ccap = width
-    for blk in prange(nblocks):
-        lo = blk * m // nblocks
-        hi = (blk + 1) * m // nblocks
-        cav = np.empty(ccap, np.int64)
-        cpar = np.empty(ccap, np.int64)
-        cchd = np.empty(ccap, np.int64)
-        cpa = np.empty(ccap, np.int64)
-        cpb = np.empty(ccap, np.int64)
-        cedge = np.empty(ccap, np.int64)
-        cstep = np.empty(ccap, np.int64)
-        stk = np.empty(ccap, np.int64)
-        cnb = np.empty((ccap, 3), np.int64)
-        rej = np.empty(ccap + 4, np.int64)
-        ox = np.empty(ccap)
-        oy = np.empty(ccap)
-        nn = np.empty(ccap + 2, np.int64)
-        be_b = np.empty(ccap + 2, np.int64)
-        be_u = np.empty(ccap + 2, np.int64)
-        be_c = np.empty(ccap + 2, np.int64)
-        perm = np.empty(ccap + 2, np.int64)
-        vx = np.empty(ccap + 2)
-        vy = np.empty(ccap + 2)
-        dv = np.empty(ccap + 2)
-        area = np.empty(ccap + 2)
-        gax = np.empty(ccap + 2)
-        gay = np.empty(ccap + 2)
-        prev = -1
-        for q in range(lo, hi):
-            qx = Q[q, 0]
-            qy = Q[q, 1]
-            if start.shape[0]:
-                t0 = start[q]
-            else:
-                f0 = min(max((qx - glo[0]) / gspan[0] * nc, 0.0), nc - 1.0)
-                f1 = min(max((qy - glo[1]) / gspan[1] * nc, 0.0), nc - 1.0)
-                t0 = grid[int(f0) * nc + int(f1)]
-            if t0 < 0:
-                t0 = 0
-            # start the walk from the seed or from the previous query's
-            # triangle, whichever is nearer (sorted queries walk ~1 step)
-            if prev >= 0:
-                a = T[t0, 0]
-                b = T[prev, 0]
-                da = (P[a, 0] - qx) ** 2 + (P[a, 1] - qy) ** 2
-                db = (P[b, 0] - qx) ** 2 + (P[b, 1] - qy) ** 2
-                if db < da:
-                    t0 = prev
-            t, k = _locate(P, T, N, qx, qy, t0)
-            tri[q] = t
-            cnt = 0
-            st = OK
-            if k >= 0 or t < 0:
-                st = OUTSIDE
-            else:
-                prev = t
-                cnt = _at_node(P, T, t, qx, qy, q, out_i, out_v, out_gx, out_gy, want_grad)
-                if cnt:
-                    st = AT_NODE
-            if st == OK and cnt == 0:
-                # the cavity, its boundary as a counter-clockwise cycle
-                # nn[0..nb-1] around x, and its internal edges
-                if general:
-                    ncav, nb, nedge = _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn,
-                                                      be_b, be_c, be_u, cpar, cchd, cpa, cpb)
-                else:
-                    ncav, nb = _conflict_cycle(P, T, N, C, qx, qy, t, cav, cpar, cpa, cpb,
-                                               cedge, cstep, stk, nn, be_u, be_c)
-                    nedge = ncav - 1
-                    for e in range(1, ncav):
-                        cchd[e] = e
-                if ncav < 0 or nb > width:
-                    st = OVERFLOW
-                else:
-                    cnt = _on_hull(P, nn, be_u, nb, qx, qy, q, out_i, out_v, out_gx, out_gy,
-                                   want_grad)
-                    if cnt:
-                        st = ON_HULL
-            if st == OK and cnt == 0:
-                _new_vertices(P, nn, nb, qx, qy, vx, vy, dv)
-                if kind == SIBSON:
-                    _sibson_areas(P, T, C, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb,
-                                  nedge, vx, vy, ox, oy, area)
-                    if want_grad:
-                        _sibson_gradients(P, nn, nb, qx, qy, vx, vy, gax, gay)
-                else:
-                    _laplace_weights(P, nn, nb, qx, qy, vx, vy, dv, want_grad, area, gax, gay)
-                _write_row(nn, nb, area, gax, gay, want_grad, perm, q, out_i, out_v, out_gx,
-                           out_gy)
-                cnt = nb
-            count[q] = cnt
-            status[q] = st
+    count = np.empty(m, np.int64)
+    piece = max(1, min(m, chunk))
+    maxblocks = max(1, piece // block) if m >= _PARALLEL_MIN and nthreads > 1 else 1
+    scap = piece * room + maxblocks * width
+    gcap = scap if want_grad else 0
+    s_i = np.empty(scap, index_proto.dtype)
+    s_v = np.empty(scap)
+    s_gx = np.empty(gcap)
+    s_gy = np.empty(gcap)
+    bfill = np.empty(maxblocks, np.int64)
+    ind0 = np.empty(0, index_proto.dtype)
+    ind1 = np.empty(0, index_proto.dtype)
+    ind2 = np.empty(0, index_proto.dtype)
+    val0 = np.empty(0)
+    val1 = np.empty(0)
+    val2 = np.empty(0)
+    indptr[0] = 0
+    for c0 in range(0, m, piece):
+        c1 = min(m, c0 + piece)
+        mc = c1 - c0
+        nblocks = max(1, min(mc // block, maxblocks))
+        for blk in prange(nblocks):
+            lo = c0 + blk * mc // nblocks
+            hi = c0 + (blk + 1) * mc // nblocks
+            base = (lo - c0) * room + blk * width
+            end = (hi - c0) * room + (blk + 1) * width
+            bfill[blk] = _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind,
+                                      want_grad, general, width, lo, hi, base, end,
+                                      s_i, s_v, s_gx, s_gy, count, status, tri) - base
+        for r in range(c0, c1):
+            indptr[r + 1] = indptr[r] + count[r]
+        nnz = indptr[c0]
+        need = indptr[c1]
+        if need > ind0.shape[0]:
+            # room for this piece and, estimated from the rows so far, the rest
+            cap = need + int(1.02 * (m - c1) * need / c1) + 1024
+            ind0 = _grown(ind0, cap, nnz)
+            val0 = _grown(val0, cap, nnz)
+            if want_grad:
+                ind1 = _grown(ind1, cap, nnz)
+                ind2 = _grown(ind2, cap, nnz)
+                val1 = _grown(val1, cap, nnz)
+                val2 = _grown(val2, cap, nnz)
+        for blk in prange(nblocks):
+            lo = c0 + blk * mc // nblocks
+            base = (lo - c0) * room + blk * width
+            off = indptr[lo]
+            f = bfill[blk]
+            ind0[off:off + f] = s_i[base:base + f]
+            val0[off:off + f] = s_v[base:base + f]
+            if want_grad:
+                ind1[off:off + f] = s_i[base:base + f]
+                ind2[off:off + f] = s_i[base:base + f]
+                val1[off:off + f] = s_gx[base:base + f]
+                val2[off:off + f] = s_gy[base:base + f]
+    return ind0, ind1, ind2, val0, val1, val2, indptr[m]
+
+
+@njit(cache=True)
+def _grown(a, cap, n):
+    """A copy of ``a[:n]`` with room for ``cap`` entries, its pages faulted
+    in from this one thread (first touches of the same pages from several
+    threads at once serialise in the kernel and cost far more)."""
+    b = np.empty(cap, a.dtype)
+    step = max(1, 4096 // b.itemsize)
+    for i in range(0, cap, step):
+        b[i] = 0
+    b[:n] = a[:n]
+    return b
 
 
 def _dimension(nodes_or_triangulation) -> int:
@@ -556,32 +660,26 @@ def natural_neighbour_coordinates(
             raise ValueError(f"hint must hold {m} triangle indices in [0, {tri.ntriangles})")
     status = np.empty(m, dtype=np.int64)
     tri_out = np.empty(m, dtype=np.int64)
-    rows = RowStore(m, n, 3 if gradient else 1)
-    nthreads = _threads()
-    buffers = _buffers(min(m, chunk), _CAP, gradient)
-    for c0 in range(0, m, chunk):
-        c1 = min(m, c0 + chunk)
-        count = _run_chunk(tri, q[c0:c1], start[c0:c1] if start.size else start, ikind,
-                           gradient, False, status[c0:c1], tri_out[c0:c1], buffers)
-        rows.append(c0, count, buffers, nthreads)
+    rows = _run(tri, q, start, ikind, gradient, False, _CAP, _ROOM, chunk, status, tri_out)
     # points outside by round-off only: move them onto the hull and redo
     redo = _snap_to_hull(tri, q, np.flatnonzero(status == OUTSIDE), hull_tol)
     # rare: more natural neighbours than the buffers hold (co-circular
-    # clusters), or a cavity that is not a tree (a triangulation that is not
-    # Delaunay): redo with the general cavity search and buffers large enough
+    # clusters, or a block of queries with more than _ROOM on average), or a
+    # cavity that is not a tree (a triangulation that is not Delaunay): redo
+    # with more room, from the second round on with the general cavity search
     redo = np.union1d(redo, np.flatnonzero(status == OVERFLOW))
-    cap = 4 * _CAP
+    width, room, general = 4 * _CAP, 2 * _ROOM, False
     while redo.size:
         st2 = np.empty(redo.size, dtype=np.int64)
         t2 = np.empty(redo.size, dtype=np.int64)
-        bufs = _buffers(redo.size, cap, gradient)
-        count = _run_chunk(tri, q[redo], tri_out[redo], ikind, gradient, True, st2, t2, bufs)
+        extra = _run(tri, q[redo], tri_out[redo], ikind, gradient, general, width, room, chunk,
+                     st2, t2)
         done = st2 != OVERFLOW
         status[redo] = st2
-        tri_out[redo[done]] = t2[done]
-        rows.replace(redo[done], np.flatnonzero(done), count[done], bufs)
+        tri_out[redo] = t2
+        rows.replace(redo[done], extra, np.flatnonzero(done))
         redo = redo[~done]
-        cap *= 4
+        width, room, general = 4 * width, min(4 * width, 2 * room), True
     _check_status(status, q, 0, gradient, undefined, tri)
     out = rows.matrices()
     result = (out[0], out[1:]) if gradient else out[0]
@@ -590,7 +688,14 @@ def natural_neighbour_coordinates(
     return result
 
 
+# natural neighbours a query may have in the first pass (more: redone with
+# larger buffers), and staging room per query (a block of queries averaging
+# more than that is finished in a second pass)
 _CAP = 24
+_ROOM = 12
+# queries per block: blocks go to threads as these come free, so that
+# threads finish a piece together
+_BLOCK = 1024
 
 
 def _snap_to_hull(tri, q, rows, hull_tol):
@@ -624,33 +729,22 @@ def _snap_to_hull(tri, q, rows, hull_tol):
     return np.array(moved, dtype=np.int64)
 
 
-def _buffers(mc, cap, gradient):
-    """Padded per-chunk output rows, reused across chunks (no page faults):
-    indices, values (mc, cap) and gradients (2, mc, cap)."""
-    return (np.empty((mc, cap), np.int64), np.empty((mc, cap)),
-            np.empty((2, mc, cap) if gradient else (2, 1, 1)))
-
-
-def _run_chunk(tri, Qc, start, ikind, gradient, general, status, tloc, buffers):
-    """Run the query kernel on the points Qc (mc, 2) into ``buffers`` (see
-    :func:`_buffers`), ``status`` and ``tloc`` (mc,); returns the (mc,) counts."""
+def _run(tri, q, start, ikind, gradient, general, width, room, chunk, status, tri_out):
+    """The kernel :func:`_query_all` on the points q (m, 2); returns a
+    :class:`RowStore` of the rows and fills ``status``, ``tri_out`` (m,)."""
     import numba
-    mc = Qc.shape[0]
-    out_i, out_v, out_g = buffers
-    count = np.empty(mc, np.int64)
+    m = q.shape[0]
+    n = tri.npoints
     lo, span, nc, grid = tri._seeds()
-    # blocks of a few hundred queries, handed to the threads as they come
-    # free (other load on a core then does not hold the batch up); a small
-    # batch is one block: waking the thread pool would cost more than it saves
-    nblocks = max(1, min(mc // 256, 16 * _threads())) if mc >= _PARALLEL_MIN else 1
+    indptr = np.empty(m + 1, dtype=np.int64)
+    proto = np.empty(0, dtype=index_dtype(n, m * width))
     with numba.parallel_chunksize(1):
-        _query_batch(tri.nodes, tri.triangles, tri.neighbours, tri.circumcircles, Qc,
-                     start, grid, nc, lo, span, ikind, gradient, general, nblocks,
-                     out_i[:mc], out_v[:mc], out_g[0, :mc], out_g[1, :mc], count, status, tloc)
-    return count
-
-
-_PARALLEL_MIN = 2000
+        *arrays, nnz = _query_all(tri.nodes, tri.triangles, tri.neighbours, tri.circumcircles,
+                                  q, start, grid, nc, lo, span, ikind, gradient, general, width,
+                                  room, max(1, chunk), _BLOCK, _threads(), proto, status,
+                                  tri_out, indptr)
+    k = 3 if gradient else 1
+    return RowStore(n, indptr, arrays[:3][:k], arrays[3:][:k], int(nnz))
 
 
 def _check_status(status, q, offset, gradient, undefined, tri):

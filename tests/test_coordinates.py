@@ -478,17 +478,14 @@ def test_fallback_cavity_search_agrees():
         for general in (False, True):
             st = np.empty(q.shape[0], np.int64)
             tl = np.empty(q.shape[0], np.int64)
-            bufs = C._buffers(q.shape[0], C._CAP, True)
-            cnt = C._run_chunk(t, q, np.empty(0, np.int64), C.SIBSON, True, general, st, tl,
-                               bufs)
+            rows = C._run(t, q, np.empty(0, np.int64), C.SIBSON, True, general, C._CAP,
+                          C._ROOM, 1 << 15, st, tl)
             assert (st == 0).all()
-            res.append((cnt, *bufs))
-        np.testing.assert_array_equal(res[0][0], res[1][0])
-        for r in range(q.shape[0]):
-            c = res[0][0][r]
-            np.testing.assert_array_equal(res[0][1][r, :c], res[1][1][r, :c])
-            np.testing.assert_allclose(res[0][2][r, :c], res[1][2][r, :c], atol=1e-13)
-            np.testing.assert_allclose(res[0][3][:, r, :c], res[1][3][:, r, :c], atol=1e-10)
+            res.append(rows.matrices())
+        for A, B, tol in zip(res[0], res[1], (1e-13, 1e-10, 1e-10)):
+            np.testing.assert_array_equal(A.indptr, B.indptr)
+            np.testing.assert_array_equal(A.indices, B.indices)
+            np.testing.assert_allclose(A.data, B.data, rtol=0, atol=tol * max(1, abs(A.data).max()))
 
 
 def test_non_delaunay_triangulation_terminates():
@@ -519,3 +516,24 @@ def test_non_delaunay_triangulation_terminates():
     q = interior_queries(2000, seed=41)
     Phi = sibson_coordinates(bad, q)
     assert Phi.shape == (2000, p.shape[0]) and np.isfinite(Phi.data).all()
+
+
+def test_rows_longer_than_the_staging_room():
+    # every query has 20 natural neighbours (inside an empty co-circular
+    # 20-gon), more than the first pass's room per query on average: the
+    # rows that do not fit are finished in a second pass
+    k = 20
+    ang = 2 * np.pi * np.arange(k) / k
+    ring = np.c_[np.cos(ang), np.sin(ang)]
+    p = np.r_[ring, 3 * ring]
+    tri = Triangulation(p)
+    rng = np.random.default_rng(42)
+    q = 0.5 * (rng.random((6000, 2)) - 0.5)
+    Phi, (Dx, Dy) = sibson_coordinates(tri, q, gradient=True)
+    assert (np.diff(Phi.indptr) >= k).all() and _rows_sorted(Phi)
+    ref = sibson_coordinates(tri, q, gradient=True, chunk=1)
+    for A, B in zip([Phi, Dx, Dy], [ref[0], *ref[1]]):
+        np.testing.assert_array_equal(A.indptr, B.indptr)
+        np.testing.assert_array_equal(A.indices, B.indices)
+        np.testing.assert_allclose(A.data, B.data, rtol=1e-12, atol=1e-12)
+    check_properties(tri, q[:200], sibson_coordinates, tol=1e-11)

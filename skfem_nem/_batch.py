@@ -2,9 +2,10 @@
 
 The 2D area method (:mod:`skfem_nem.coordinates`) and the n-D Lasserre
 method (:mod:`skfem_nem.lasserre`) both check query points the same way,
-write padded per-query rows from their numba kernels, compress them into one
-CSR sparsity pattern shared by values and gradients, and report the same
-status codes with the same messages.
+turn the rows their numba kernels write into one CSR sparsity pattern shared
+by values and gradients (the Lasserre kernel's padded rows through
+:func:`compress`, the area kernel's flat rows through :class:`RowStore`), and
+report the same status codes with the same messages.
 """
 from __future__ import annotations
 
@@ -30,6 +31,8 @@ def check_queries(x, d: int) -> np.ndarray:
         q = q[None, :]
     if q.ndim != 2 or q.shape[1] != d:
         raise ValueError(f"query points must have shape (m, {d}), got {np.shape(x)}")
+    if np.isfinite(q).all():
+        return q
     bad = np.flatnonzero(~np.isfinite(q).all(axis=1))
     if bad.size:
         raise ValueError(
@@ -76,16 +79,6 @@ def compress(count, out_i, out_v, out_g, gradient: bool, n: int):
     grads = np.empty((out_g.shape[0], nnz if gradient else 0))
     _compress(count, indptr, out_i, out_v, out_g, gradient, indices, data, grads)
     return indptr, indices, data, grads
-
-
-def csr_family(indptr, indices, values, shape):
-    """One CSR matrix per array in ``values`` on the same (indptr, indices)
-    pattern (each matrix gets its own copy of the index arrays)."""
-    indptr = indptr.astype(indices.dtype, copy=False)
-    mats = [sp.csr_matrix((values[0], indices, indptr), shape=shape)]
-    for v in values[1:]:
-        mats.append(sp.csr_matrix((v, indices.copy(), indptr.copy()), shape=shape))
-    return mats
 
 
 @njit(cache=True)

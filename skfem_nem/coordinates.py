@@ -36,6 +36,20 @@ Robustness
     triangulation holds. A query on a convex-hull edge gets the linear 1D
     weights of the edge's two nodes, a query at a node the Kronecker delta.
 
+Cost
+    Per query: a walk from the previous query's triangle (or a bucket-grid
+    seed), one depth-first traversal that collects the cavity and orders its
+    boundary counter-clockwise at the same time (the cavity of a Delaunay
+    triangulation is a tree of triangles), in-circle tests decided by the
+    cached circumcircles unless they are within round-off of the circle
+    (then by the exact predicate), and the Sibson areas summed edge by edge
+    over that tree. All of it is inlined into one parallel loop over blocks
+    of consecutive queries, which write their rows straight into staging
+    buffers that are copied in parallel into the CSR arrays: numba
+    reference-counts the arrays passed to a called function with atomic
+    operations, which would cost more than the geometry and keep a second
+    thread from helping.
+
 Undefined gradients
     The gradient is undefined at a node (the coordinates have a cone-like
     kink there), and on a hull edge this module does not compute the

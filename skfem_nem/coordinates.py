@@ -188,10 +188,11 @@ def _new_vertices(P, nn, nb, qx, qy, vx, vy, dv):
 
 
 @njit(cache=True, inline="always")
-def _sibson_areas(P, T, CC, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb, nedge,
+def _sibson_areas(CC, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb, nedge,
                   vx, vy, ox, oy, area):
     """Twice the Sibson areas A_i, of the polygons (o_t1, ..., o_tr, v_{i-1}, v_i),
-    into ``area[:nb]`` (every factor 1/2 cancels in phi and grad phi).
+    into ``area[:nb]`` (every factor 1/2 cancels in phi and grad phi); the old
+    Voronoi vertices o_t come from the circumcircles ``CC``.
 
     Summed edge by edge: the boundary edge j in cavity triangle c gives
     cross(v_j, o_c) to node j and its negative to node j + 1; the internal
@@ -201,9 +202,8 @@ def _sibson_areas(P, T, CC, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb, n
     """
     for c in range(ncav):
         tc = cav[c]
-        a = T[tc, 0]
-        ox[c] = (P[a, 0] - qx) + CC[tc, 0]
-        oy[c] = (P[a, 1] - qy) + CC[tc, 1]
+        ox[c] = (CC[tc, 3] - qx) + CC[tc, 0]
+        oy[c] = (CC[tc, 4] - qy) + CC[tc, 1]
     for j in range(nb):
         jm = j - 1 if j > 0 else nb - 1
         area[j] = vx[jm] * vy[j] - vy[jm] * vx[j]
@@ -430,8 +430,8 @@ def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, g
         if st == OK and cnt == 0:
             _new_vertices(P, nn, nb, qx, qy, vx, vy, dv)
             if kind == SIBSON:
-                _sibson_areas(P, T, CC, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb,
-                              nedge, vx, vy, ox, oy, area)
+                _sibson_areas(CC, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb, nedge,
+                              vx, vy, ox, oy, area)
                 if want_grad:
                     _sibson_gradients(P, nn, nb, qx, qy, vx, vy, gax, gay)
             else:

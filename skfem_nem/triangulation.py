@@ -495,7 +495,7 @@ def _filter_range(x):
 
 @njit(cache=True)
 def _circumcircles(P, T, out):
-    """Circumcentre offsets and their error bounds, ``out`` (nt, 3).
+    """Circumcentre offsets, their error bounds and the first vertices, ``out`` (nt, 5).
 
     ``out[t, :2]`` is the circumcentre of triangle t minus its first vertex a
     (with b, c relative to a: ``(c_y |b|^2 - b_y |c|^2, b_x |c|^2 - c_x |b|^2)
@@ -504,6 +504,8 @@ def _circumcircles(P, T, out):
     numerators carry at most 8 rounding errors relative to the sums of
     their terms' magnitudes, the division the error of d; both are doubled
     here. Triangles outside the range where these bounds hold get ``inf``.
+    ``out[t, 3:]`` is the vertex a itself (so that the in-circle filter needs
+    no second, dependent memory access).
     """
     for t in range(T.shape[0]):
         a = T[t, 0]
@@ -529,6 +531,8 @@ def _circumcircles(P, T, out):
             if not (abs(ox) + abs(oy) < _CIRCLE_MAX and err < _CIRCLE_MAX):
                 err = np.inf
         out[t, 2] = err
+        out[t, 3] = P[a, 0]
+        out[t, 4] = P[a, 1]
 
 
 @njit(cache=True, inline="always")
@@ -543,9 +547,8 @@ def _in_circumcircle(P, T, CC, t, qx, qy):
     :func:`incircle_sign` decide. Same answer as :func:`_in_cavity`, for a
     fraction of its cost.
     """
-    a = T[t, 0]
-    ux = qx - P[a, 0]
-    uy = qy - P[a, 1]
+    ux = qx - CC[t, 3]
+    uy = qy - CC[t, 4]
     cx = CC[t, 0]
     cy = CC[t, 1]
     s = abs(ux) + abs(uy)
@@ -844,11 +847,11 @@ class Triangulation:
 
     @property
     def circumcircles(self) -> np.ndarray:
-        """(nt, 3) circumcentre of each triangle minus its first vertex, and a
+        """(nt, 5) circumcentre of each triangle minus its first vertex, a
         bound on the error of that offset (``inf`` where it is not used as a
-        filter); see :attr:`circumcentre_offsets`."""
+        filter), and the first vertex; see :attr:`circumcentre_offsets`."""
         if self._circumcentres is None:
-            out = np.empty((self.ntriangles, 3))
+            out = np.empty((self.ntriangles, 5))
             _circumcircles(self.nodes, self.triangles, out)
             self._circumcentres = out
         return self._circumcentres

@@ -2,9 +2,10 @@
 
 The 2D area method (:mod:`skfem_nem.coordinates`) and the n-D Lasserre
 method (:mod:`skfem_nem.lasserre`) both check query points the same way,
-write padded per-query rows from their numba kernels, compress them into one
-CSR sparsity pattern shared by values and gradients, and report the same
-status codes with the same messages.
+turn the rows their numba kernels write into one CSR sparsity pattern shared
+by values and gradients (the Lasserre kernel's padded rows through
+:func:`compress`, the area kernel's flat rows through :class:`RowStore`), and
+report the same status codes with the same messages.
 """
 from __future__ import annotations
 
@@ -30,6 +31,8 @@ def check_queries(x, d: int) -> np.ndarray:
         q = q[None, :]
     if q.ndim != 2 or q.shape[1] != d:
         raise ValueError(f"query points must have shape (m, {d}), got {np.shape(x)}")
+    if np.isfinite(q).all():
+        return q
     bad = np.flatnonzero(~np.isfinite(q).all(axis=1))
     if bad.size:
         raise ValueError(
@@ -78,14 +81,84 @@ def compress(count, out_i, out_v, out_g, gradient: bool, n: int):
     return indptr, indices, data, grads
 
 
-def csr_family(indptr, indices, values, shape):
-    """One CSR matrix per array in ``values`` on the same (indptr, indices)
-    pattern (each matrix gets its own copy of the index arrays)."""
-    indptr = indptr.astype(indices.dtype, copy=False)
-    mats = [sp.csr_matrix((values[0], indices, indptr), shape=shape)]
-    for v in values[1:]:
-        mats.append(sp.csr_matrix((v, indices.copy(), indptr.copy()), shape=shape))
-    return mats
+@njit(cache=True)
+def _splice(indptr, arrays, rows, indptr2, arrays2, sel, new_indptr, new_arrays):
+    """CSR rows (``indptr``, ``arrays``) with the (sorted) rows ``rows``
+    replaced by the rows ``sel`` of (``indptr2``, ``arrays2``), written to
+    ``new_indptr`` (m + 1,) and ``new_arrays`` (tuples of flat arrays)."""
+    m = indptr.shape[0] - 1
+    new_indptr[0] = 0
+    j = 0
+    for r in range(m):
+        if j < rows.shape[0] and rows[j] == r:
+            src, a, b = 1, indptr2[sel[j]], indptr2[sel[j] + 1]
+            j += 1
+        else:
+            src, a, b = 0, indptr[r], indptr[r + 1]
+        p0 = new_indptr[r]
+        new_indptr[r + 1] = p0 + b - a
+        for k in range(len(new_arrays)):
+            if src:
+                new_arrays[k][p0:p0 + b - a] = arrays2[k][a:b]
+            else:
+                new_arrays[k][p0:p0 + b - a] = arrays[k][a:b]
+
+
+class RowStore:
+    """CSR rows on one sparsity pattern: column indices ``indices`` and values
+    ``vals`` (lists of k flat arrays, ``nnz`` entries each, possibly with
+    slack after them) with row pointers ``indptr`` (m + 1,), ``n`` columns.
+
+    One copy of the indices per matrix (scipy may sort or prune a matrix in
+    place); rows sorted by column.
+    """
+
+    def __init__(self, n: int, indptr, indices, vals, nnz: int):
+        self.n = n
+        self.indptr = indptr
+        self.indices = list(indices)
+        self.vals = list(vals)
+        self.nnz = nnz
+
+    @property
+    def m(self) -> int:
+        return self.indptr.shape[0] - 1
+
+    def replace(self, rows, other: "RowStore", sel):
+        """Replace the (sorted) rows ``rows`` by the rows ``sel`` of ``other``."""
+        if not rows.size:
+            return
+        counts = np.diff(self.indptr)
+        counts[rows] = np.diff(other.indptr)[sel]
+        nnz = int(counts.sum())
+        dtype = index_dtype(self.n, nnz)
+        indptr = np.empty_like(self.indptr)
+        indices = [np.empty(nnz, dtype=dtype) for _ in self.indices]
+        vals = [np.empty(nnz) for _ in self.vals]
+        for new, old, old2 in ((indices, self.indices, other.indices),
+                               (vals, self.vals, other.vals)):
+            old = tuple(a.astype(dtype, copy=False) for a in old) if new is indices else tuple(old)
+            old2 = (tuple(a.astype(dtype, copy=False) for a in old2) if new is indices
+                    else tuple(old2))
+            _splice(self.indptr, old, rows, other.indptr, old2, sel, indptr, tuple(new))
+        self.indptr, self.indices, self.vals, self.nnz = indptr, indices, vals, nnz
+
+    def matrices(self):
+        """The k CSR matrices (m, n), flagged as having sorted indices."""
+        nnz = self.nnz
+        ind, val = self.indices, self.vals
+        if ind[0].shape[0] > nnz + nnz // 16 + 4096:
+            # estimate too generous: do not keep the slack alive
+            ind = [a[:nnz].copy() for a in ind]
+            val = [a[:nnz].copy() for a in val]
+        indptr = self.indptr.astype(ind[0].dtype)
+        mats = []
+        for j in range(len(ind)):
+            M = sp.csr_matrix((val[j][:nnz], ind[j][:nnz],
+                               indptr if j == 0 else indptr.copy()), shape=(self.m, self.n))
+            M.has_sorted_indices = True
+            mats.append(M)
+        return mats
 
 
 def raise_outside(status, q, offset=0):

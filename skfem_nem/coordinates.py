@@ -36,6 +36,20 @@ Robustness
     triangulation holds. A query on a convex-hull edge gets the linear 1D
     weights of the edge's two nodes, a query at a node the Kronecker delta.
 
+Cost
+    Per query: a walk from the previous query's triangle (or a bucket-grid
+    seed), one depth-first traversal that collects the cavity and orders its
+    boundary counter-clockwise at the same time (the cavity of a Delaunay
+    triangulation is a tree of triangles), in-circle tests decided by the
+    cached circumcircles unless they are within round-off of the circle
+    (then by the exact predicate), and the Sibson areas summed edge by edge
+    over that tree. All of it is inlined into one parallel loop over blocks
+    of consecutive queries, which write their rows straight into staging
+    buffers that are copied in parallel into the CSR arrays: numba
+    reference-counts the arrays passed to a called function with atomic
+    operations, which would cost more than the geometry and keep a second
+    thread from helping.
+
 Undefined gradients
     The gradient is undefined at a node (the coordinates have a cone-like
     kink there), and on a hull edge this module does not compute the
@@ -48,15 +62,15 @@ from __future__ import annotations
 from typing import Literal, Optional
 
 import numpy as np
-import scipy.sparse as sp
 from numba import njit, prange
 from scipy.spatial import Delaunay
 
-from ._batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, check_queries, compress,
-                     csr_family, raise_outside, raise_undefined)
+from ._batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, RowStore, check_queries,
+                     index_dtype, raise_outside, raise_undefined)
 from .lasserre import sibson_coordinates_nd
 from .predicates import orient2d
-from .triangulation import Triangulation, _cavity_boundary, _grow_cavity, _locate
+from .triangulation import (Triangulation, _cavity_boundary, _conflict_cycle, _grow_cavity,
+                            _locate)
 
 __all__ = ["sibson_coordinates", "laplace_coordinates", "natural_neighbour_coordinates"]
 
@@ -76,39 +90,69 @@ def _circumcentre_rel(ax, ay, bx, by, d):
     return (by * a2 - ay * b2) * f, (ax * b2 - bx * a2) * f
 
 
-@njit(cache=True)
-def _query(P, T, N, C, qx, qy, t0, kind, want_grad, cap,
-           cav, cnb, rej, be_b, be_t, be_u, nn, vx, vy, ox, oy, area, gax, gay,
-           out_i, out_v, out_gx, out_gy):
-    """Natural-neighbour coordinates of one point.
-
-    Writes up to ``cap`` entries into ``out_*`` (sorted by node index) and
-    returns ``(count, status, triangle)``.
-    """
-    t, k = _locate(P, T, N, qx, qy, t0)
-    if k >= 0:
-        return 0, OUTSIDE, t
-    # at a node: Kronecker delta
+@njit(cache=True, inline="always")
+def _at_node(P, T, t, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad):
+    """1 (and the Kronecker-delta row, written from ``pos`` on) if the point
+    is a vertex of triangle t, else 0."""
     for j in range(3):
         a = T[t, j]
         if P[a, 0] == qx and P[a, 1] == qy:
-            out_i[0] = a
-            out_v[0] = 1.0
-            out_gx[0] = np.nan
-            out_gy[0] = np.nan
-            return 1, AT_NODE, t
+            s_i[pos] = a
+            s_v[pos] = 1.0
+            if want_grad:
+                s_gx[pos] = np.nan
+                s_gy[pos] = np.nan
+            return 1
+    return 0
+
+
+@njit(cache=True, inline="always")
+def _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn, be_b, be_c, be_u,
+                    cpar, cchd, cpa, cpb):
+    """The cavity by :func:`_grow_cavity` (any triangulation), in the form
+    :func:`_conflict_cycle` gives: returns ``(ncav, nb, nedge)`` and the
+    internal edges e = 1..nedge in ``cpar, cchd, cpa, cpb``; ncav < 0 if the
+    buffers are too small."""
     ncav = _grow_cavity(P, T, N, qx, qy, t, cav, cnb, rej)
     if ncav < 0:
-        return 0, OVERFLOW, t
-    # boundary of the cavity, a counter-clockwise cycle nn[0..nb-1] around x
-    nb = _cavity_boundary(T, N, cav, cnb, ncav, nn, be_b, be_t, be_u)
+        return -1, -1, 0
+    nb = _cavity_boundary(T, N, cav, cnb, ncav, nn, be_b, be_c, be_u)
     if nb < 0:
-        return 0, OVERFLOW, t
+        return -1, -1, 0
+    nedge = 0
+    for c in range(ncav):
+        tc = cav[c]
+        for kk in range(3):
+            d = cnb[c, kk]
+            if d > c:
+                a = T[tc, (kk + 1) % 3]
+                b = T[tc, (kk + 2) % 3]
+                ja = -1
+                jb = -1
+                for j in range(nb):
+                    if nn[j] == a:
+                        ja = j
+                    if nn[j] == b:
+                        jb = j
+                if ja < 0 or jb < 0 or nedge + 1 == cav.shape[0]:
+                    # a node inside the cavity: not a Delaunay triangulation
+                    continue
+                nedge += 1
+                cpar[nedge] = c
+                cchd[nedge] = d
+                cpa[nedge] = ja
+                cpb[nedge] = jb
+    return ncav, nb, nedge
+
+
+@njit(cache=True, inline="always")
+def _on_hull(P, nn, be_u, nb, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad):
+    """2 (and the row of linear 1D weights, written from ``pos`` on) if the
+    point lies, to round-off, on a hull edge of the cavity boundary; else 0."""
     for j in range(nb):
         if be_u[j] < 0:
-            # hull edge on the cavity boundary: is the point (numerically) on it?
             a = nn[j]
-            b = be_b[j]
+            b = nn[j + 1 if j + 1 < nb else 0]
             ex = P[b, 0] - P[a, 0]
             ey = P[b, 1] - P[a, 1]
             L2 = ex * ex + ey * ey
@@ -117,88 +161,127 @@ def _query(P, T, N, C, qx, qy, t0, kind, want_grad, cap,
                 s = ((qx - P[a, 0]) * ex + (qy - P[a, 1]) * ey) / L2
                 s = min(max(s, 0.0), 1.0)
                 lo = min(a, b)
-                out_i[0] = lo
-                out_i[1] = a + b - lo
-                out_v[0] = 1.0 - s if lo == a else s
-                out_v[1] = 1.0 - out_v[0]
-                for jj in range(2):
-                    out_gx[jj] = np.nan
-                    out_gy[jj] = np.nan
-                return 2, ON_HULL, t
-    # new Voronoi vertices v_i = circumcentre(x, p_i, p_{i+1}), relative to x
-    for i in range(nb):
-        a = nn[i]
-        b = nn[(i + 1) % nb]
+                s_i[pos] = lo
+                s_i[pos + 1] = a + b - lo
+                v0 = 1.0 - s if lo == a else s
+                s_v[pos] = v0
+                s_v[pos + 1] = 1.0 - v0
+                if want_grad:
+                    for jj in range(2):
+                        s_gx[pos + jj] = np.nan
+                        s_gy[pos + jj] = np.nan
+                return 2
+    return 0
+
+
+@njit(cache=True, inline="always")
+def _new_vertices(P, nn, nb, qx, qy, vx, vy, dv):
+    """The new Voronoi vertices v_j = circumcentre(x, p_j, p_{j+1}) relative to
+    x into ``vx, vy``, and twice the areas of (p_j, p_{j+1}, x) into ``dv``."""
+    for j in range(nb):
+        a = nn[j]
+        b = nn[j + 1 if j + 1 < nb else 0]
         d = orient2d(P[a, 0], P[a, 1], P[b, 0], P[b, 1], qx, qy)
-        vx[i], vy[i] = _circumcentre_rel(P[a, 0] - qx, P[a, 1] - qy,
+        dv[j] = d
+        vx[j], vy[j] = _circumcentre_rel(P[a, 0] - qx, P[a, 1] - qy,
                                          P[b, 0] - qx, P[b, 1] - qy, d)
-    # old Voronoi vertices: circumcentres of the cavity triangles, relative to x
+
+
+@njit(cache=True, inline="always")
+def _sibson_areas(CC, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb, nedge,
+                  vx, vy, ox, oy, area):
+    """Twice the Sibson areas A_i, of the polygons (o_t1, ..., o_tr, v_{i-1}, v_i),
+    into ``area[:nb]`` (every factor 1/2 cancels in phi and grad phi); the old
+    Voronoi vertices o_t come from the circumcircles ``CC``.
+
+    Summed edge by edge: the boundary edge j in cavity triangle c gives
+    cross(v_j, o_c) to node j and its negative to node j + 1; the internal
+    edge from node a to node b between the cavity triangles c -> d gives
+    cross(o_c, o_d) to b and its negative to a; each node i also gets
+    cross(v_{i-1}, v_i).
+    """
     for c in range(ncav):
         tc = cav[c]
-        a = T[tc, 0]
-        ox[c] = (P[a, 0] - qx) + C[tc, 0]
-        oy[c] = (P[a, 1] - qy) + C[tc, 1]
-    # areas (Sibson) or weights (Laplace)
+        ox[c] = (CC[tc, 3] - qx) + CC[tc, 0]
+        oy[c] = (CC[tc, 4] - qy) + CC[tc, 1]
+    for j in range(nb):
+        jm = j - 1 if j > 0 else nb - 1
+        area[j] = vx[jm] * vy[j] - vy[jm] * vx[j]
+    for j in range(nb):
+        c = be_c[j]
+        w = vx[j] * oy[c] - vy[j] * ox[c]
+        area[j] += w
+        area[j + 1 if j + 1 < nb else 0] -= w
+    for e in range(1, nedge + 1):
+        c = cpar[e]
+        d = cchd[e]
+        w = ox[c] * oy[d] - oy[c] * ox[d]
+        area[cpb[e]] += w
+        area[cpa[e]] -= w
+
+
+@njit(cache=True, inline="always")
+def _sibson_gradients(P, nn, nb, qx, qy, vx, vy, gax, gay):
+    """Twice grad A_i = 2 (s_i / h_i) (c_i - x), c_i the midpoint of v_{i-1}
+    and v_i, into ``gax, gay``."""
     for i in range(nb):
+        im = i - 1 if i > 0 else nb - 1
         p = nn[i]
-        im = (i - 1 + nb) % nb
+        px = P[p, 0] - qx
+        py = P[p, 1] - qy
+        ex = vx[i] - vx[im]
+        ey = vy[i] - vy[im]
+        f = np.sqrt((ex * ex + ey * ey) / (px * px + py * py))
+        gax[i] = f * (vx[im] + vx[i])
+        gay[i] = f * (vy[im] + vy[i])
+
+
+@njit(cache=True, inline="always")
+def _laplace_weights(P, nn, nb, qx, qy, vx, vy, dv, want_grad, area, gax, gay):
+    """Laplace weights w_i = s_i / h_i into ``area`` and, if ``want_grad``,
+    their gradients into ``gax, gay``."""
+    for i in range(nb):
+        im = i - 1 if i > 0 else nb - 1
+        p = nn[i]
         px = P[p, 0] - qx
         py = P[p, 1] - qy
         h = np.sqrt(px * px + py * py)
         ex = vx[i] - vx[im]
         ey = vy[i] - vy[im]
         s = np.sqrt(ex * ex + ey * ey)
-        if kind == SIBSON:
-            # polygon o_t1 ... o_tr, v_{i-1}, v_i (counter-clockwise)
-            acc = 0.0
-            x0 = vx[i]
-            y0 = vy[i]
-            ci = be_t[i]
-            for _ in range(ncav):
-                acc += x0 * oy[ci] - y0 * ox[ci]
-                x0 = ox[ci]
-                y0 = oy[ci]
-                tc = cav[ci]
-                jp = 0 if T[tc, 0] == p else (1 if T[tc, 1] == p else 2)
-                ci = cnb[ci, (jp + 1) % 3]
-                if ci < 0:
-                    break
-            acc += x0 * vy[im] - y0 * vx[im]
-            acc += vx[im] * vy[i] - vy[im] * vx[i]
-            area[i] = 0.5 * acc
-            if want_grad:
-                f = s / h * 0.5
-                gax[i] = f * (vx[im] + vx[i])
-                gay[i] = f * (vy[im] + vy[i])
-        else:
-            area[i] = s / h
-            if want_grad:
-                # d s / dx = (e . m_i) (v_i - x) - (e . m_{i-1}) (v_{i-1} - x)
-                dsx = 0.0
-                dsy = 0.0
-                if s > 0.0:
-                    ex /= s
-                    ey /= s
-                    for sgn, jv in ((1.0, i), (-1.0, im)):
-                        a = nn[jv]
-                        b = nn[(jv + 1) % nb]
-                        ax_ = P[a, 0] - qx
-                        ay_ = P[a, 1] - qy
-                        bx_ = P[b, 0] - qx
-                        by_ = P[b, 1] - qy
-                        d = orient2d(P[a, 0], P[a, 1], P[b, 0], P[b, 1], qx, qy)
-                        mx = (by_ - ay_) / d
-                        my = (ax_ - bx_) / d
-                        em = sgn * (ex * mx + ey * my)
-                        dsx += em * vx[jv]
-                        dsy += em * vy[jv]
-                # w = s / h,  dh/dx = (x - p) / h
-                gax[i] = dsx / h + s * px / (h * h * h)
-                gay[i] = dsy / h + s * py / (h * h * h)
-    # The dominant neighbour d gets its gradient from complement sums,
-    #   grad phi_d = (grad A_d (1 - phi_d) - phi_d sum_{j != d} grad A_j) / A,
-    # which avoids the cancellation of two O(1/r) terms at distance r from
-    # node d (the plain formula loses digits like eps * spacing / r there).
+        area[i] = s / h
+        if want_grad:
+            # d s / dx = (e . m_i) (v_i - x) - (e . m_{i-1}) (v_{i-1} - x)
+            dsx = 0.0
+            dsy = 0.0
+            if s > 0.0:
+                ex /= s
+                ey /= s
+                for side in range(2):
+                    sgn = 1.0 if side == 0 else -1.0
+                    jv = i if side == 0 else im
+                    a = nn[jv]
+                    b = nn[jv + 1 if jv + 1 < nb else 0]
+                    mx = ((P[b, 1] - qy) - (P[a, 1] - qy)) / dv[jv]
+                    my = ((P[a, 0] - qx) - (P[b, 0] - qx)) / dv[jv]
+                    em = sgn * (ex * mx + ey * my)
+                    dsx += em * vx[jv]
+                    dsy += em * vy[jv]
+            # w = s / h,  dh/dx = (x - p) / h
+            gax[i] = dsx / h + s * px / (h * h * h)
+            gay[i] = dsy / h + s * py / (h * h * h)
+
+
+@njit(cache=True, inline="always")
+def _write_row(nn, nb, area, gax, gay, want_grad, perm, pos, s_i, s_v, s_gx, s_gy):
+    """phi_i = A_i / A and grad phi_i = (grad A_i - phi_i sum_j grad A_j) / A
+    into the outputs from ``pos`` on, sorted by node index.
+
+    The dominant neighbour d gets its gradient from complement sums,
+    grad phi_d = (grad A_d (1 - phi_d) - phi_d sum_{j != d} grad A_j) / A,
+    which avoids the cancellation of two O(1/r) terms at distance r from
+    node d (the plain formula loses digits like eps * spacing / r there).
+    """
     dom = 0
     for i in range(1, nb):
         if area[i] > area[dom]:
@@ -213,90 +296,250 @@ def _query(P, T, N, C, qx, qy, t0, kind, want_grad, cap,
                 gcx += gax[i]
                 gcy += gay[i]
     total = area[dom] + rest
+    inv = 1.0 / total
     gsx = gax[dom] + gcx
     gsy = gay[dom] + gcy
-    # write out, sorted by node index (insertion sort, small)
+    # insertion sort of a permutation by node index (small)
     for i in range(nb):
-        phi = area[i] / total
-        out_i[i] = nn[i]
-        out_v[i] = phi
+        key = nn[i]
+        j = i
+        while j > 0 and nn[perm[j - 1]] > key:
+            perm[j] = perm[j - 1]
+            j -= 1
+        perm[j] = i
+    for r in range(nb):
+        i = perm[r]
+        phi = area[i] * inv
+        s_i[pos + r] = nn[i]
+        s_v[pos + r] = phi
         if want_grad:
             if i == dom:
-                out_gx[i] = (gax[i] * (rest / total) - phi * gcx) / total
-                out_gy[i] = (gay[i] * (rest / total) - phi * gcy) / total
+                s_gx[pos + r] = (gax[i] * (rest * inv) - phi * gcx) * inv
+                s_gy[pos + r] = (gay[i] * (rest * inv) - phi * gcy) * inv
             else:
-                out_gx[i] = (gax[i] - phi * gsx) / total
-                out_gy[i] = (gay[i] - phi * gsy) / total
-        j = i
-        while j > 0 and out_i[j - 1] > out_i[j]:
-            out_i[j - 1], out_i[j] = out_i[j], out_i[j - 1]
-            out_v[j - 1], out_v[j] = out_v[j], out_v[j - 1]
-            out_gx[j - 1], out_gx[j] = out_gx[j], out_gx[j - 1]
-            out_gy[j - 1], out_gy[j] = out_gy[j], out_gy[j - 1]
-            j -= 1
-    return nb, OK, t
+                s_gx[pos + r] = (gax[i] - phi * gsx) * inv
+                s_gy[pos + r] = (gay[i] - phi * gsy) * inv
+
+
+@njit(cache=True, inline="always")
+def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, general, width,
+                 lo, hi, pos, end, s_i, s_v, s_gx, s_gy, count, status, tri):
+    """Natural-neighbour coordinates of the points Q[lo:hi], one after another.
+
+    ``start`` (m,): the triangle each walk starts from, or empty: then the
+    bucket grid ``grid`` (nc * nc,) over the box ``glo`` (2,) + ``gspan`` (2,)
+    gives one (see :meth:`Triangulation._seeds`); consecutive queries also
+    try the previous query's triangle. ``CC``: :attr:`Triangulation.circumcircles`.
+    ``general``: find cavities with :func:`_grow_cavity` (any triangulation)
+    instead of the traversal :func:`_conflict_cycle` (Delaunay
+    triangulations; the fast path).
+
+    Outputs: the rows, one after another from position ``pos`` on, in the
+    flat arrays ``s_i`` (node indices, sorted within each row), ``s_v``
+    (values), ``s_gx``, ``s_gy`` (gradients, if ``want_grad``); ``count[q]``
+    entries, ``status[q]`` a status code and ``tri[q]`` a triangle containing
+    the point, for q in [lo, hi). Rows with more than ``width`` natural
+    neighbours, and all rows once fewer than ``width`` positions are left
+    before ``end``, get status OVERFLOW and no entries. Returns the position
+    after the last entry.
+
+    Inlined, like everything it calls: numba reference-counts the array
+    arguments of the functions it calls with atomic operations, which cost
+    more than the geometry and keep threads from scaling.
+    """
+    ccap = width
+    cav = np.empty(ccap, np.int64)
+    cpar = np.empty(ccap, np.int64)
+    cchd = np.empty(ccap, np.int64)
+    cpa = np.empty(ccap, np.int64)
+    cpb = np.empty(ccap, np.int64)
+    cedge = np.empty(ccap, np.int64)
+    cstep = np.empty(ccap, np.int64)
+    stk = np.empty(ccap, np.int64)
+    cnb = np.empty((ccap, 3), np.int64)
+    rej = np.empty(ccap + 4, np.int64)
+    ox = np.empty(ccap)
+    oy = np.empty(ccap)
+    nn = np.empty(ccap + 2, np.int64)
+    be_b = np.empty(ccap + 2, np.int64)
+    be_u = np.empty(ccap + 2, np.int64)
+    be_c = np.empty(ccap + 2, np.int64)
+    perm = np.empty(ccap + 2, np.int64)
+    vx = np.empty(ccap + 2)
+    vy = np.empty(ccap + 2)
+    dv = np.empty(ccap + 2)
+    area = np.empty(ccap + 2)
+    gax = np.empty(ccap + 2)
+    gay = np.empty(ccap + 2)
+    prev = -1
+    for q in range(lo, hi):
+        count[q] = 0
+        if end - pos < width:
+            # out of room: left for a second pass
+            status[q] = OVERFLOW
+            tri[q] = prev if prev >= 0 else 0
+            continue
+        qx = Q[q, 0]
+        qy = Q[q, 1]
+        if start.shape[0]:
+            t0 = start[q]
+        else:
+            f0 = min(max((qx - glo[0]) / gspan[0] * nc, 0.0), nc - 1.0)
+            f1 = min(max((qy - glo[1]) / gspan[1] * nc, 0.0), nc - 1.0)
+            t0 = grid[int(f0) * nc + int(f1)]
+        if t0 < 0:
+            t0 = 0
+        # start the walk from the seed or from the previous query's
+        # triangle, whichever is nearer (sorted queries walk ~1 step)
+        if prev >= 0:
+            a = T[t0, 0]
+            b = T[prev, 0]
+            da = (P[a, 0] - qx) ** 2 + (P[a, 1] - qy) ** 2
+            db = (P[b, 0] - qx) ** 2 + (P[b, 1] - qy) ** 2
+            if db < da:
+                t0 = prev
+        t, k = _locate(P, T, N, qx, qy, t0)
+        tri[q] = t
+        cnt = 0
+        st = OK
+        if k >= 0 or t < 0:
+            st = OUTSIDE
+        else:
+            prev = t
+            cnt = _at_node(P, T, t, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad)
+            if cnt:
+                st = AT_NODE
+        if st == OK and cnt == 0:
+            # the cavity, its boundary as a counter-clockwise cycle
+            # nn[0..nb-1] around x, and its internal edges
+            if general:
+                ncav, nb, nedge = _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn,
+                                                  be_b, be_c, be_u, cpar, cchd, cpa, cpb)
+            else:
+                ncav, nb = _conflict_cycle(P, T, N, CC, qx, qy, t, cav, cpar, cpa, cpb,
+                                           cedge, cstep, stk, nn, be_u, be_c)
+                nedge = ncav - 1
+                for e in range(1, ncav):
+                    cchd[e] = e
+            if ncav < 0 or nb > width:
+                st = OVERFLOW
+            else:
+                cnt = _on_hull(P, nn, be_u, nb, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad)
+                if cnt:
+                    st = ON_HULL
+        if st == OK and cnt == 0:
+            _new_vertices(P, nn, nb, qx, qy, vx, vy, dv)
+            if kind == SIBSON:
+                _sibson_areas(CC, qx, qy, cav, ncav, be_c, nb, cpar, cchd, cpa, cpb, nedge,
+                              vx, vy, ox, oy, area)
+                if want_grad:
+                    _sibson_gradients(P, nn, nb, qx, qy, vx, vy, gax, gay)
+            else:
+                _laplace_weights(P, nn, nb, qx, qy, vx, vy, dv, want_grad, area, gax, gay)
+            _write_row(nn, nb, area, gax, gay, want_grad, perm, pos, s_i, s_v, s_gx, s_gy)
+            cnt = nb
+        count[q] = cnt
+        status[q] = st
+        pos += cnt
+    return pos
+
+
+# below this many queries a batch runs as one block per piece: waking the
+# thread pool would cost more than it saves
+_PARALLEL_MIN = 2000
 
 
 @njit(cache=True, parallel=True)
-def _query_batch(P, T, N, C, Q, start, kind, want_grad, cap, nblocks,
-                 out_i, out_v, out_gx, out_gy, count, status, tri):
-    """Coordinates of m points into padded (m, cap) arrays, parallel over blocks."""
+def _query_all(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, general, width,
+               room, chunk, block, nthreads, index_proto, status, tri, indptr):
+    """Natural-neighbour coordinates of the m points Q (m, 2) as CSR arrays.
+
+    Pieces of ``chunk`` queries go in parallel blocks of consecutive queries
+    (see :func:`_query_block`, which also describes ``start, grid, nc, glo,
+    gspan, general, width`` and the status codes), each block writing its rows
+    one after another into its own stretch of a staging buffer (``room``
+    entries per query); then the blocks' stretches are copied, in parallel,
+    to their places in the flat CSR arrays, which are allocated once from an
+    estimate after the first piece (and grown if it falls short). Two
+    parallel regions per piece; blocks go to threads as these come free (set
+    ``numba.parallel_chunksize(1)`` around the call).
+
+    Fills ``status``, ``tri`` (m,) and ``indptr`` (m + 1,); returns
+    ``(ind0, ind1, ind2, val0, val1, val2, nnz)``: column indices (dtype of
+    ``index_proto``) and values, then, if ``want_grad``, two more copies of
+    the indices and the x and y gradients (else empty arrays), each holding
+    ``nnz`` entries (and possibly some slack after them).
+    """
     m = Q.shape[0]
-    for blk in prange(nblocks):
-        lo = blk * m // nblocks
-        hi = (blk + 1) * m // nblocks
-        cav = np.empty(cap, np.int64)
-        cnb = np.empty((cap, 3), np.int64)
-        rej = np.empty(cap + 4, np.int64)
-        be_u = np.empty(cap + 2, np.int64)
-        be_b = np.empty(cap + 2, np.int64)
-        be_t = np.empty(cap + 2, np.int64)
-        nn = np.empty(cap + 2, np.int64)
-        vx = np.empty(cap + 2)
-        vy = np.empty(cap + 2)
-        ox = np.empty(cap)
-        oy = np.empty(cap)
-        area = np.empty(cap + 2)
-        gax = np.empty(cap + 2)
-        gay = np.empty(cap + 2)
-        oi = np.empty(cap + 2, np.int64)
-        ov = np.empty(cap + 2)
-        ogx = np.empty(cap + 2)
-        ogy = np.empty(cap + 2)
-        prev = -1
-        for q in range(lo, hi):
-            # start the walk from the seed or from the previous query's
-            # triangle, whichever is nearer (sorted queries walk ~1 step)
-            t0 = start[q]
-            if prev >= 0:
-                if t0 < 0:
-                    t0 = prev
-                else:
-                    a = T[t0, 0]
-                    b = T[prev, 0]
-                    da = (P[a, 0] - Q[q, 0]) ** 2 + (P[a, 1] - Q[q, 1]) ** 2
-                    db = (P[b, 0] - Q[q, 0]) ** 2 + (P[b, 1] - Q[q, 1]) ** 2
-                    if db < da:
-                        t0 = prev
-            elif t0 < 0:
-                t0 = 0
-            cnt, st, t = _query(P, T, N, C, Q[q, 0], Q[q, 1], t0, kind, want_grad, cap,
-                                cav, cnb, rej, be_b, be_t, be_u, nn, vx, vy, ox, oy, area,
-                                gax, gay, oi, ov, ogx, ogy)
-            if cnt > cap:
-                st = OVERFLOW
-                cnt = 0
-            count[q] = cnt
-            status[q] = st
-            tri[q] = t
-            if t >= 0:
-                prev = t
-            for j in range(cnt):
-                out_i[q, j] = oi[j]
-                out_v[q, j] = ov[j]
-                if want_grad:
-                    out_gx[q, j] = ogx[j]
-                    out_gy[q, j] = ogy[j]
+    count = np.empty(m, np.int64)
+    piece = max(1, min(m, chunk))
+    maxblocks = max(1, piece // block) if m >= _PARALLEL_MIN and nthreads > 1 else 1
+    scap = piece * room + maxblocks * width
+    gcap = scap if want_grad else 0
+    s_i = np.empty(scap, index_proto.dtype)
+    s_v = np.empty(scap)
+    s_gx = np.empty(gcap)
+    s_gy = np.empty(gcap)
+    bfill = np.empty(maxblocks, np.int64)
+    ind0 = np.empty(0, index_proto.dtype)
+    ind1 = np.empty(0, index_proto.dtype)
+    ind2 = np.empty(0, index_proto.dtype)
+    val0 = np.empty(0)
+    val1 = np.empty(0)
+    val2 = np.empty(0)
+    indptr[0] = 0
+    for c0 in range(0, m, piece):
+        c1 = min(m, c0 + piece)
+        mc = c1 - c0
+        nblocks = max(1, min(mc // block, maxblocks))
+        for blk in prange(nblocks):
+            lo = c0 + blk * mc // nblocks
+            hi = c0 + (blk + 1) * mc // nblocks
+            base = (lo - c0) * room + blk * width
+            end = (hi - c0) * room + (blk + 1) * width
+            bfill[blk] = _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind,
+                                      want_grad, general, width, lo, hi, base, end,
+                                      s_i, s_v, s_gx, s_gy, count, status, tri) - base
+        for r in range(c0, c1):
+            indptr[r + 1] = indptr[r] + count[r]
+        nnz = indptr[c0]
+        need = indptr[c1]
+        if need > ind0.shape[0]:
+            # room for this piece and, estimated from the rows so far, the rest
+            cap = need + int(1.02 * (m - c1) * need / c1) + 1024
+            ind0 = _grown(ind0, cap, nnz)
+            val0 = _grown(val0, cap, nnz)
+            if want_grad:
+                ind1 = _grown(ind1, cap, nnz)
+                ind2 = _grown(ind2, cap, nnz)
+                val1 = _grown(val1, cap, nnz)
+                val2 = _grown(val2, cap, nnz)
+        for blk in prange(nblocks):
+            lo = c0 + blk * mc // nblocks
+            base = (lo - c0) * room + blk * width
+            off = indptr[lo]
+            f = bfill[blk]
+            ind0[off:off + f] = s_i[base:base + f]
+            val0[off:off + f] = s_v[base:base + f]
+            if want_grad:
+                ind1[off:off + f] = s_i[base:base + f]
+                ind2[off:off + f] = s_i[base:base + f]
+                val1[off:off + f] = s_gx[base:base + f]
+                val2[off:off + f] = s_gy[base:base + f]
+    return ind0, ind1, ind2, val0, val1, val2, indptr[m]
+
+
+@njit(cache=True)
+def _grown(a, cap, n):
+    """A copy of ``a[:n]`` with room for ``cap`` entries, its pages faulted
+    in from this one thread (first touches of the same pages from several
+    threads at once serialise in the kernel and cost far more)."""
+    b = np.empty(cap, a.dtype)
+    step = max(1, 4096 // b.itemsize)
+    for i in range(0, cap, step):
+        b[i] = 0
+    b[:n] = a[:n]
+    return b
 
 
 def _dimension(nodes_or_triangulation) -> int:
@@ -422,63 +665,51 @@ def natural_neighbour_coordinates(
     m = q.shape[0]
     n = tri.npoints
     P, T, N = tri.nodes, tri.triangles, tri.neighbours
-    C = tri.circumcentre_offsets
     ikind = SIBSON if kind == "sibson" else LAPLACE
     if hint is None:
-        start_all = tri.start_triangles(q)
+        start = np.empty(0, dtype=np.int64)
     else:
-        start_all = np.asarray(hint, dtype=np.int64).reshape(-1)
-        if start_all.shape[0] != m or (m and (start_all.min() < 0 or
-                                              start_all.max() >= tri.ntriangles)):
+        start = np.asarray(hint, dtype=np.int64).reshape(-1)
+        if start.shape[0] != m or (m and (start.min() < 0 or start.max() >= tri.ntriangles)):
             raise ValueError(f"hint must hold {m} triangle indices in [0, {tri.ntriangles})")
+    status = np.empty(m, dtype=np.int64)
     tri_out = np.empty(m, dtype=np.int64)
-    nthreads = _threads()
-    blocks = []
-    buffers = _buffers(min(m, chunk), _CAP, gradient)
-    for c0 in range(0, m, chunk):
-        c1 = min(m, c0 + chunk)
-        Qc = q[c0:c1]
-        mats, status, tloc = _run_chunk(P, T, N, C, Qc, start_all[c0:c1], ikind, gradient,
-                                        _CAP, nthreads, buffers)
-        # points outside by round-off only: move them onto the hull and redo
-        redo = _snap_to_hull(tri, Qc, np.flatnonzero(status == OUTSIDE), hull_tol)
-        # rare: more natural neighbours than the buffer holds (co-circular
-        # clusters): redo with buffers large enough
-        redo = np.union1d(redo, np.flatnonzero(status == OVERFLOW))
-        cap = 4 * _CAP
-        while redo.size:
-            extra, st2, t2 = _run_chunk(P, T, N, C, Qc[redo], tloc[redo], ikind,
-                                        gradient, cap, 1)
-            status[redo] = st2
-            done = np.flatnonzero(st2 != OVERFLOW)
-            # splice the recomputed rows in by row selection (sparse products
-            # and sums would drop explicit zeros and break the shared pattern)
-            src = np.arange(c1 - c0)
-            src[redo[done]] = (c1 - c0) + done
-            mats = [sp.vstack([M, X], format="csr")[src] for M, X in zip(mats, extra)]
-            tloc[redo[done]] = t2[done]
-            redo = redo[st2 == OVERFLOW]
-            cap *= 4
-        _check_status(status, q, c0, gradient, undefined, tri)
-        tri_out[c0:c1] = tloc
-        blocks.append(mats)
-    nmat = 3 if gradient else 1
-    out = []
-    for j in range(nmat):
-        M = sp.vstack([b[j] for b in blocks], format="csr") if blocks else \
-            sp.csr_matrix((m, n))
-        M.sort_indices()
-        out.append(M)
-    if gradient:
-        for D in out[1:]:
-            assert D.nnz == out[0].nnz and np.array_equal(D.indices, out[0].indices)
+    rows = _run(tri, q, start, ikind, gradient, False, _CAP, _ROOM, chunk, status, tri_out)
+    # points outside by round-off only: move them onto the hull and redo
+    redo = _snap_to_hull(tri, q, np.flatnonzero(status == OUTSIDE), hull_tol)
+    # rare: more natural neighbours than the buffers hold (co-circular
+    # clusters, or a block of queries with more than _ROOM on average), or a
+    # cavity that is not a tree (a triangulation that is not Delaunay): redo
+    # with more room, from the second round on with the general cavity search
+    redo = np.union1d(redo, np.flatnonzero(status == OVERFLOW))
+    width, room, general = 4 * _CAP, 2 * _ROOM, False
+    while redo.size:
+        st2 = np.empty(redo.size, dtype=np.int64)
+        t2 = np.empty(redo.size, dtype=np.int64)
+        extra = _run(tri, q[redo], tri_out[redo], ikind, gradient, general, width, room, chunk,
+                     st2, t2)
+        done = st2 != OVERFLOW
+        status[redo] = st2
+        tri_out[redo] = t2
+        rows.replace(redo[done], extra, np.flatnonzero(done))
+        redo = redo[~done]
+        width, room, general = 4 * width, min(4 * width, 2 * room), True
+    _check_status(status, q, 0, gradient, undefined, tri)
+    out = rows.matrices()
     result = (out[0], out[1:]) if gradient else out[0]
     if return_triangles:
         return result, tri_out
     return result
 
 
+# natural neighbours a query may have in the first pass (more: redone with
+# larger buffers), and staging room per query (a block of queries averaging
+# more than that is finished in a second pass)
 _CAP = 24
+_ROOM = 12
+# queries per block: blocks go to threads as these come free, so that
+# threads finish a piece together
+_BLOCK = 1024
 
 
 def _snap_to_hull(tri, q, rows, hull_tol):
@@ -512,35 +743,22 @@ def _snap_to_hull(tri, q, rows, hull_tol):
     return np.array(moved, dtype=np.int64)
 
 
-def _buffers(mc, cap, gradient):
-    """Padded per-chunk output rows, reused across chunks (no page faults):
-    indices, values (mc, cap) and gradients (2, mc, cap)."""
-    return (np.empty((mc, cap), np.int64), np.empty((mc, cap)),
-            np.empty((2, mc, cap) if gradient else (2, 1, 1)))
-
-
-def _run_chunk(P, T, N, C, Qc, start, ikind, gradient, cap, nthreads, buffers=None):
-    """Run the query kernel on one chunk; returns ([Phi, (dx, dy)], status, tri)."""
-    mc = Qc.shape[0]
-    n = P.shape[0]
-    if buffers is None:
-        buffers = _buffers(mc, cap, gradient)
-    out_i, out_v, out_g = buffers
-    count = np.empty(mc, np.int64)
-    status = np.empty(mc, np.int64)
-    tloc = np.empty(mc, np.int64)
-    # small batches run serially: waking the thread pool costs more than it saves
-    kernel = _query_batch if mc >= _PARALLEL_MIN else _query_batch_serial
-    nblocks = max(1, min(mc // 64, 8 * nthreads))
-    kernel(P, T, N, C, Qc, start, ikind, gradient, cap, nblocks,
-           out_i, out_v, out_g[0], out_g[1], count, status, tloc)
-    indptr, indices, data, grads = compress(count, out_i, out_v, out_g, gradient, n)
-    mats = csr_family(indptr, indices, [data, *grads] if gradient else [data], (mc, n))
-    return mats, status, tloc
-
-
-_query_batch_serial = njit(cache=True)(_query_batch.py_func)
-_PARALLEL_MIN = 20000
+def _run(tri, q, start, ikind, gradient, general, width, room, chunk, status, tri_out):
+    """The kernel :func:`_query_all` on the points q (m, 2); returns a
+    :class:`RowStore` of the rows and fills ``status``, ``tri_out`` (m,)."""
+    import numba
+    m = q.shape[0]
+    n = tri.npoints
+    lo, span, nc, grid = tri._seeds()
+    indptr = np.empty(m + 1, dtype=np.int64)
+    proto = np.empty(0, dtype=index_dtype(n, m * width))
+    with numba.parallel_chunksize(1):
+        *arrays, nnz = _query_all(tri.nodes, tri.triangles, tri.neighbours, tri.circumcircles,
+                                  q, start, grid, nc, lo, span, ikind, gradient, general, width,
+                                  room, max(1, chunk), _BLOCK, _threads(), proto, status,
+                                  tri_out, indptr)
+    k = 3 if gradient else 1
+    return RowStore(n, indptr, arrays[:3][:k], arrays[3:][:k], int(nnz))
 
 
 def _check_status(status, q, offset, gradient, undefined, tri):

@@ -61,7 +61,7 @@ def validate_nodes(nodes, dim: int = 2, name: str = "nodes") -> np.ndarray:
 # numba kernels
 # ---------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _locate(P, T, N, qx, qy, start):
     """Visibility walk from triangle ``start`` towards (qx, qy).
 
@@ -69,6 +69,9 @@ def _locate(P, T, N, qx, qy, start):
     with ``k = -1``; if the point is outside the convex hull, ``t`` is the hull
     triangle whose edge opposite its vertex ``k`` has the point strictly on its
     outer side.
+
+    (Inlined into its callers: numba reference-counts array arguments with
+    atomic operations, which would cost more than the walk itself.)
     """
     nt = T.shape[0]
     t = start
@@ -111,7 +114,7 @@ def _locate(P, T, N, qx, qy, start):
     return -1, -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _in_cavity(P, T, t, qx, qy):
     a = T[t, 0]
     b = T[t, 1]
@@ -204,6 +207,84 @@ def _cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_c, be_u):
                     be_u[i + 1], be_u[j] = be_u[j], be_u[i + 1]
                 break
     return nb
+
+
+@njit(cache=True, inline="always")
+def _conflict_cycle(P, T, N, CC, qx, qy, t0, cav, cpar, cpa, cpb, cedge, cstep, stk, nn, be_u,
+                    be_c):
+    """The Bowyer--Watson cavity of (qx, qy) and its boundary, in one traversal.
+
+    ``t0`` must contain the point and the point must not be a node; ``CC``:
+    :attr:`Triangulation.circumcircles`. In a Delaunay triangulation the cavity is a triangulated disc without interior
+    vertices, so its triangles form a tree under edge adjacency: a
+    depth-first traversal from ``t0`` that visits the edges of each triangle
+    counter-clockwise, starting after the edge it came in by, meets the
+    boundary edges in counter-clockwise order, and no triangle is reached
+    twice (so no search is needed).
+
+    Outputs (``ncav`` cavity triangles, ``nb = ncav + 2`` boundary edges):
+
+    * ``cav[c]``: the cavity triangles, ``cav[0] = t0``, each after its parent;
+    * ``cpar[c]`` (c >= 1): the parent's index in ``cav``; the shared edge runs
+      from node ``nn[cpa[c]]`` to node ``nn[cpb[c]]`` as seen from the parent
+      (counter-clockwise in the parent);
+    * ``nn[j]``: boundary edge j runs from node ``nn[j]`` to ``nn[(j + 1) % nb]``,
+      lies in triangle ``cav[be_c[j]]`` and has the triangle ``be_u[j]`` (-1 on
+      the hull) outside;
+    * ``cedge``, ``cstep``, ``stk``: scratch of the size of ``cav``.
+
+    Returns ``(ncav, nb)``, or ``(-1, -1)`` if the buffers (``cav``: ccap,
+    ``nn``: bcap) are too small -- also the only possible outcome if the
+    triangulation is not Delaunay and the cavity is not a tree (the traversal
+    then goes round a cycle): :func:`_grow_cavity` handles that case.
+    """
+    ccap = cav.shape[0]
+    bcap = nn.shape[0]
+    cav[0] = t0
+    cpar[0] = -1
+    cedge[0] = 0
+    cstep[0] = 0
+    stk[0] = 0
+    depth = 1
+    ncav = 1
+    nb = 0
+    while depth > 0:
+        c = stk[depth - 1]
+        s = cstep[c]
+        if s == (3 if c == 0 else 2):
+            depth -= 1
+            cpb[c] = nb
+            continue
+        cstep[c] = s + 1
+        t = cav[c]
+        k = cedge[c] + s
+        if k >= 3:
+            k -= 3
+        u = N[t, k]
+        if u >= 0 and _in_circumcircle(P, T, CC, u, qx, qy):
+            if ncav == ccap:
+                return -1, -1
+            l = 0 if N[u, 0] == t else (1 if N[u, 1] == t else 2)
+            cav[ncav] = u
+            cpar[ncav] = c
+            cpa[ncav] = nb
+            cedge[ncav] = l + 1 if l < 2 else 0
+            cstep[ncav] = 0
+            stk[depth] = ncav
+            depth += 1
+            ncav += 1
+        else:
+            if nb == bcap:
+                return -1, -1
+            nn[nb] = T[t, k + 1 if k < 2 else 0]
+            be_u[nb] = u
+            be_c[nb] = c
+            nb += 1
+    # the edge that closes the cycle ends where the first one starts
+    for c in range(1, ncav):
+        if cpb[c] == nb:
+            cpb[c] = 0
+    return ncav, nb
 
 
 @njit(cache=True)
@@ -395,8 +476,37 @@ def _count_non_delaunay(P, T, N):
     return bad
 
 
+# The cached circumcircles are used as a float filter for the in-circle test
+# only while every coordinate difference is zero or within [2**-300, 2**300],
+# the circumcentre offset below 2**400 and the doubled area above 2**-900:
+# then nothing overflows or underflows and the error bounds below hold.
+_CIRCLE_LO = 2.0 ** -300
+_CIRCLE_HI = 2.0 ** 300
+_CIRCLE_MAX = 2.0 ** 400
+_CIRCLE_MIN_AREA = 2.0 ** -900
+_CIRCLE_ABS = 2.0 ** -900
+
+
+@njit(cache=True, inline="always")
+def _filter_range(x):
+    x = abs(x)
+    return x == 0.0 or (x >= _CIRCLE_LO and x <= _CIRCLE_HI)
+
+
 @njit(cache=True)
-def _circumcentre_offsets(P, T, out):
+def _circumcircles(P, T, out):
+    """Circumcentre offsets, their error bounds and the first vertices, ``out`` (nt, 5).
+
+    ``out[t, :2]`` is the circumcentre of triangle t minus its first vertex a
+    (with b, c relative to a: ``(c_y |b|^2 - b_y |c|^2, b_x |c|^2 - c_x |b|^2)
+    / (2 d)``, d = cross(b, c) from :func:`orient2d`, relative error 2**-42).
+    ``out[t, 2]`` bounds the error of the two components together: the
+    numerators carry at most 8 rounding errors relative to the sums of
+    their terms' magnitudes, the division the error of d; both are doubled
+    here. Triangles outside the range where these bounds hold get ``inf``.
+    ``out[t, 3:]`` is the vertex a itself (so that the in-circle filter needs
+    no second, dependent memory access).
+    """
     for t in range(T.shape[0]):
         a = T[t, 0]
         b = T[t, 1]
@@ -409,8 +519,48 @@ def _circumcentre_offsets(P, T, out):
         b2 = bx * bx + by * by
         c2 = cx * cx + cy * cy
         f = 0.5 / d
-        out[t, 0] = (cy * b2 - by * c2) * f
-        out[t, 1] = (bx * c2 - cx * b2) * f
+        ox = (cy * b2 - by * c2) * f
+        oy = (bx * c2 - cx * b2) * f
+        out[t, 0] = ox
+        out[t, 1] = oy
+        err = np.inf
+        if (_filter_range(bx) and _filter_range(by) and _filter_range(cx)
+                and _filter_range(cy) and abs(d) >= _CIRCLE_MIN_AREA):
+            err = (2.0 ** -49 * (abs(cy) * b2 + abs(by) * c2 + abs(bx) * c2 + abs(cx) * b2)
+                   * abs(f) + 2.0 ** -41 * (abs(ox) + abs(oy)))
+            if not (abs(ox) + abs(oy) < _CIRCLE_MAX and err < _CIRCLE_MAX):
+                err = np.inf
+        out[t, 2] = err
+        out[t, 3] = P[a, 0]
+        out[t, 4] = P[a, 1]
+
+
+@njit(cache=True, inline="always")
+def _in_circumcircle(P, T, CC, t, qx, qy):
+    """Strict in-circle test of (qx, qy) against triangle t, with the cached
+    circumcircle ``CC[t]`` (see :func:`_circumcircles`) as a float filter.
+
+    With u = x - a (a the first vertex) and c the circumcentre offset, x is
+    strictly inside iff D = u . (2 c - u) > 0. The computed D is within
+    B = 2 |u|_1 err_c + 16 eps |u|_1 (|u|_1 + |c|_1) (+ a tiny absolute term
+    for underflow) of the exact one; only when |D| <= B does the exact
+    :func:`incircle_sign` decide. Same answer as :func:`_in_cavity`, for a
+    fraction of its cost.
+    """
+    ux = qx - CC[t, 3]
+    uy = qy - CC[t, 4]
+    cx = CC[t, 0]
+    cy = CC[t, 1]
+    s = abs(ux) + abs(uy)
+    g = abs(cx) + abs(cy)
+    if s < _CIRCLE_MAX and g < _CIRCLE_MAX:
+        det = ux * (2.0 * cx - ux) + uy * (2.0 * cy - uy)
+        bound = 2.01 * s * CC[t, 2] + 2.0 ** -49 * s * (s + g) + _CIRCLE_ABS
+        if det > bound:
+            return True
+        if det < -bound:
+            return False
+    return _in_cavity(P, T, t, qx, qy)
 
 
 @njit(cache=True)
@@ -696,6 +846,17 @@ class Triangulation:
         self._circumcentres = None
 
     @property
+    def circumcircles(self) -> np.ndarray:
+        """(nt, 5) circumcentre of each triangle minus its first vertex, a
+        bound on the error of that offset (``inf`` where it is not used as a
+        filter), and the first vertex; see :attr:`circumcentre_offsets`."""
+        if self._circumcentres is None:
+            out = np.empty((self.ntriangles, 5))
+            _circumcircles(self.nodes, self.triangles, out)
+            self._circumcentres = out
+        return self._circumcentres
+
+    @property
     def circumcentre_offsets(self) -> np.ndarray:
         """(nt, 2) circumcentre of each triangle minus its first vertex.
 
@@ -703,12 +864,9 @@ class Triangulation:
         :func:`~skfem_nem.predicates.orient2d`) so that the circumcentre
         relative to a nearby point x is ``(nodes[T[t, 0]] - x) + offset``
         without cancellation, however far the nodes are from the origin.
+        (A view of the first two columns of :attr:`circumcircles`.)
         """
-        if self._circumcentres is None:
-            out = np.empty((self.ntriangles, 2))
-            _circumcentre_offsets(self.nodes, self.triangles, out)
-            self._circumcentres = out
-        return self._circumcentres
+        return self.circumcircles[:, :2]
 
     # -- queries -------------------------------------------------------------
     def _seeds(self):

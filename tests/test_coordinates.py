@@ -382,3 +382,158 @@ def test_shared_pattern_with_exact_zero_gradients():
     assert Phi[0].nnz == 30
     check_properties(Triangulation(nodes), np.array([[0.5, 0.0], [0.1, 0.2]]), sibson_coordinates,
                      tol=1e-11)
+
+
+def _rows_sorted(M):
+    """True if the column indices increase strictly within every row."""
+    d = np.diff(M.indices.astype(np.int64))
+    row_start = np.zeros(M.indices.size, dtype=bool)
+    row_start[M.indptr[1:-1][M.indptr[1:-1] < M.indices.size]] = True
+    return bool(np.all((d > 0) | row_start[1:]))
+
+
+def test_rows_sorted_and_chunking_independent():
+    # random, hull, node and many-neighbour rows, split across chunks of
+    # every size: same pattern, same values to round-off, rows sorted
+    p = random_nodes(300, seed=30)
+    p = p[np.hypot(*(p - 0.5).T) > 0.15]
+    k = 40  # co-circular nodes around an empty disc: 40+ natural neighbours
+    ang = 2 * np.pi * np.arange(k) / k
+    p = np.r_[p, 0.5 + 0.1 * np.c_[np.cos(ang), np.sin(ang)]]
+    tri = Triangulation(p)
+    rng = np.random.default_rng(31)
+    q = np.r_[rng.random((3000, 2)), p[::7], [[0.5, 0.5], [0.5, 0.0], [0.3, 1.0]],
+              [[0.5 + 1e-4, 0.5]]]
+    rng.shuffle(q)
+    ref = sibson_coordinates(tri, q, gradient=True, undefined="nan")
+    for chunk in (1, 7, 1000, 1 << 15):
+        Phi, D = sibson_coordinates(tri, q, gradient=True, undefined="nan", chunk=chunk)
+        for A, B in zip([Phi, *D], [ref[0], *ref[1]]):
+            assert A.has_sorted_indices and _rows_sorted(A)
+            np.testing.assert_array_equal(A.indptr, B.indptr)
+            np.testing.assert_array_equal(A.indices, B.indices)
+            np.testing.assert_allclose(A.data, B.data, rtol=1e-12, atol=1e-12)
+    assert max(np.diff(ref[0].indptr)) >= k
+
+
+def test_output_arrays_grow_past_the_first_estimate():
+    # the first chunk holds queries at nodes (one entry each), the rest
+    # ordinary points: the flat arrays must grow, and match one big chunk
+    p = random_nodes(400, seed=32)
+    tri = Triangulation(p)
+    q = np.r_[p[4:], interior_queries(3000, seed=33)]
+    Phi = laplace_coordinates(tri, q, chunk=256)
+    ref = laplace_coordinates(tri, q)
+    np.testing.assert_array_equal(Phi.indptr, ref.indptr)
+    np.testing.assert_array_equal(Phi.indices, ref.indices)
+    np.testing.assert_allclose(Phi.data, ref.data, rtol=1e-12, atol=1e-15)
+    assert Phi.nnz == Phi.data.size == Phi.indices.size
+
+
+def test_filtered_incircle_agrees_with_exact():
+    """The cached-circumcircle filter decides exactly as the exact predicate."""
+    from numba import njit
+    from skfem_nem.triangulation import _in_cavity, _in_circumcircle
+
+    @njit
+    def both(P, T, CC, tris, Q, out):
+        for i in range(tris.shape[0]):
+            out[i, 0] = _in_circumcircle(P, T, CC, tris[i], Q[i, 0], Q[i, 1])
+            out[i, 1] = _in_cavity(P, T, tris[i], Q[i, 0], Q[i, 1])
+
+    rng = np.random.default_rng(34)
+    g = np.stack(np.meshgrid(np.arange(7.0), np.arange(7.0)), -1).reshape(-1, 2)
+    pr = random_nodes(100, seed=36)
+    cases = [random_nodes(300, seed=35), g, g * 0.1 + 1e3, g * 1e-100, g * 1e100, pr * 1e-200,
+             pr * 1e200, np.r_[pr, 0.5 + 1e-9 * rng.random((30, 2))]]
+    for p in cases:
+        # (Qhull does not take extreme scales: triangulate the unscaled nodes)
+        s = np.abs(p).max()
+        tri = Triangulation.from_triangles(p, Triangulation(p / s).triangles)
+        P, T = tri.nodes, tri.triangles
+        t = rng.integers(0, tri.ntriangles, 4000)
+        # random points near the triangles, the nodes themselves (on or off
+        # the circles: co-circular lattices) and points on the circles
+        c = P[T[t, 0]] + tri.circumcentre_offsets[t]
+        r = np.hypot(*tri.circumcentre_offsets[t].T)
+        ang = rng.random(t.size) * 2 * np.pi
+        on = c + r[:, None] * np.c_[np.cos(ang), np.sin(ang)]
+        near = P[T[t]].mean(axis=1) + (rng.random((t.size, 2)) - 0.5) * 3 * r[:, None]
+        nodes = P[rng.integers(0, P.shape[0], t.size)]
+        for Q in (on, near, nodes):
+            out = np.empty((t.size, 2), dtype=bool)
+            both(P, T, tri.circumcircles, t, np.ascontiguousarray(Q), out)
+            np.testing.assert_array_equal(out[:, 0], out[:, 1])
+
+
+def test_fallback_cavity_search_agrees():
+    # the general cavity search (used for overflow and for triangulations
+    # that are not Delaunay) gives the traversal's results
+    from skfem_nem import coordinates as C
+    p, tri, _ = grid_triangulations()
+    tri2 = Triangulation(random_nodes(200, seed=37))
+    for t in (tri, tri2):
+        q = interior_queries(500, seed=38)
+        res = []
+        for general in (False, True):
+            st = np.empty(q.shape[0], np.int64)
+            tl = np.empty(q.shape[0], np.int64)
+            rows = C._run(t, q, np.empty(0, np.int64), C.SIBSON, True, general, C._CAP,
+                          C._ROOM, 1 << 15, st, tl)
+            assert (st == 0).all()
+            res.append(rows.matrices())
+        for A, B, tol in zip(res[0], res[1], (1e-13, 1e-10, 1e-10)):
+            np.testing.assert_array_equal(A.indptr, B.indptr)
+            np.testing.assert_array_equal(A.indices, B.indices)
+            np.testing.assert_allclose(A.data, B.data, rtol=0, atol=tol * max(1, abs(A.data).max()))
+
+
+def test_non_delaunay_triangulation_terminates():
+    # flip convex interior edges at random: the cavities of the result need
+    # not be trees; the coordinates must still come back (values are only
+    # meaningful on Delaunay triangulations)
+    from skfem_nem.triangulation import _edge_violates, _flip
+    p = random_nodes(200, seed=39)
+    tri = Triangulation(p)
+    T, N = tri.triangles.copy(), tri.neighbours.copy()
+    rng = np.random.default_rng(40)
+    flips = 0
+    for t in rng.integers(0, T.shape[0], 400):
+        for k in range(3):
+            u = N[t, k]
+            if u < 0:
+                continue
+            a, b, c = T[t, k], T[t, (k + 1) % 3], T[t, (k + 2) % 3]
+            d = [T[u, j] for j in range(3) if N[u, j] == t][0]
+            o1 = (p[b, 0] - p[a, 0]) * (p[d, 1] - p[a, 1]) - (p[b, 1] - p[a, 1]) * (p[d, 0] - p[a, 0])
+            o2 = (p[d, 0] - p[a, 0]) * (p[c, 1] - p[a, 1]) - (p[d, 1] - p[a, 1]) * (p[c, 0] - p[a, 0])
+            if o1 > 1e-9 and o2 > 1e-9 and not _edge_violates(p, T, N, t, k):
+                _flip(T, N, t, k)
+                flips += 1
+                break
+    bad = Triangulation.from_triangles(p, T, make_delaunay=False)
+    assert flips > 50 and not bad.is_delaunay()
+    q = interior_queries(2000, seed=41)
+    Phi = sibson_coordinates(bad, q)
+    assert Phi.shape == (2000, p.shape[0]) and np.isfinite(Phi.data).all()
+
+
+def test_rows_longer_than_the_staging_room():
+    # every query has 20 natural neighbours (inside an empty co-circular
+    # 20-gon), more than the first pass's room per query on average: the
+    # rows that do not fit are finished in a second pass
+    k = 20
+    ang = 2 * np.pi * np.arange(k) / k
+    ring = np.c_[np.cos(ang), np.sin(ang)]
+    p = np.r_[ring, 3 * ring]
+    tri = Triangulation(p)
+    rng = np.random.default_rng(42)
+    q = 0.5 * (rng.random((6000, 2)) - 0.5)
+    Phi, (Dx, Dy) = sibson_coordinates(tri, q, gradient=True)
+    assert (np.diff(Phi.indptr) >= k).all() and _rows_sorted(Phi)
+    ref = sibson_coordinates(tri, q, gradient=True, chunk=1)
+    for A, B in zip([Phi, Dx, Dy], [ref[0], *ref[1]]):
+        np.testing.assert_array_equal(A.indptr, B.indptr)
+        np.testing.assert_array_equal(A.indices, B.indices)
+        np.testing.assert_allclose(A.data, B.data, rtol=1e-12, atol=1e-12)
+    check_properties(tri, q[:200], sibson_coordinates, tol=1e-11)

@@ -33,6 +33,8 @@ from skfem.assembly.form import BilinearForm, LinearForm
 from skfem.assembly.form.form import FormExtraParams
 from skfem.element import DiscreteField, ElementVector
 
+from ._numba import serial_twin
+
 _INSTALLED = False
 #: element-pairs evaluated per form call in the stacked assembly
 STACK_SIZE = 1 << 16
@@ -429,10 +431,10 @@ def _contract_linear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, pb,
 # Serial twins of the parallel kernels: on small meshes waking the thread
 # pool costs more than the work (and OpenMP threads that spin between calls
 # compete with everything else on the machine).
-_contract_bilinear_serial = njit(cache=True)(_contract_bilinear.py_func)
-_contract_linear_serial = njit(cache=True)(_contract_linear.py_func)
-_node_pattern_serial = njit(cache=True)(_node_pattern.py_func)
-_sum_rows_serial = njit(cache=True)(_sum_rows.py_func)
+_contract_bilinear_serial = serial_twin(_contract_bilinear)
+_contract_linear_serial = serial_twin(_contract_linear)
+_node_pattern_serial = serial_twin(_node_pattern)
+_sum_rows_serial = serial_twin(_sum_rows)
 #: below this many stencil entries squared (times quadrature points) the
 #: kernels run on one thread
 PARALLEL_MIN = 1 << 21

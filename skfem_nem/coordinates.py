@@ -663,8 +663,6 @@ def natural_neighbour_coordinates(
         raise ValueError(f"undefined must be 'raise' or 'nan', got {undefined!r}")
     q = check_queries(x, 2)
     m = q.shape[0]
-    n = tri.npoints
-    P, T, N = tri.nodes, tri.triangles, tri.neighbours
     ikind = SIBSON if kind == "sibson" else LAPLACE
     if hint is None:
         start = np.empty(0, dtype=np.int64)

@@ -173,6 +173,7 @@ from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from ._batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, UNBOUNDED, check_queries,
                      compress, index_dtype, raise_outside, raise_undefined)
+from ._numba import serial_twin
 from .triangulation import validate_nodes
 
 __all__ = ["sibson_coordinates_nd"]
@@ -1718,7 +1719,7 @@ def _query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols,
                out_i, out_v, out_g, count, status, info)
 
 
-_query_batch_serial = njit(cache=True, error_model="numpy")(_query_batch.py_func)
+_query_batch_serial = serial_twin(_query_batch, error_model="numpy")
 # queries per batch from which the parallel kernel is used (a 3D query costs
 # ~50 us, a 2D one ~7 us: a few thousand amortise the thread pool's wake-up)
 _PARALLEL_MIN = 2000

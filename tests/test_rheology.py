@@ -142,7 +142,6 @@ def test_elastic_limit_one_step():
     el = solve_stokes(S, mu, sol_ref.force)        # incompressible linear elasticity
     assert np.abs(d - el.u).max() < 1e-9 * np.abs(el.u).max()
     # analytic: SolCx with eta = 1 is the displacement for mu = 1
-    X = S.ubasis.doflocs
     nd = S.ubasis.dofs.nodal_dofs
     exact = sol_ref.velocity(S.mesh.p) / mu
     e = np.hypot(d[nd[0]] - exact[0], d[nd[1]] - exact[1]).max() / np.abs(exact).max()

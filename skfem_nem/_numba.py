@@ -1,0 +1,28 @@
+"""Numba plumbing shared by the kernels of every layer."""
+from __future__ import annotations
+
+import types
+
+from numba import njit
+
+
+def serial_twin(kernel, **options):
+    """A one-thread copy of the parallel numba kernel ``kernel`` (its
+    ``prange`` loops run as plain loops), with a cache entry of its own.
+
+    On small batches waking the thread pool costs more than the work, so
+    callers pick the twin there. ``njit(cache=True)(kernel.py_func)`` would
+    not do: numba names a function's cache file after its module, qualified
+    name and first line, and keys the entries by signature only, so the
+    serial and the parallel compilation would serve each other from one
+    entry (whichever compiled first wins). The twin is the same code under
+    the qualified name ``<name>_serial``. ``options`` go to ``njit``.
+    """
+    f = kernel.py_func
+    g = types.FunctionType(f.__code__, f.__globals__, f.__name__ + "_serial",
+                           f.__defaults__, f.__closure__)
+    g.__qualname__ = f.__qualname__ + "_serial"
+    g.__module__ = f.__module__
+    g.__doc__ = f.__doc__
+    g.__kwdefaults__ = f.__kwdefaults__
+    return njit(cache=True, **options)(g)

@@ -236,6 +236,21 @@ def _stacked_linear(form, v, kwargs):
 # ---------------------------------------------------------------------------
 
 @njit(cache=True, inline="always")
+def stencil_position(sten, s0, S, c):
+    """Position of node c in the sorted stencil ``sten[s0:s0 + S]`` (which
+    holds it), by binary search."""
+    lo = 0
+    hi = S - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sten[s0 + mid] < c:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, inline="always")
 def _gather(e, ptr, sten, indptr, indices, vals, grads, nq, B):
     """Values and gradients of element e's stencil functions at its
     quadrature points: B (nq, 1 + dim, S), zero where a function vanishes."""
@@ -245,15 +260,7 @@ def _gather(e, ptr, sten, indptr, indices, vals, grads, nq, B):
     for q in range(nq):
         r = e * nq + q
         for kk in range(indptr[r], indptr[r + 1]):
-            c = indices[kk]
-            lo = 0
-            hi = S - 1
-            while lo < hi:  # binary search in the sorted stencil
-                mid = (lo + hi) // 2
-                if sten[s0 + mid] < c:
-                    lo = mid + 1
-                else:
-                    hi = mid
+            lo = stencil_position(sten, s0, S, indices[kk])
             B[q, 0, lo] = vals[kk]
             for g in range(dim):
                 B[q, 1 + g, lo] = grads[g, kk]

@@ -39,6 +39,7 @@ from skfem.quadrature import get_quadrature
 from skfem.refdom import RefTet, RefTri
 
 from . import _assembly
+from ._assembly import stencil_position
 from .coordinates import natural_neighbour_coordinates
 from .lasserre import delaunay_of
 from .triangulation import Triangulation, _count_non_delaunay, validate_nodes
@@ -288,15 +289,7 @@ def _fill(elems, ptr, sten, indptr, indices, data, grads, nq, V, G):
         for q in range(nq):
             r = e * nq + q
             for kk in range(indptr[r], indptr[r + 1]):
-                c = indices[kk]
-                lo = 0
-                hi = S - 1
-                while lo < hi:  # binary search in the sorted stencil
-                    mid = (lo + hi) // 2
-                    if sten[s0 + mid] < c:
-                        lo = mid + 1
-                    else:
-                        hi = mid
+                lo = stencil_position(sten, s0, S, indices[kk])
                 V[lo, k, q] = data[kk]
                 for c in range(dim):
                     G[c, lo, k, q] = grads[c][kk]

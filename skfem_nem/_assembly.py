@@ -493,7 +493,8 @@ def _unit_fields(D, dim, reps, ne, nq, which):
 
 
 def _chunks(ne, calls):
-    """Element ranges such that ``calls`` stacked copies stay near STACK_SIZE."""
+    """Element ranges such that ``calls`` stacked copies of one make about
+    65,536 elements per form call."""
     step = max(1, (1 << 16) // max(1, calls))
     return [(e0, min(ne, e0 + step)) for e0 in range(0, ne, step)]
 
@@ -571,12 +572,52 @@ def _constant_coefficients(form_fn, Du, Dv, dim, which_u, which_v, nq, w):
     return out[:, 0].copy()
 
 
-def _probe(form_fn, args_u, args_v, w, ne, reps, nq, dx, dtype):
-    """Call ``form_fn`` once on stacked unit fields; returns (reps, ne, nq)."""
+def _probe(form_fn, args_u, args_v, w, ne, reps, nq, dx):
+    """Call ``form_fn`` once on stacked unit fields (``args_v`` None for a
+    linear form); returns the values times dx, (reps, ne, nq)."""
     W = FormExtraParams({k: _tile(x, reps, ne) for k, x in w.items()})
     out = np.asarray(form_fn(*args_u, *args_v, W) if args_v is not None
-                     else form_fn(*args_u, W), dtype=dtype)
+                     else form_fn(*args_u, W), dtype=np.float64)
     return np.broadcast_to(out, (reps * ne, nq)).reshape(reps, ne, nq) * dx[None]
+
+
+class _NotProbeable(Exception):
+    """The form cannot be called on unit fields (e.g. it reads u.hess)."""
+
+
+def _coefficients(form, basis, kwargs, Du, Dv, which_u, which_v):
+    """The form's coefficients, chunk by chunk of elements: yields
+    ``(e0, e1, C, active)`` with C (len(active), e1 - e0, nq) the coefficients
+    (times dx) of the nonzero unit-field pairs ``active`` (indices into
+    ``which_u`` / ``which_v``; ``which_v`` and ``Dv`` None for a linear form,
+    whose test function is then the ``which_u`` field). Raises
+    :class:`_NotProbeable` if the form fails on the first chunk."""
+    dim = basis.mesh.dim()
+    ne, nq = basis.dx.shape
+    w = {**basis.default_parameters(), **form._normalize_asm_kwargs(kwargs, basis)}
+    reps = len(which_u)
+    const = _constant_coefficients(form.form, Du, Dv, dim, which_u, which_v, nq,
+                                   _split_kwargs(w, slice(0, 1), ne))
+    fields = {}
+    for e0, e1 in _chunks(ne, 1 if const is not None else reps):
+        if const is not None:
+            active = np.flatnonzero(const)
+            yield e0, e1, const[active, None, None] * basis.dx[None, e0:e1], active
+            continue
+        n = e1 - e0
+        if n not in fields:
+            fields[n] = (_unit_fields(Du, dim, reps, n, nq, which_u),
+                         None if which_v is None else
+                         _unit_fields(Dv, dim, reps, n, nq, which_v))
+        try:
+            C = _probe(form.form, *fields[n], _split_kwargs(w, slice(e0, e1), ne), n, reps,
+                       nq, basis.dx[e0:e1])
+        except (AttributeError, TypeError, IndexError) as err:
+            if e0 == 0:
+                raise _NotProbeable from err
+            raise
+        active = np.flatnonzero(np.any(C != 0.0, axis=(1, 2)))
+        yield e0, e1, np.ascontiguousarray(C[active]), active
 
 
 def _whole_bilinear(form, u, v, kwargs):
@@ -586,42 +627,22 @@ def _whole_bilinear(form, u, v, kwargs):
         return None
     Du, dim = _components(u)
     Dv, _ = _components(v)
-    L = 1 + dim
-    P, Q = Du * L, Dv * L
-    ne, nq = u.dx.shape
-    w = {**u.default_parameters(), **form._normalize_asm_kwargs(kwargs, u)}
+    P, Q = Du * (1 + dim), Dv * (1 + dim)
     pa, pb = (x.ravel() for x in np.meshgrid(np.arange(P), np.arange(Q), indexing="ij"))
     Phi, G = u._Phi, u._grads
     ptr, sten = u.stencil_ptr, u.stencil_nodes
+    nq = u.dx.shape[1]
     S = np.diff(ptr)
-    off = np.zeros(ne + 1, dtype=np.int64)
+    off = np.zeros(S.shape[0] + 1, dtype=np.int64)
     np.cumsum(Du * Dv * S * S, out=off[1:])
     K = np.empty(off[-1])
     kernel = _contract_bilinear if _parallel(u) else _contract_bilinear_serial
-    const = _constant_coefficients(form.form, Du, Dv, dim, pa, pb, nq,
-                                   _split_kwargs(w, slice(0, 1), ne))
-    fields = {}
-    for e0, e1 in _chunks(ne, 1 if const is not None else P * Q):
-        n = e1 - e0
-        if const is not None:
-            active = np.flatnonzero(const)
-            C = const[active, None, None] * u.dx[None, e0:e1]
-        else:
-            if n not in fields:
-                fields[n] = (_unit_fields(Du, dim, P * Q, n, nq, pa),
-                             _unit_fields(Dv, dim, P * Q, n, nq, pb))
-            Uf, Vf = fields[n]
-            wc = _split_kwargs(w, slice(e0, e1), ne)
-            try:
-                C = _probe(form.form, Uf, Vf, wc, n, P * Q, nq, u.dx[e0:e1], np.float64)
-            except (AttributeError, TypeError, IndexError):
-                if e0 == 0:
-                    return None  # e.g. a form reading u.hess: take the group road
-                raise
-            active = np.flatnonzero(np.any(C != 0.0, axis=(1, 2)))
-            C = np.ascontiguousarray(C[active])
-        kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
-               C, pa[active], pb[active], Du, Dv, off, K)
+    try:
+        for e0, e1, C, active in _coefficients(form, u, kwargs, Du, Dv, pa, pb):
+            kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
+                   C, pa[active], pb[active], Du, Dv, off, K)
+    except _NotProbeable:
+        return None  # take the group road
     return _global(u, v, Du, Dv, off, K)
 
 
@@ -666,41 +687,22 @@ def _whole_linear(form, v, kwargs):
     if form.dtype != np.float64:
         return None
     Dv, dim = _components(v)
-    Q = Dv * (1 + dim)
-    ne, nq = v.dx.shape
-    w = {**v.default_parameters(), **form._normalize_asm_kwargs(kwargs, v)}
-    pb = np.arange(Q)
+    pb = np.arange(Dv * (1 + dim))
     Phi, G = v._Phi, v._grads
     ptr, sten = v.stencil_ptr, v.stencil_nodes
-    off = np.zeros(ne + 1, dtype=np.int64)
+    nq = v.dx.shape[1]
+    off = np.zeros(ptr.shape[0], dtype=np.int64)
     np.cumsum(Dv * np.diff(ptr), out=off[1:])
     rows = np.empty(off[-1], dtype=_index_dtype(v.N))
     data = np.empty(off[-1])
     ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
     kernel = _contract_linear if _parallel(v) else _contract_linear_serial
-    const = _constant_coefficients(form.form, Dv, Dv, dim, pb, None, nq,
-                                   _split_kwargs(w, slice(0, 1), ne))
-    fields = {}
-    for e0, e1 in _chunks(ne, 1 if const is not None else Q):
-        n = e1 - e0
-        if const is not None:
-            active = np.flatnonzero(const)
-            C = const[active, None, None] * v.dx[None, e0:e1]
+    try:
+        for e0, e1, C, active in _coefficients(form, v, kwargs, Dv, None, pb, None):
             kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
                    C, pb[active], Dv, ndv, off, rows, data)
-            continue
-        if n not in fields:
-            fields[n] = _unit_fields(Dv, dim, Q, n, nq, pb)
-        wc = _split_kwargs(w, slice(e0, e1), ne)
-        try:
-            C = _probe(form.form, fields[n], None, wc, n, Q, nq, v.dx[e0:e1], np.float64)
-        except (AttributeError, TypeError, IndexError):
-            if e0 == 0:
-                return None
-            raise
-        active = np.flatnonzero(np.any(C != 0.0, axis=(1, 2)))
-        kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
-               np.ascontiguousarray(C[active]), pb[active], Dv, ndv, off, rows, data)
+    except _NotProbeable:
+        return None
     return np.array([rows]), data
 
 

@@ -41,7 +41,7 @@ def nodes(n=2500, seed=0):
 def setup(n=2500, seed=0):
     """Mesh, spaces and the prescribed punch/wall dofs."""
     mesh = delaunay_mesh(nodes(n, seed))
-    sp_ = stokes_spaces(mesh, "nem", npoints=3)
+    sp_ = stokes_spaces(mesh, "nem")
     P = mesh.p
     nd = sp_.ubasis.dofs.nodal_dofs
     top = np.flatnonzero(np.abs(P[1]) < 1e-12)

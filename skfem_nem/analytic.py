@@ -2,6 +2,9 @@
 
 - :class:`SolCx`: Stokes flow in the unit square with a viscosity jump
   (Zhong 1996; Duretz et al. 2011), free slip on all walls.
+- :class:`DoneaHuerta`: a manufactured Stokes flow in the unit square with
+  constant viscosity and no slip (Donea and Huerta 2003, section 6.8), smooth,
+  for convergence rates.
 - :func:`viscoelastic_buildup`: Maxwell stress under constant strain rate
   (Gerya and Yuen 2007), optionally capped by a yield stress.
 """
@@ -9,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SolCx", "viscoelastic_buildup"]
+__all__ = ["DoneaHuerta", "SolCx", "viscoelastic_buildup"]
 
 
 class SolCx:
@@ -141,6 +144,50 @@ class SolCx:
         eta = self.viscosity(x)
         return np.cos(k * x[1]) * (eta * (self.Psi(x[0], 3) - k ** 2 * self.Psi(x[0], 1))
                                    + self.g * np.cos(np.pi * x[0])) / k
+
+
+class DoneaHuerta:
+    """Donea and Huerta's manufactured Stokes flow (Finite Element Methods
+    for Flow Problems, 2003, section 6.8.1) on the unit square, viscosity 1::
+
+        u_x =  x^2 (1 - x)^2 (2 y - 6 y^2 + 4 y^3)
+        u_y = -y^2 (1 - y)^2 (2 x - 6 x^2 + 4 x^3)
+        p   =  x (1 - x) - 1/6
+
+    Divergence-free, zero on the whole boundary (no slip), pressure of mean
+    zero; the body force ``f = -div(2 eps(u)) + grad p = -lap u + grad p``
+    makes it a solution. Methods take points x of shape (2, ...).
+    """
+
+    @staticmethod
+    def velocity(x):
+        X, Y = x[0], x[1]
+        return np.stack([X ** 2 * (1 - X) ** 2 * (2 * Y - 6 * Y ** 2 + 4 * Y ** 3),
+                         -Y ** 2 * (1 - Y) ** 2 * (2 * X - 6 * X ** 2 + 4 * X ** 3)])
+
+    @staticmethod
+    def velocity_gradient(x):
+        """(2, 2, ...): [i, j] = d u_i / d x_j."""
+        X, Y = x[0], x[1]
+        a, da = X ** 2 * (1 - X) ** 2, 2 * X - 6 * X ** 2 + 4 * X ** 3
+        b, db = Y ** 2 * (1 - Y) ** 2, 2 * Y - 6 * Y ** 2 + 4 * Y ** 3
+        dda, ddb = 2 - 12 * X + 12 * X ** 2, 2 - 12 * Y + 12 * Y ** 2
+        return np.stack([np.stack([da * db, a * ddb]), np.stack([-dda * b, -da * db])])
+
+    @staticmethod
+    def pressure(x):
+        return x[0] * (1 - x[0]) - 1.0 / 6.0
+
+    @staticmethod
+    def force(x):
+        X, Y = x[0], x[1]
+        a, da = X ** 2 * (1 - X) ** 2, 2 * X - 6 * X ** 2 + 4 * X ** 3
+        b, db = Y ** 2 * (1 - Y) ** 2, 2 * Y - 6 * Y ** 2 + 4 * Y ** 3
+        dda, ddb = 2 - 12 * X + 12 * X ** 2, 2 - 12 * Y + 12 * Y ** 2
+        d3a, d3b = -12 + 24 * X, -12 + 24 * Y
+        lap_ux = dda * db + a * d3b
+        lap_uy = -(d3a * b + da * ddb)
+        return np.stack([-lap_ux + (1 - 2 * X), -lap_uy + 0 * Y])
 
 
 def viscoelastic_buildup(t, eta: float, mu: float, strain_rate: float,

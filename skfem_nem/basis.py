@@ -42,15 +42,19 @@ from . import _assembly
 from ._assembly import stencil_position
 from .coordinates import natural_neighbour_coordinates
 from .lasserre import delaunay_of
+from .smoothing import cells_2d, cells_3d, combine, value_rule
 from .triangulation import Triangulation, _count_non_delaunay, validate_nodes
 
 __all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeighbourBasis",
-           "NaturalNeighbourFacetBasis", "delaunay_mesh", "QUADRATURE_POINTS"]
+           "NaturalNeighbourFacetBasis", "delaunay_mesh", "QUADRATURE_POINTS", "INTEGRATIONS"]
 
 _assembly.install()
 
 #: number of quadrature points -> scikit-fem integration order on triangles
 QUADRATURE_POINTS = {3: 2, 4: 3, 6: 4, 7: 5, 12: 6, 13: 7}
+#: integration schemes: gradients smoothed over cells (consistent, the
+#: default; :mod:`skfem_nem.smoothing`) or Gauss quadrature of the gradients
+INTEGRATIONS = ("smoothed", "gauss")
 
 
 class ElementNaturalNeighbour(Element):
@@ -225,6 +229,23 @@ def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
                 f"boundary (a known NEM limitation)", stacklevel=3)
     mesh._skfem_nem_triangulation = tri
     return tri
+
+
+def _integration(integration, npoints=None, intorder=None, quadrature=None):
+    """The integration scheme: ``integration`` if given (checked against the
+    rule options), else Gauss when a rule is asked for, smoothed otherwise."""
+    rule = [k for k, v in (("npoints", npoints), ("intorder", intorder),
+                           ("quadrature", quadrature)) if v is not None]
+    if integration is None:
+        return "gauss" if rule else "smoothed"
+    if integration not in INTEGRATIONS:
+        raise ValueError(f"integration must be one of {', '.join(map(repr, INTEGRATIONS))}, "
+                         f"got {integration!r}")
+    if integration == "smoothed" and rule:
+        raise ValueError(f"{rule[0]} chooses a Gauss rule, but integration='smoothed' has "
+                         f"its own points (one per smoothing cell); pass "
+                         f"integration='gauss' with it")
+    return integration
 
 
 def _quadrature(npoints, intorder, quadrature, refdom=RefTri):
@@ -402,6 +423,28 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
         # gradients as one (dim, nnz) array on Phi's pattern; the CSR
         # matrices of the gradients are views of its rows
         G = np.stack([Dk.data for Dk in D]) if len(D) else np.empty((0, Phi.nnz))
+        self._set_functions(Phi, G, ne, nq)
+
+    def _build_smoothed(self, x, elems, cell_of):
+        """Values at the (dim, ne, nq) points x (in the elements ``elems``)
+        and smoothed gradients over the cells ``cell_of`` (ne * nq,) of the
+        cells of ``np.unique(elems)`` (:mod:`skfem_nem.smoothing`)."""
+        dim, ne, nq = x.shape
+        pts = np.ascontiguousarray(x.transpose(1, 2, 0).reshape(-1, dim))
+        Phi_v = self._coordinates(pts, hint=np.repeat(elems, nq))
+        mesh = self.mesh
+        cells = cells_2d if dim == 2 else cells_3d
+        points, hint, cp, coef = cells(mesh.p.T, mesh.t, mesh.t2f, mesh.facets,
+                                       np.unique(elems))
+        Phi_s = self._coordinates(points, hint=hint)
+        ptr, idx, val, grad = combine(Phi_v, cell_of, Phi_s, cp, coef)
+        import scipy.sparse as sp
+        Phi = sp.csr_matrix((val, idx.astype(Phi_v.indices.dtype), ptr), shape=Phi_v.shape)
+        self._set_functions(Phi, grad, ne, nq)
+
+    def _set_functions(self, Phi, G, ne, nq):
+        """Values (CSR, one row per quadrature point) and gradients (dim, nnz)
+        on their pattern; the stencils follow."""
         self._Phi, self._grads = Phi, G
         self._D = [type(Phi)((G[k], Phi.indices, Phi.indptr), shape=Phi.shape)
                    for k in range(G.shape[0])]
@@ -580,17 +623,33 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         vector case are ``dim i, ..., dim i + dim - 1``, named ``u^1``,
         ``u^2``, ...). On a ``MeshTet`` the tetrahedron variant
         :class:`ElementTetNaturalNeighbour` is used (same numbering).
+    integration
+        ``"smoothed"`` (the default when no Gauss rule is given): gradients
+        smoothed over cells, the boundary integral of each function times the
+        normal over the cell's area (:mod:`skfem_nem.smoothing`). Three cells
+        per triangle (one at each vertex, one integration point each: the
+        3-point rule's points, weights |T|/3) or one per tetrahedron (4
+        points). Consistent: the linear patch test passes to round-off and
+        the rates are optimal. ``"gauss"``: values and exact gradients at the
+        points of a Gauss rule (``intorder``, ``npoints``, ``quadrature``;
+        default the 3-point rule on triangles, 4 points on tetrahedra); not
+        exact for natural-neighbour functions, so not consistent.
     intorder, npoints, quadrature
-        Quadrature per cell: scikit-fem's integration order (on tetrahedra:
-        2 -> 4 points, 3 -> 6, 4 -> 11), or on triangles the number of points
-        (1, 3, 4, 6, 7, 12, 13; 4 and 13 have a negative weight), or an
-        explicit ``(X, W)`` pair on the reference cell. Default: the 3-point
-        rule on triangles (the paper's choice), 4 points on tetrahedra.
+        A Gauss rule per cell (implies ``integration="gauss"``): scikit-fem's
+        integration order (on tetrahedra: 2 -> 4 points, 3 -> 6, 4 -> 11), or
+        on triangles the number of points (1, 3, 4, 6, 7, 12, 13; 4 and 13
+        have a negative weight), or an explicit ``(X, W)`` pair on the
+        reference cell.
     coordinates
         ``"sibson"`` (default) or ``"laplace"`` (2D area method only).
     method
         ``"area"`` (2D default: the area method, the paper's method 1) or
         ``"lasserre"`` (Box 1, method 2; the only one on tetrahedra).
+
+    With smoothed integration, ``interpolate(u)`` gives the values at the
+    integration points and the smoothed gradients (the gradient the forms
+    see); for the exact gradient of the field at points use a Gauss basis
+    (e.g. ``npoints=7``, as for error norms).
 
     Everything a ``CellBasis`` offers for assembly works: forms, ``asm``,
     ``get_dofs``, ``interpolate``, ``project``, ``probes``, ``plot``. Trial
@@ -601,21 +660,34 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     def __init__(self, mesh: MeshTri | MeshTet, elem: Optional[Element] = None,
                  intorder: Optional[int] = None, quadrature: Optional[Tuple[ndarray, ndarray]] = None,
                  npoints: Optional[int] = None, coordinates: str = "sibson",
-                 method: Optional[str] = None):
+                 method: Optional[str] = None, integration: Optional[str] = None):
         elem = _element_for(mesh, elem, "NaturalNeighbourBasis")
         self.method = _check_method(mesh, coordinates, method)
+        self.integration = _integration(integration, npoints, intorder, quadrature)
         self.triangulation = _adopt(mesh, self.method)
         self.coordinates = coordinates
+        if self.integration == "smoothed":
+            rule = value_rule(mesh.dim())
+        else:
+            rule = _quadrature(npoints, intorder, quadrature, mesh.refdom)
         with np.errstate(divide="ignore", invalid="ignore"):
             # (flat cells have no inverse mapping; only F and detDF are used)
-            super().__init__(mesh, elem, None, None,
-                             _quadrature(npoints, intorder, quadrature, mesh.refdom),
-                             mesh.refdom)
+            super().__init__(mesh, elem, None, None, rule, mesh.refdom)
             self.tind = None
             self.nelems = mesh.nelements
             self.dx = np.abs(self.mapping.detDF(self.X)) * np.broadcast_to(
                 self.W, (self.nelems, self.W.shape[-1]))
-            self._build(self.mapping.F(self.X), np.arange(self.nelems))
+            x = self.mapping.F(self.X)
+            elems = np.arange(self.nelems)
+            if self.integration == "smoothed":
+                nq = self.X.shape[1]
+                # 2D: point q of a triangle lies in the cell of its vertex q;
+                # 3D: one cell per tetrahedron
+                cell_of = (np.arange(self.nelems * nq) if mesh.dim() == 2
+                           else np.repeat(elems, nq))
+                self._build_smoothed(x, elems, cell_of)
+            else:
+                self._build(x, elems)
 
     def global_coordinates(self) -> DiscreteField:
         if self._global_coordinates is None:
@@ -629,9 +701,10 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         return self._mesh_parameters
 
     def with_element(self, elem: Element) -> "NaturalNeighbourBasis":
-        """The same mesh and quadrature with another (natural-neighbour) element."""
-        return type(self)(self.mesh, elem, quadrature=self.quadrature,
-                          coordinates=self.coordinates, method=self.method)
+        """The same mesh and integration with another (natural-neighbour) element."""
+        rule = {"quadrature": self.quadrature} if self.integration == "gauss" else {}
+        return type(self)(self.mesh, elem, coordinates=self.coordinates, method=self.method,
+                          integration=self.integration, **rule)
 
     def split_bases(self):
         if isinstance(self.elem, ElementVector):
@@ -725,13 +798,24 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
     weights of the facet's nodes; gradients there are the one-sided limits
     from inside, evaluated a relative distance ``1e-7`` (of the facet length)
     inside the domain.
+
+    ``integration="smoothed"`` (default) gives each facet point the smoothed
+    gradient of the cell it lies on (in 2D the vertex cell of the facet's
+    half, in 3D the tetrahedron), so facet terms such as Nitsche's see the
+    gradients of a smoothed cell basis and the patch test still passes;
+    ``"gauss"`` the one-sided gradients above. Values are always exact.
     """
 
     def __init__(self, mesh: MeshTri | MeshTet, elem: Optional[Element] = None, facets=None,
                  intorder: Optional[int] = None, quadrature=None, coordinates: str = "sibson",
-                 side: int = 0, method: Optional[str] = None):
+                 side: int = 0, method: Optional[str] = None,
+                 integration: str = "smoothed"):
         elem = _element_for(mesh, elem, "NaturalNeighbourFacetBasis")
         self.method = _check_method(mesh, coordinates, method)
+        if integration not in INTEGRATIONS:
+            raise ValueError(f"integration must be one of "
+                             f"{', '.join(map(repr, INTEGRATIONS))}, got {integration!r}")
+        self.integration = integration
         self.triangulation = _adopt(mesh, self.method)
         self.coordinates = coordinates
         p1 = ElementTetP1() if isinstance(mesh, MeshTet) else ElementTriP1()
@@ -745,7 +829,24 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
         self.nelems = geom.nelems
         self.dx = geom.dx
         self.normals = geom.normals
-        self._build(np.asarray(geom.global_coordinates()), geom.tind)
+        x = np.asarray(geom.global_coordinates())
+        if integration == "gauss":
+            self._build(x, geom.tind)
+        else:
+            self._build_smoothed(x, geom.tind, self._cells_of(x, geom.tind))
+
+    def _cells_of(self, x, tind):
+        """The smoothing cell of each facet point (dim, nf, nq), numbered as
+        :func:`~skfem_nem.smoothing.cells_2d` numbers the cells of
+        ``np.unique(tind)``: in 2D the cell of the triangle's vertex nearest to
+        the point (the facet's half it lies on), in 3D the tetrahedron."""
+        elems, j = np.unique(tind, return_inverse=True)
+        nq = x.shape[2]
+        if self.mesh.dim() == 3:
+            return np.repeat(j, nq)
+        V = self.mesh.p[:, self.mesh.t[:, tind]]           # (2, 3, nf)
+        d = ((x[:, None, :, :] - V[:, :, :, None]) ** 2).sum(axis=0)   # (3, nf, nq)
+        return (3 * j[:, None] + d.argmin(axis=0)).ravel()
 
     def _fix_undefined(self, pts, Phi, D):
         # gradients on the hull: one-sided limit, evaluated just inside

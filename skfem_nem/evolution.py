@@ -348,13 +348,18 @@ class LagrangianMesh:
                                           np.ascontiguousarray(self.triangles.T), sort_t=False)
         return self._cache["mesh"]
 
-    def basis(self, elem=None):
-        """A :class:`~skfem_nem.NaturalNeighbourBasis` on the current mesh with
-        the 3-point rule (cached until the mesh changes)."""
+    def basis(self, elem=None, integration: str = "smoothed"):
+        """A :class:`~skfem_nem.NaturalNeighbourBasis` on the current mesh
+        (cached until the mesh changes) whose integration points are the
+        integration-point fields' slots: point k of triangle t near its
+        vertex k. ``integration="smoothed"`` (default): gradients smoothed
+        over the vertex cells of the triangles; ``"gauss"``: the 3-point rule."""
         from .basis import NaturalNeighbourBasis
-        key = ("basis", None if elem is None else repr(elem))
+        key = ("basis", None if elem is None else repr(elem), integration)
         if key not in self._cache:
-            self._cache[key] = NaturalNeighbourBasis(self.mesh, elem, quadrature=(_X3, _W3))
+            rule = {"quadrature": (_X3, _W3)} if integration == "gauss" else {}
+            self._cache[key] = NaturalNeighbourBasis(self.mesh, elem, integration=integration,
+                                                     **rule)
         return self._cache[key]
 
     def node_areas(self) -> np.ndarray:

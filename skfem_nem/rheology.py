@@ -297,7 +297,7 @@ def vep_update(eps: np.ndarray, W: Optional[np.ndarray], tau_old: np.ndarray, et
 
 def to_ip_field(tau: np.ndarray) -> np.ndarray:
     """(2, 2, ne, nq) -> (ne, nq, 2, 2): the layout of :class:`~skfem_nem.LagrangianMesh`
-    integration-point fields (with the 3-point rule, ``stokes_spaces(mesh, npoints=3)``)."""
+    integration-point fields (3 points per triangle: ``stokes_spaces(mesh)``)."""
     return np.ascontiguousarray(np.moveaxis(np.asarray(tau), (0, 1), (2, 3)))
 
 

@@ -103,6 +103,8 @@ class PlateConfig:
     inject: float = 2.0
     #: remap of the stress on flips: "conservative" or "average"
     remap: str = "conservative"
+    #: integration of the velocity gradients: "smoothed" (consistent) or "gauss"
+    integration: str = "smoothed"
     #: Picard tolerance of the plastic iterations
     picard_tol: float = 1e-3
     #: write a checkpoint every this many steps
@@ -130,6 +132,9 @@ class PlateConfig:
             raise ValueError(f"inject must be 0 (off) or a factor above 1, got {self.inject!r}")
         if self.remap not in ("conservative", "average"):
             raise ValueError(f"remap must be 'conservative' or 'average', got {self.remap!r}")
+        if self.integration not in ("smoothed", "gauss"):
+            raise ValueError(f"integration must be 'smoothed' or 'gauss', got "
+                             f"{self.integration!r}")
         if not 0 < self.interface_z < self.height:
             raise ValueError(f"interface_z must lie inside the box (0, {self.height}), got "
                              f"{self.interface_z!r}")
@@ -174,6 +179,8 @@ HELP = {
     'output_interval': 'time between VTU outputs',
     'inject': "inject nodes where a node's Voronoi area grew past this factor (0: never)",
     'remap': 'remap of the stress on flips: "conservative" or "average"',
+    'integration': 'integration of the velocity gradients: "smoothed" (consistent) or "gauss" '
+                   '(3-point rule)',
     'picard_tol': 'Picard tolerance of the plastic iterations',
     'checkpoint_every': 'write a checkpoint every this many steps',
 }
@@ -365,7 +372,9 @@ class SinkingPlate:
         c = self.cfg
         lm = self.lm
         t0 = _time.perf_counter()
-        spaces = stokes_spaces(lm.mesh, "nem", npoints=3)
+        gauss = c.integration == "gauss"
+        spaces = stokes_spaces(lm.mesh, "nem", npoints=3 if gauss else None,
+                               integration=c.integration)
         mat, force, plate = self.materials(spaces)
         tau_old = from_ip_field(lm.ip_fields["stress"])
         ps_old = lm.ip_fields["plastic_strain"]

@@ -171,8 +171,8 @@ class StokesSolution:
         return self.p[self.spaces.pbasis.dofs.nodal_dofs[0]]
 
 
-def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: int = 6,
-                  coordinates: str = "sibson") -> StokesSpaces:
+def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: Optional[int] = None,
+                  coordinates: str = "sibson", integration: Optional[str] = None) -> StokesSpaces:
     """Velocity/pressure bases for :func:`solve_stokes`.
 
     Parameters
@@ -183,23 +183,34 @@ def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: int = 6,
         ``"nem"`` (natural-neighbour velocity, P1 pressure, stabilised) or
         ``"taylor-hood"`` (P2 velocity, P1 pressure).
     npoints
-        Quadrature points per triangle (1, 3, 4, 6, 7, 12, 13). The default 6
-        integrates the Taylor-Hood forms exactly and keeps the NEM
-        quadrature error below its discretisation error on typical meshes.
+        Gauss points per triangle (1, 3, 4, 6, 7, 12, 13). Natural-neighbour
+        velocities: ``None`` (default) integrates them consistently by
+        gradient smoothing (:mod:`skfem_nem.smoothing`; 3 points per
+        triangle, one per smoothing cell); a number asks for Gauss quadrature
+        of their gradients with that rule. Taylor-Hood: default 6, which
+        integrates its forms exactly.
     coordinates
         ``"sibson"`` or ``"laplace"`` (NEM only).
+    integration
+        ``"smoothed"`` or ``"gauss"`` for the natural-neighbour velocity (see
+        :class:`~skfem_nem.NaturalNeighbourBasis`); ``None`` follows
+        ``npoints``. Not an option of Taylor-Hood.
     """
     bb = None
     if method in ("nem", "nem-projection"):
         ub = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()),
-                                   npoints=npoints, coordinates=coordinates)
+                                   npoints=npoints, coordinates=coordinates,
+                                   integration=integration)
         quad = ub.quadrature
         if method == "nem":
             bb = Basis(mesh, ElementVector(ElementTriBubble()), quadrature=quad)
     elif method in ("taylor-hood", "th"):
         method = "taylor-hood"
+        if integration not in (None, "gauss"):
+            raise ValueError(f"integration={integration!r} is an option of the "
+                             f"natural-neighbour velocity; Taylor-Hood uses Gauss quadrature")
         from .basis import _quadrature
-        quad = _quadrature(npoints, None, None)
+        quad = _quadrature(6 if npoints is None else npoints, None, None)
         ub = Basis(mesh, ElementVector(ElementTriP2()), quadrature=quad)
     else:
         raise ValueError(f"method must be 'nem', 'nem-projection' or 'taylor-hood', "

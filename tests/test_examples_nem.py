@@ -27,6 +27,16 @@ def ex03():
 # --------------------------------------------------------------------------
 
 @pytest.mark.parametrize("kind", ["uniform", "graded"])
+def test_ex04_default_nem_converges_below_p1(ex04, kind):
+    r = ex04.results[kind]
+    nem, p1 = r["NEM"], r["P1"]
+    # gradient smoothing: optimal rates at every level, errors below P1's
+    assert nem["rate_l2"].min() > 1.9 and nem["rate_h1"].min() > 0.95
+    assert (nem["l2"] < p1["l2"]).all() and (nem["h1"] < p1["h1"]).all()
+    assert ex04.ratio_to_p1[kind]["l2"]["NEM"] < 0.7       # 0.55 / 0.43 at 16000 nodes
+
+
+@pytest.mark.parametrize("kind", ["uniform", "graded"])
 def test_ex04_reference_methods_converge(ex04, kind):
     r = ex04.results[kind]
     # the set-up itself (manufactured solution, boundary, error integrals) is right
@@ -105,6 +115,11 @@ def test_ex03_nem_cantilever(ex03, kind):
         assert abs(r[m]["tip_error"][-1]) < abs(r["P1"]["tip_error"][-1])  # P1: -0.50%
         # L2 error below P1's on every mesh (NEM-3 0.16x, NEM-13 0.28x P1 at 3200 nodes)
         assert np.all(r[m]["l2"] < r["P1"]["l2"])
+    smoothed = r["NEM"]
+    assert abs(smoothed["tip_error"][-1]) < abs(r["P1"]["tip_error"][-1])
+    assert np.all(smoothed["energy"] < r["P1"]["energy"])
+    # energy rates 0.84 / 1.08 (random), 1.02 / 1.02 (graded): 200 nodes is pre-asymptotic
+    assert smoothed["rate_energy"][-1] > 0.95 and smoothed["rate_l2"][-1] > 1.8
     nem = r["NEM-13"]
     assert np.all(nem["energy"] < r["P1"]["energy"])     # 0.57x P1 at 3200 nodes
     assert nem["rate_energy"][-1] > 0.85                  # 1.06 / 0.99
@@ -113,7 +128,8 @@ def test_ex03_nem_cantilever(ex03, kind):
 
 def test_ex03_patch_test(ex03):
     patch = ex03.patch
-    assert set(patch) == {1, 3, 4, 6, 7, 12, 13}
+    assert set(patch) == {"smoothed", 1, 3, 4, 6, 7, 12, 13}
+    assert patch["smoothed"] < 1e-10          # the default: consistent integration
     # relative max interior nodal error: 1 point 5.2e-2, 3 points 7.8e-3, 13 points 1.6e-3
     assert patch[13] < 0.2 * patch[1] and patch[12] < 0.2 * patch[1]
     assert patch[13] < patch[3] and patch[3] < patch[1]
@@ -123,3 +139,28 @@ def test_ex03_patch_test(ex03):
 def test_ex03_figure(ex03, tmp_path):
     png = ex03.visualize(tmp_path / "ex03.png")
     assert Path(png).stat().st_size > 20_000
+
+
+# --------------------------------------------------------------------------
+# ex12: the patch test with smoothed gradients
+# --------------------------------------------------------------------------
+
+def test_ex12_patch_test_and_figure(tmp_path):
+    from matplotlib.collections import PolyCollection
+    import matplotlib.pyplot as plt
+    ex12 = load("ex12_smoothing")
+    assert ex12.errors["smoothed (default)"].max() < 1e-12
+    assert ex12.errors["Gauss, 3 points"].max() > 1e-4
+    fig, path = ex12.visualize(tmp_path / "ex12.png")
+    cells = [c for c in fig.axes[0].collections if isinstance(c, PolyCollection)]
+    assert len(cells) == 1 and len(cells[0].get_paths()) == 18    # 6 triangles x 3 cells
+    # the three cells of a triangle have equal areas (a third of it)
+    V = np.array([p.vertices[:4] for p in cells[0].get_paths()])
+    area = 0.5 * np.abs(np.sum(V[:, :, 0] * np.roll(V[:, :, 1], -1, 1)
+                               - np.roll(V[:, :, 0], -1, 1) * V[:, :, 1], axis=1))
+    assert np.allclose(area.reshape(6, 3), area.reshape(6, 3)[:, :1])
+    drawn = [a.collections[0].get_array() for a in fig.axes[1:3]]
+    for d, err in zip(drawn, ex12.errors.values()):
+        assert np.allclose(d, np.log10(err + 1e-17))
+    assert Path(path).exists()
+    plt.close(fig)

@@ -224,7 +224,7 @@ def test_bad_input(box):
     with pytest.raises(ValueError, match="element 5"):
         vep_step(S, Material(1.0), bad, 1.0)
     with pytest.raises(ValueError, match="shape"):
-        vep_step(S, Material(1.0), z[..., :3], 1.0)
+        vep_step(S, Material(1.0), z[..., :2], 1.0)
     with pytest.raises(ValueError, match="per-element values"):
         vep_step(S, Material(np.ones(3)), z, 1.0)
     bc = prescribed_velocity(S, "all", lambda x: np.stack([x[0], -x[1]]))

@@ -34,15 +34,15 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
-from skfem import (Basis, BilinearForm, ElementTriMini, ElementTriP1, ElementVector, Functional,
-                   LinearForm, condense, solve)
-from skfem.helpers import ddot, div, dot, grad, sym_grad
-from skfem.models.elasticity import lame_parameters, linear_elasticity
+from skfem import (Basis, BilinearForm, ElementTriMini, ElementTriP1, ElementVector, LinearForm,
+                   condense, solve)
+from skfem.helpers import ddot, div, dot, sym_grad
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from ex04_nem_vs_fem import error_basis, errors, laplace, load, make_basis, node_set  # noqa: E402
-from test_consistency import cube_nodes, elasticity_patch_error, graded, laplace_patch_error, thin  # noqa: E402,E501
+from test_consistency import (_stokes_l2p as _l2p, _stokes_l2u as _l2u, cube_nodes,  # noqa: E402
+                              elasticity_patch_error, graded, laplace_patch_error, thin)
 
 from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis,  # noqa: E402
                        delaunay_mesh)
@@ -167,17 +167,6 @@ def patch_table():
 # ---------------------------------------------------------------------------
 # 4. Stokes
 # ---------------------------------------------------------------------------
-
-@Functional
-def _l2u(w):
-    d = w["u"] - DoneaHuerta.velocity(w.x)
-    return d[0] ** 2 + d[1] ** 2
-
-
-@Functional
-def _l2p(w):
-    return (w["p"] - DoneaHuerta.pressure(w.x)) ** 2
-
 
 @BilinearForm
 def _visc(u, v, w):

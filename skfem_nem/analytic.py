@@ -166,12 +166,18 @@ class DoneaHuerta:
                          -Y ** 2 * (1 - Y) ** 2 * (2 * X - 6 * X ** 2 + 4 * X ** 3)])
 
     @staticmethod
+    def _factors(x):
+        """u_x = a(x) b'(y), u_y = -a'(x) b(y) with a(s) = b(s) = s^2 (1 - s)^2:
+        the values and first three derivatives of a at x[0] and of b at x[1]."""
+        def f(s):
+            return (s ** 2 * (1 - s) ** 2, 2 * s - 6 * s ** 2 + 4 * s ** 3,
+                    2 - 12 * s + 12 * s ** 2, -12 + 24 * s)
+        return f(x[0]), f(x[1])
+
+    @staticmethod
     def velocity_gradient(x):
         """(2, 2, ...): [i, j] = d u_i / d x_j."""
-        X, Y = x[0], x[1]
-        a, da = X ** 2 * (1 - X) ** 2, 2 * X - 6 * X ** 2 + 4 * X ** 3
-        b, db = Y ** 2 * (1 - Y) ** 2, 2 * Y - 6 * Y ** 2 + 4 * Y ** 3
-        dda, ddb = 2 - 12 * X + 12 * X ** 2, 2 - 12 * Y + 12 * Y ** 2
+        (a, da, dda, _), (b, db, ddb, _) = DoneaHuerta._factors(x)
         return np.stack([np.stack([da * db, a * ddb]), np.stack([-dda * b, -da * db])])
 
     @staticmethod
@@ -180,14 +186,10 @@ class DoneaHuerta:
 
     @staticmethod
     def force(x):
-        X, Y = x[0], x[1]
-        a, da = X ** 2 * (1 - X) ** 2, 2 * X - 6 * X ** 2 + 4 * X ** 3
-        b, db = Y ** 2 * (1 - Y) ** 2, 2 * Y - 6 * Y ** 2 + 4 * Y ** 3
-        dda, ddb = 2 - 12 * X + 12 * X ** 2, 2 - 12 * Y + 12 * Y ** 2
-        d3a, d3b = -12 + 24 * X, -12 + 24 * Y
+        (a, da, dda, d3a), (b, db, ddb, d3b) = DoneaHuerta._factors(x)
         lap_ux = dda * db + a * d3b
         lap_uy = -(d3a * b + da * ddb)
-        return np.stack([-lap_ux + (1 - 2 * X), -lap_uy + 0 * Y])
+        return np.stack([-lap_ux + (1 - 2 * x[0]), -lap_uy + 0 * x[1]])
 
 
 def viscoelastic_buildup(t, eta: float, mu: float, strain_rate: float,

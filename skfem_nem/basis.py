@@ -542,7 +542,8 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
     def __repr__(self):
         return (f"<skfem_nem {type(self).__name__}({type(self.mesh).__name__}, "
                 f"{type(self.elem).__name__})>\n  Number of elements: {self.nelems}\n"
-                f"  Number of DOFs: {self.N}\n  Stencil sizes: mean "
+                f"  Number of DOFs: {self.N}\n  Integration: {self.integration}\n"
+                f"  Stencil sizes: mean "
                 f"{self.stencil_sizes.mean():.2f}, max {self.stencil_sizes.max()} "
                 f"({len(self.groups)} groups)")
 

@@ -60,9 +60,11 @@ from numba import njit, prange
 from ._numba import serial_twin
 
 #: Gauss-Legendre points per cell edge (2D). Any rule exact for linear
-#: functions passes the patch test; 2 points measured as accurate as 3
-#: (errors within 0.3 % on 250-16,000 nodes), 1 point is not tested
-SEGMENT_POINTS = 2
+#: functions passes the patch test. Measured on the Poisson problem of
+#: docs/verification.md (250-16,000 nodes): 1, 2 and 3 points give the same
+#: errors within 7 % (L2: 1 point 6 % lower; H1: 1 % higher) and the same
+#: rates; 1 point needs half the evaluations and gives smaller stencils
+SEGMENT_POINTS = 1
 #: points of the triangle rule on each face of a tetrahedron (3D): degree 2
 FACE_POINTS = 3
 #: rows per block of the combination kernel (one scratch array per block)
@@ -90,78 +92,103 @@ def value_rule(dim: int):
 # cells and their boundary points
 # ---------------------------------------------------------------------------
 
-def _rot(d):
-    """(..., 2) vectors turned by -90 degrees: the outward normal times length
-    of an edge traversed counter-clockwise."""
-    return np.stack([d[..., 1], -d[..., 0]], axis=-1)
-
-
 def cells_2d(p, t, t2f, facets, elems):
     """Boundary points of the vertex cells of the triangles ``elems``.
 
-    Returns (points (m, 2), hint (m,) triangle of each point, pts (3 k, 4 s)
-    point indices per cell, coef (3 k, 4 s, 2)): the smoothed gradient of a
-    function over cell 3 j + i (vertex i of triangle elems[j]) is
-    ``sum_r coef[c, r] * phi(points[pts[c, r]])``.
+    ``p`` (n, 2) nodes; ``t``, ``t2f`` (3, nt) and ``facets`` (2, nf) as in a
+    scikit-fem ``MeshTri`` (``t2f[i]`` is the edge from vertex i to vertex
+    i + 1). Returns (points (m, 2), hint (m,) a triangle holding each point,
+    pts (3 k, 4 s) point indices per cell, coef (3 k, 4 s, 2)): the smoothed
+    gradient of a function over cell 3 j + i (vertex i of triangle
+    elems[j]) is ``sum_r coef[c, r] * phi(points[pts[c, r]])``.
     """
     s, w = np.polynomial.legendre.leggauss(SEGMENT_POINTS)
-    s, w = 0.5 * (s + 1.0), 0.5 * w
-    ns = s.size
-    k = elems.size
-    T = t[:, elems].T                                   # (k, 3)
-    F = t2f[:, elems].T                                 # (k, 3): edge (i, i+1)
-    fac, finv = np.unique(F.ravel(), return_inverse=True)
-    finv = finv.reshape(k, 3)
-    a, b = p[facets[0, fac]], p[facets[1, fac]]
-    m = 0.5 * (a + b)
-    # half-edges: half 0 from a to m, half 1 from m to b
-    half = np.stack([a[:, None] + s[None, :, None] * (m - a)[:, None],
-                     m[:, None] + s[None, :, None] * (b - m)[:, None]], axis=1)  # (nf, 2, ns, 2)
-    V = p[T]                                            # (k, 3, 2)
-    g = V.mean(axis=1)
-    mid = m[finv]                                       # (k, 3, 2) midpoint of edge (i, i+1)
-    inner = mid[:, :, None] + s[None, None, :, None] * (g[:, None, None] - mid[:, :, None])
-    nh = fac.size * 2 * ns
-    points = np.concatenate([half.reshape(-1, 2), inner.reshape(-1, 2)])
-    # a triangle to start each point's search from
-    hint = np.concatenate([np.repeat(_first_owner(finv, elems, fac.size), 2 * ns),
-                           np.repeat(elems, 3 * ns)])
-    det = ((V[:, 1, 0] - V[:, 0, 0]) * (V[:, 2, 1] - V[:, 0, 1])
-           - (V[:, 1, 1] - V[:, 0, 1]) * (V[:, 2, 0] - V[:, 0, 0]))
-    sgn = np.sign(det)
-    area = np.abs(det) / 6.0                            # |T| / 3 per cell
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scale = np.where(area > 0, sgn / area, 0.0)
-    pts = np.empty((k, 3, 4, ns), dtype=np.int64)
-    coef = np.empty((k, 3, 4, ns, 2))
-    r = np.arange(ns)
-    for i in range(3):
-        j = (i + 2) % 3                                 # edge (i - 1, i)
-        vi, mi, mj = V[:, i], mid[:, i], mid[:, j]
-        # 1. half of edge (i, i+1) at vertex i, from vertex i to its midpoint
-        hi = np.where(facets[0, fac[finv[:, i]]] == T[:, i], 0, 1)
-        pts[:, i, 0] = (finv[:, i] * 2 + hi)[:, None] * ns + r
-        coef[:, i, 0] = _rot(mi - vi)[:, None, :] * w[None, :, None]
-        # 2. midpoint of edge (i, i+1) to the centroid
-        pts[:, i, 1] = nh + (np.arange(k) * 3 + i)[:, None] * ns + r
-        coef[:, i, 1] = _rot(g - mi)[:, None, :] * w[None, :, None]
-        # 3. centroid to the midpoint of edge (i - 1, i)
-        pts[:, i, 2] = nh + (np.arange(k) * 3 + j)[:, None] * ns + r
-        coef[:, i, 2] = _rot(mj - g)[:, None, :] * w[None, :, None]
-        # 4. half of edge (i - 1, i) at vertex i, from its midpoint to vertex i
-        hj = np.where(facets[0, fac[finv[:, j]]] == T[:, i], 0, 1)
-        pts[:, i, 3] = (finv[:, j] * 2 + hj)[:, None] * ns + r
-        coef[:, i, 3] = _rot(vi - mj)[:, None, :] * w[None, :, None]
-    coef *= scale[:, None, None, None, None]
-    return (points, hint, pts.reshape(3 * k, 4 * ns),
-            coef.reshape(3 * k, 4 * ns, 2))
+    return _cells_2d(np.ascontiguousarray(p, dtype=np.float64),
+                     np.ascontiguousarray(t, dtype=np.int64),
+                     np.ascontiguousarray(t2f, dtype=np.int64),
+                     np.ascontiguousarray(facets, dtype=np.int64),
+                     np.ascontiguousarray(elems, dtype=np.int64), 0.5 * (s + 1.0), 0.5 * w)
 
 
-def _first_owner(finv, elems, nf):
-    """For each of nf facets a triangle of ``elems`` that has it."""
-    own = np.empty(nf, dtype=np.int64)
-    own[finv.ravel()] = np.repeat(elems, 3)
-    return own
+@njit(cache=True)
+def _cells_2d(p, t, t2f, facets, elems, s, w):
+    """The kernel of :func:`cells_2d`. Points: first two halves per edge of
+    the triangles (from the edge's first node to its midpoint, then on to its
+    second node), then the segments midpoint-centroid, three per triangle.
+    Shared segments get bitwise equal points and exactly opposite
+    coefficients (midpoints are computed once, from the edge's own node
+    order), so the cells' contributions cancel to round-off."""
+    k = elems.shape[0]
+    ns = s.shape[0]
+    local = np.full(facets.shape[1], -1, np.int64)
+    fac = np.empty(3 * k, np.int64)
+    owner = np.empty(3 * k, np.int64)
+    nfl = 0
+    for j in range(k):
+        for i in range(3):
+            f = t2f[i, elems[j]]
+            if local[f] < 0:
+                local[f] = nfl
+                fac[nfl] = f
+                owner[nfl] = elems[j]
+                nfl += 1
+    nh = 2 * nfl * ns
+    points = np.empty((nh + 3 * k * ns, 2))
+    hint = np.empty(nh + 3 * k * ns, np.int64)
+    mid = np.empty((nfl, 2))
+    for q in range(nfl):
+        a, b = facets[0, fac[q]], facets[1, fac[q]]
+        for d in range(2):
+            mid[q, d] = 0.5 * (p[a, d] + p[b, d])
+        for r in range(ns):
+            for d in range(2):
+                points[2 * q * ns + r, d] = p[a, d] + s[r] * (mid[q, d] - p[a, d])
+                points[(2 * q + 1) * ns + r, d] = mid[q, d] + s[r] * (p[b, d] - mid[q, d])
+            hint[2 * q * ns + r] = owner[q]
+            hint[(2 * q + 1) * ns + r] = owner[q]
+    pts = np.empty((3 * k, 4 * ns), np.int64)
+    coef = np.empty((3 * k, 4 * ns, 2))
+    g = np.empty(2)
+    for j in range(k):
+        e = elems[j]
+        v0, v1, v2 = t[0, e], t[1, e], t[2, e]
+        det = ((p[v1, 0] - p[v0, 0]) * (p[v2, 1] - p[v0, 1])
+               - (p[v1, 1] - p[v0, 1]) * (p[v2, 0] - p[v0, 0]))
+        area = abs(det) / 6.0                           # |T| / 3 per cell
+        scale = 0.0 if area == 0.0 else (1.0 if det > 0 else -1.0) / area
+        for d in range(2):
+            g[d] = (p[v0, d] + p[v1, d] + p[v2, d]) / 3.0
+        for i in range(3):
+            q = local[t2f[i, e]]
+            for r in range(ns):
+                for d in range(2):
+                    points[nh + (3 * j + i) * ns + r, d] = mid[q, d] + s[r] * (g[d] - mid[q, d])
+                hint[nh + (3 * j + i) * ns + r] = e
+        for i in range(3):
+            c = 3 * j + i
+            vi = t[i, e]
+            qi = local[t2f[i, e]]                       # edge (i, i+1)
+            qj = local[t2f[(i + 2) % 3, e]]             # edge (i-1, i)
+            hi = 0 if facets[0, fac[qi]] == vi else 1
+            hj = 0 if facets[0, fac[qj]] == vi else 1
+            # the cell's boundary, counter-clockwise for a positive det:
+            # vertex i -> mid(i, i+1) -> centroid -> mid(i-1, i) -> vertex i;
+            # (dy, -dx) of each piece is its outward normal times its length
+            for r in range(ns):
+                wr = w[r] * scale
+                pts[c, r] = (2 * qi + hi) * ns + r
+                coef[c, r, 0] = (mid[qi, 1] - p[vi, 1]) * wr
+                coef[c, r, 1] = -(mid[qi, 0] - p[vi, 0]) * wr
+                pts[c, ns + r] = nh + (3 * j + i) * ns + r
+                coef[c, ns + r, 0] = (g[1] - mid[qi, 1]) * wr
+                coef[c, ns + r, 1] = -(g[0] - mid[qi, 0]) * wr
+                pts[c, 2 * ns + r] = nh + (3 * j + (i + 2) % 3) * ns + r
+                coef[c, 2 * ns + r, 0] = (mid[qj, 1] - g[1]) * wr
+                coef[c, 2 * ns + r, 1] = -(mid[qj, 0] - g[0]) * wr
+                pts[c, 3 * ns + r] = (2 * qj + hj) * ns + r
+                coef[c, 3 * ns + r, 0] = (p[vi, 1] - mid[qj, 1]) * wr
+                coef[c, 3 * ns + r, 1] = -(p[vi, 0] - mid[qj, 0]) * wr
+    return points, hint, pts, coef
 
 
 # local vertices of the faces of a tetrahedron in scikit-fem's t2f order,
@@ -209,6 +236,43 @@ def cells_3d(p, t, t2f, facets, elems):
 # values and smoothed gradients on one pattern
 # ---------------------------------------------------------------------------
 
+@njit(cache=True)
+def _entry(col, r, mark, where, pos, fill, out_idx, out_val, out_grad):
+    """The position of column ``col`` in row r, which starts at ``pos[0]``
+    and has ``pos[1]`` entries so far: a new column is appended (zeroed when
+    filling) and counted."""
+    if mark[col] != r:
+        mark[col] = r
+        where[col] = pos[0] + pos[1]
+        if fill:
+            out_idx[where[col]] = col
+            out_val[where[col]] = 0.0
+            out_grad[:, where[col]] = 0.0
+        pos[1] += 1
+    return where[col]
+
+
+@njit(cache=True)
+def _sort_row(lo, hi, out_idx, out_val, out_grad, gi):
+    """Insertion sort of entries lo..hi-1 by column (rows hold ~10-30)."""
+    dim = out_grad.shape[0]
+    for a in range(lo + 1, hi):
+        ci, vi = out_idx[a], out_val[a]
+        for d in range(dim):
+            gi[d] = out_grad[d, a]
+        b = a
+        while b > lo and out_idx[b - 1] > ci:
+            out_idx[b] = out_idx[b - 1]
+            out_val[b] = out_val[b - 1]
+            for d in range(dim):
+                out_grad[d, b] = out_grad[d, b - 1]
+            b -= 1
+        out_idx[b] = ci
+        out_val[b] = vi
+        for d in range(dim):
+            out_grad[d, b] = gi[d]
+
+
 @njit(cache=True, parallel=True)
 def _smoothed_rows(cell_of, pts, coef, v_ptr, v_idx, v_val, s_ptr, s_idx, s_val, n,
                    count, out_ptr, out_idx, out_val, out_grad, fill):
@@ -228,59 +292,27 @@ def _smoothed_rows(cell_of, pts, coef, v_ptr, v_idx, v_val, s_ptr, s_idx, s_val,
         mark = np.full(n, -1, np.int64)
         where = np.empty(n, np.int64)
         gi = np.empty(dim)
+        pos = np.zeros(2, np.int64)
         for r in range(blk * _BLOCK, min(nrows, blk * _BLOCK + _BLOCK)):
             c = cell_of[r]
-            cnt = 0
-            base = out_ptr[r] if fill else 0
+            pos[0] = out_ptr[r] if fill else 0
+            pos[1] = 0
             for kk in range(v_ptr[r], v_ptr[r + 1]):
-                col = v_idx[kk]
-                if mark[col] != r:
-                    mark[col] = r
-                    where[col] = base + cnt
-                    if fill:
-                        out_idx[base + cnt] = col
-                        out_val[base + cnt] = 0.0
-                        for d in range(dim):
-                            out_grad[d, base + cnt] = 0.0
-                    cnt += 1
+                at = _entry(v_idx[kk], r, mark, where, pos, fill, out_idx, out_val, out_grad)
                 if fill:
-                    out_val[where[col]] += v_val[kk]
+                    out_val[at] += v_val[kk]
             for j in range(pts.shape[1]):
                 q = pts[c, j]
                 for kk in range(s_ptr[q], s_ptr[q + 1]):
-                    col = s_idx[kk]
-                    if mark[col] != r:
-                        mark[col] = r
-                        where[col] = base + cnt
-                        if fill:
-                            out_idx[base + cnt] = col
-                            out_val[base + cnt] = 0.0
-                            for d in range(dim):
-                                out_grad[d, base + cnt] = 0.0
-                        cnt += 1
+                    at = _entry(s_idx[kk], r, mark, where, pos, fill, out_idx, out_val,
+                                out_grad)
                     if fill:
-                        pos = where[col]
                         for d in range(dim):
-                            out_grad[d, pos] += coef[c, j, d] * s_val[kk]
-            if not fill:
-                count[r] = cnt
-                continue
-            # sort the row by column (insertion sort: rows hold ~10-30 entries)
-            for a in range(base + 1, base + cnt):
-                ci, vi = out_idx[a], out_val[a]
-                for d in range(dim):
-                    gi[d] = out_grad[d, a]
-                b = a
-                while b > base and out_idx[b - 1] > ci:
-                    out_idx[b] = out_idx[b - 1]
-                    out_val[b] = out_val[b - 1]
-                    for d in range(dim):
-                        out_grad[d, b] = out_grad[d, b - 1]
-                    b -= 1
-                out_idx[b] = ci
-                out_val[b] = vi
-                for d in range(dim):
-                    out_grad[d, b] = gi[d]
+                            out_grad[d, at] += coef[c, j, d] * s_val[kk]
+            if fill:
+                _sort_row(pos[0], pos[0] + pos[1], out_idx, out_val, out_grad, gi)
+            else:
+                count[r] = pos[1]
 
 
 _smoothed_rows_serial = serial_twin(_smoothed_rows)

@@ -111,12 +111,11 @@ def test_buildup_through_nem_stokes(box):
             ref, _ = vep_update(E, None, ref, ETA, MU, Y, dt)
             sxx = deviator(tau)[0, 0]
             mean = area_mean(S, sxx)
-            # the NEM solve reproduces the pointwise update in the mean ...
-            assert mean == pytest.approx(ref[0, 0, 0], rel=2e-3)
-            # ... and pointwise to 2 % rms, 10 % max (NEM's quadrature error in the patch test)
+            # the NEM solve reproduces the pointwise update at every point (smoothed
+            # gradients pass the patch test; Gauss quadrature left 2 % rms, 10 % max)
             dev = sxx - ref[0, 0, 0]
-            assert np.sqrt(area_mean(S, dev ** 2)) < 0.02 * ref[0, 0, 0]
-            assert np.abs(dev).max() < 0.10 * ref[0, 0, 0]
+            assert np.abs(dev).max() < 1e-6 * ref[0, 0, 0]
+            assert mean == pytest.approx(ref[0, 0, 0], rel=1e-6)
         exact = viscoelastic_buildup(250 * KYR, ETA, MU, EDOT, Y)
         assert mean == pytest.approx(exact, rel=2e-2)
         if np.isfinite(Y):
@@ -193,21 +192,22 @@ def test_jaumann_pointwise():
 def test_jaumann_rigid_rotation_nem(box):
     S = box
     ne, nq = S.quadrature_points.shape[1:]
-    # an elastic solid (eta = inf) turned by the walls; mu dt w >> |tau| keeps the
-    # spurious flow of the uniform prestress (quadrature error) small
+    # an elastic solid (eta = inf) turned by the walls; with smoothed gradients
+    # the uniform prestress drives no spurious flow, so the rotation holds at
+    # every integration point (Gauss quadrature left 1-2 % in the mean)
     w, dt = 1e-3, 10.0
     bc = prescribed_velocity(S, "all", lambda x: np.stack([-w * (x[1] - 0.5), w * (x[0] - 0.5)]))
     tau = np.zeros((2, 2, ne, nq))
     tau[0, 0], tau[1, 1], tau[0, 1] = 3.0, -3.0, 0.0
-    for rot in ("exact", "jaumann"):
+    a = w * dt
+    for rot, tol, tol_ii in (("exact", 1e-9, 1e-9), ("jaumann", 1e-3, 1e-3)):
         r = vep_step(S, Material(np.inf, 1e5), tau, dt, prescribed=bc, rotation=rot, tol=1e-9)
-        a = w * dt
         # deviatoric tensor diag(3, -3) rotated by a: (3 cos 2a, 3 sin 2a)
-        assert area_mean(S, r.tau[0, 0]) == pytest.approx(3 * np.cos(2 * a), rel=1e-3)
-        assert area_mean(S, r.tau[0, 1]) == pytest.approx(3 * np.sin(2 * a), rel=2e-2)
+        assert np.abs(r.tau[0, 0] - 3 * np.cos(2 * a)).max() < tol
+        assert np.abs(r.tau[0, 1] - 3 * np.sin(2 * a)).max() < tol
         np.testing.assert_allclose(r.tau[0, 1], r.tau[1, 0], atol=1e-12)
-        II = second_invariant(r.tau)
-        assert abs(area_mean(S, II) - 3.0) < (1e-3 if rot == "exact" else 2e-3)
+        # Jaumann's first-order error: |II| grows by sqrt(1 + (2 a)^2) - 1 = 6e-4
+        assert np.abs(second_invariant(r.tau) - 3.0).max() < tol_ii
 
 
 # -- checks -------------------------------------------------------------------

@@ -430,16 +430,18 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
         and smoothed gradients over the cells ``cell_of`` (ne * nq,) of the
         cells of ``np.unique(elems)`` (:mod:`skfem_nem.smoothing`)."""
         dim, ne, nq = x.shape
-        pts = np.ascontiguousarray(x.transpose(1, 2, 0).reshape(-1, dim))
-        Phi_v = self._coordinates(pts, hint=np.repeat(elems, nq))
+        pts = x.transpose(1, 2, 0).reshape(-1, dim)
         mesh = self.mesh
         cells = cells_2d if dim == 2 else cells_3d
         points, hint, cp, coef = cells(mesh.p.T, mesh.t, mesh.t2f, mesh.facets,
                                        np.unique(elems))
-        Phi_s = self._coordinates(points, hint=hint)
-        ptr, idx, val, grad = combine(Phi_v, cell_of, Phi_s, cp, coef)
+        # one batch: the integration points, then the cells' boundary points
+        Phi = self._coordinates(np.concatenate([pts, points]),
+                                hint=np.concatenate([np.repeat(elems, nq), hint]))
+        ptr, idx, val, grad = combine(Phi, cell_of, cp + ne * nq, coef)
         import scipy.sparse as sp
-        Phi = sp.csr_matrix((val, idx.astype(Phi_v.indices.dtype), ptr), shape=Phi_v.shape)
+        Phi = sp.csr_matrix((val, idx.astype(Phi.indices.dtype), ptr),
+                            shape=(ne * nq, Phi.shape[1]))
         self._set_functions(Phi, grad, ne, nq)
 
     def _set_functions(self, Phi, G, ne, nq):

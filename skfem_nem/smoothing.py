@@ -67,10 +67,11 @@ from ._numba import serial_twin
 SEGMENT_POINTS = 1
 #: points of the triangle rule on each face of a tetrahedron (3D): degree 2
 FACE_POINTS = 3
-#: rows per block of the combination kernel (one scratch array per block)
-_BLOCK = 4096
-#: rows below which the serial kernel runs (waking threads costs more)
-_PARALLEL_MIN = 20000
+#: rows per block of the combination kernel (blocks go to threads)
+_BLOCK = 1024
+#: rows below which the serial kernel runs (waking threads costs more: about
+#: 0.3 us per row serially, so from a few blocks on two threads gain)
+_PARALLEL_MIN = 4096
 
 # barycentric coordinates of the 3-point rule's points, point i nearest vertex i
 _X3 = np.array([[1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
@@ -237,106 +238,103 @@ def cells_3d(p, t, t2f, facets, elems):
 # ---------------------------------------------------------------------------
 
 @njit(cache=True)
-def _entry(col, r, mark, where, pos, fill, out_idx, out_val, out_grad):
-    """The position of column ``col`` in row r, which starts at ``pos[0]``
-    and has ``pos[1]`` entries so far: a new column is appended (zeroed when
-    filling) and counted."""
-    if mark[col] != r:
-        mark[col] = r
-        where[col] = pos[0] + pos[1]
+def _merge_row(r, c, pts, coef, v_ptr, v_idx, v_val, s_ptr, s_idx, s_val, head, stop, cur,
+               base, fill, out_idx, out_val, out_grad):
+    """Row r as a merge of its value row and its cell's segment rows, all of
+    them sorted by column: the columns come out sorted and each once, with no
+    work array of the size of the node set (that cost a cache miss per
+    entry). Returns the row's length; writes it at ``base`` when filling.
+    Source 0 is the value row, source 1 + j the row of point pts[c, j];
+    ``cur`` holds each source's next column (-1: exhausted)."""
+    m = pts.shape[1] + 1
+    dim = coef.shape[2]
+    head[0], stop[0] = v_ptr[r], v_ptr[r + 1]
+    for j in range(1, m):
+        q = pts[c, j - 1]
+        head[j], stop[j] = s_ptr[q], s_ptr[q + 1]
+    for j in range(m):
+        idx = v_idx if j == 0 else s_idx
+        cur[j] = idx[head[j]] if head[j] < stop[j] else -1
+    n = 0
+    while True:
+        col = -1
+        for j in range(m):
+            if cur[j] >= 0 and (col < 0 or cur[j] < col):
+                col = cur[j]
+        if col < 0:
+            return n
         if fill:
-            out_idx[where[col]] = col
-            out_val[where[col]] = 0.0
-            out_grad[:, where[col]] = 0.0
-        pos[1] += 1
-    return where[col]
-
-
-@njit(cache=True)
-def _sort_row(lo, hi, out_idx, out_val, out_grad, gi):
-    """Insertion sort of entries lo..hi-1 by column (rows hold ~10-30)."""
-    dim = out_grad.shape[0]
-    for a in range(lo + 1, hi):
-        ci, vi = out_idx[a], out_val[a]
-        for d in range(dim):
-            gi[d] = out_grad[d, a]
-        b = a
-        while b > lo and out_idx[b - 1] > ci:
-            out_idx[b] = out_idx[b - 1]
-            out_val[b] = out_val[b - 1]
+            out_idx[base + n] = col
+            out_val[base + n] = 0.0
             for d in range(dim):
-                out_grad[d, b] = out_grad[d, b - 1]
-            b -= 1
-        out_idx[b] = ci
-        out_val[b] = vi
-        for d in range(dim):
-            out_grad[d, b] = gi[d]
+                out_grad[d, base + n] = 0.0
+        for j in range(m):
+            if cur[j] != col:
+                continue
+            h = head[j]
+            if j == 0:
+                if fill:
+                    out_val[base + n] = v_val[h]
+                cur[0] = v_idx[h + 1] if h + 1 < stop[0] else -1
+            else:
+                if fill:
+                    for d in range(dim):
+                        out_grad[d, base + n] += coef[c, j - 1, d] * s_val[h]
+                cur[j] = s_idx[h + 1] if h + 1 < stop[j] else -1
+            head[j] = h + 1
+        n += 1
 
 
 @njit(cache=True, parallel=True)
-def _smoothed_rows(cell_of, pts, coef, v_ptr, v_idx, v_val, s_ptr, s_idx, s_val, n,
+def _smoothed_rows(cell_of, pts, coef, v_ptr, v_idx, v_val, s_ptr, s_idx, s_val,
                    count, out_ptr, out_idx, out_val, out_grad, fill):
     """Rows of values and smoothed gradients, one per integration point.
 
     Row r joins the value row r of (v_ptr, v_idx, v_val) with the rows
     pts[cell_of[r]] of (s_ptr, s_idx, s_val) weighted by coef[cell_of[r]]
-    (the boundary integral of each function over the cell). With
-    ``fill=False`` it only counts each row's distinct columns into
-    ``count``; with ``fill=True`` it writes the row at out_ptr[r], columns
-    sorted. A dense marker per block of rows (size n) finds repeated columns.
+    (the boundary integral of each function over the cell); every input row
+    is sorted by column. With ``fill=False`` it only counts each row's
+    distinct columns into ``count``; with ``fill=True`` it writes the row at
+    out_ptr[r], columns sorted.
     """
     nrows = cell_of.shape[0]
-    dim = coef.shape[2]
     nb = (nrows + _BLOCK - 1) // _BLOCK
+    m = pts.shape[1] + 1
     for blk in prange(nb):
-        mark = np.full(n, -1, np.int64)
-        where = np.empty(n, np.int64)
-        gi = np.empty(dim)
-        pos = np.zeros(2, np.int64)
+        head = np.empty(m, np.int64)
+        stop = np.empty(m, np.int64)
+        cur = np.empty(m, np.int64)
         for r in range(blk * _BLOCK, min(nrows, blk * _BLOCK + _BLOCK)):
-            c = cell_of[r]
-            pos[0] = out_ptr[r] if fill else 0
-            pos[1] = 0
-            for kk in range(v_ptr[r], v_ptr[r + 1]):
-                at = _entry(v_idx[kk], r, mark, where, pos, fill, out_idx, out_val, out_grad)
-                if fill:
-                    out_val[at] += v_val[kk]
-            for j in range(pts.shape[1]):
-                q = pts[c, j]
-                for kk in range(s_ptr[q], s_ptr[q + 1]):
-                    at = _entry(s_idx[kk], r, mark, where, pos, fill, out_idx, out_val,
-                                out_grad)
-                    if fill:
-                        for d in range(dim):
-                            out_grad[d, at] += coef[c, j, d] * s_val[kk]
-            if fill:
-                _sort_row(pos[0], pos[0] + pos[1], out_idx, out_val, out_grad, gi)
-            else:
-                count[r] = pos[1]
+            n = _merge_row(r, cell_of[r], pts, coef, v_ptr, v_idx, v_val, s_ptr, s_idx, s_val,
+                           head, stop, cur, out_ptr[r] if fill else 0, fill, out_idx, out_val,
+                           out_grad)
+            if not fill:
+                count[r] = n
 
 
 _smoothed_rows_serial = serial_twin(_smoothed_rows)
 
 
-def combine(Phi_v, cell_of, Phi_s, pts, coef):
-    """Values at the integration points (CSR ``Phi_v``, one row each) and
-    their cells' smoothed gradients, on one sparsity pattern.
+def combine(Phi, cell_of, pts, coef):
+    """Values at the integration points and their cells' smoothed gradients,
+    on one sparsity pattern.
 
-    ``cell_of`` (rows,) names each row's cell; the smoothed gradient of
-    cell c is ``sum_j coef[c, j] * Phi_s[pts[c, j]]``. Returns (indptr,
-    indices, values, grads (dim, nnz)).
+    ``Phi`` is the CSR matrix of the coordinates at the integration points
+    (rows 0 .. len(cell_of) - 1) and at the cells' boundary points (rows
+    ``pts``); ``cell_of`` names each integration point's cell, and the
+    smoothed gradient of cell c is ``sum_j coef[c, j] * Phi[pts[c, j]]``.
+    Returns (indptr, indices, values, grads (dim, nnz)) of len(cell_of) rows.
     """
-    nrows, n = Phi_v.shape
+    nrows = cell_of.shape[0]
     kernel = _smoothed_rows if nrows >= _PARALLEL_MIN else _smoothed_rows_serial
+    Phi.sort_indices()
+    ip, ix = Phi.indptr.astype(np.int64), Phi.indices.astype(np.int64)
     args = (np.ascontiguousarray(cell_of, dtype=np.int64), np.ascontiguousarray(pts),
-            np.ascontiguousarray(coef),
-            Phi_v.indptr.astype(np.int64), Phi_v.indices.astype(np.int64), Phi_v.data,
-            Phi_s.indptr.astype(np.int64), Phi_s.indices.astype(np.int64), Phi_s.data, n)
+            np.ascontiguousarray(coef), ip, ix, Phi.data, ip, ix, Phi.data)
     dim = coef.shape[2]
     count = np.zeros(nrows, np.int64)
     ptr = np.zeros(nrows + 1, np.int64)
-    none_i, none_f = np.empty(0, np.int64), np.empty(0)
-    kernel(*args, count, ptr, none_i, none_f, np.empty((dim, 0)), False)
+    kernel(*args, count, ptr, np.empty(0, np.int64), np.empty(0), np.empty((dim, 0)), False)
     np.cumsum(count, out=ptr[1:])
     nnz = int(ptr[-1])
     idx = np.empty(nnz, np.int64)

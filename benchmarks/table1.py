@@ -130,7 +130,7 @@ def run_child(meshfile: str, problem: str, method: str, min_time: float, budget:
     from skfem import MeshTri
 
     import skfem_nem
-    from skfem_nem.basis import _adopt
+    from skfem_nem.meshes import adopt as _adopt
 
     if threads:
         import numba

@@ -88,7 +88,7 @@ from skfem.element import ElementH1, ElementTriP0, ElementTriP1, ElementTriP2, E
 from skfem.refdom import RefTri
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
-from .basis import ElementNaturalNeighbour, NaturalNeighbourBasis
+from .basis import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
 
 __all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes", "outline_flux",
            "boundary_flux",
@@ -209,8 +209,7 @@ def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: Optional[int] = N
         if integration not in (None, "gauss"):
             raise ValueError(f"integration={integration!r} is an option of the "
                              f"natural-neighbour velocity; Taylor-Hood uses Gauss quadrature")
-        from .basis import _quadrature
-        quad = _quadrature(6 if npoints is None else npoints, None, None)
+        quad = gauss_rule(6 if npoints is None else npoints)
         ub = Basis(mesh, ElementVector(ElementTriP2()), quadrature=quad)
     else:
         raise ValueError(f"method must be 'nem', 'nem-projection' or 'taylor-hood', "

@@ -683,10 +683,8 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
                  integration: str = "smoothed"):
         elem = _element_for(mesh, elem, "NaturalNeighbourFacetBasis")
         self.method = _check_method(mesh, coordinates, method)
-        if integration not in INTEGRATIONS:
-            raise ValueError(f"integration must be one of "
-                             f"{', '.join(map(repr, INTEGRATIONS))}, got {integration!r}")
-        self.integration = integration
+        # (the facet rule serves both schemes: values and smoothed gradients)
+        self.integration = integration = _integration(integration)
         self.triangulation = adopt(mesh, self.method)
         self.coordinates = coordinates
         p1 = ElementTetP1() if isinstance(mesh, MeshTet) else ElementTriP1()

@@ -68,7 +68,7 @@ def visualize(path="out/ex12_smoothing.png"):
     a.add_collection(cells)
     pts = cells_2d(mesh.p.T, mesh.t, mesh.t2f, mesh.facets, np.sort(elems))[0]
     a.plot(pts[:, 0], pts[:, 1], ".", color="C3", ms=5, label="edge points (values)")
-    x = NaturalNeighbourBasis(mesh).global_coordinates().value[:, elems].reshape(2, -1)
+    x = np.asarray(NaturalNeighbourBasis(mesh).global_coordinates())[:, elems].reshape(2, -1)
     a.plot(x[0], x[1], "x", color="k", ms=7, label="integration points")
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     pad = 0.3 * (hi - lo).max()

@@ -503,70 +503,47 @@ def _index_dtype(n):
     return np.int32 if n < 2**31 - 1 else np.int64
 
 
-class _Watched(FormExtraParams):
-    """``w`` that notes whether the form reads it: a form that never does
-    has the same coefficients at every quadrature point of every element."""
-
-    read = False
-
-    def _note(self):
-        self.read = True
-
-    def __getitem__(self, key):
-        self._note()
-        return super().__getitem__(key)
-
-    def __getattr__(self, attr):
-        self._note()
-        return super().__getattr__(attr)
-
-    def __contains__(self, key):
-        self._note()
-        return super().__contains__(key)
-
-    def __iter__(self):
-        self._note()
-        return super().__iter__()
-
-    def __len__(self):
-        self._note()
-        return super().__len__()
-
-    def get(self, *args):
-        self._note()
-        return super().get(*args)
-
-    def keys(self):
-        self._note()
-        return super().keys()
-
-    def values(self):
-        self._note()
-        return super().values()
-
-    def items(self):
-        self._note()
-        return super().items()
+class _Touched(Exception):
+    """The form used ``w``: its coefficients may vary between elements."""
 
 
-def _constant_coefficients(form_fn, Du, Dv, dim, which_u, which_v, nq, w):
-    """The coefficients of a form that ignores ``w``, as (pairs,) scalars,
-    from one call on one element; None if the form reads ``w`` (or gives
-    different values at the points)."""
+def _touched(self, *args, **kwargs):
+    raise _Touched
+
+
+class _NoParams:
+    """Stands in for ``w`` on the first call of a form: any use of it (an
+    attribute, a method such as ``w.copy()``, an item, ``in``, ``len``,
+    iteration, truth, comparison, arithmetic, conversion) raises
+    :class:`_Touched`. A form that returns without touching it computes its
+    coefficients from the unit fields alone, which are the same on every
+    element: that proves them constant. Anything else is probed element by
+    element with the real parameters."""
+
+    __slots__ = ()
+    __getattribute__ = __getattr__ = _touched
+    __getitem__ = __contains__ = __iter__ = __len__ = __bool__ = _touched
+    __eq__ = __ne__ = __lt__ = __le__ = __gt__ = __ge__ = __hash__ = _touched
+    __add__ = __radd__ = __sub__ = __rsub__ = __mul__ = __rmul__ = _touched
+    __truediv__ = __rtruediv__ = __pow__ = __rpow__ = __neg__ = __matmul__ = _touched
+    __array__ = __float__ = __int__ = __index__ = __call__ = _touched
+    __repr__ = __str__ = __format__ = _touched
+
+
+def _constant_coefficients(form_fn, Du, Dv, dim, which_u, which_v, nq):
+    """The coefficients of a form that does not use ``w``, as (pairs,)
+    scalars, from one call on one element; None if the form uses ``w`` (or
+    fails, or gives different values at the points)."""
     reps = len(which_u)
-    W = _Watched({k: _tile(x, reps, 1) for k, x in w.items()})
-    W.read = False
     U = _unit_fields(Du, dim, reps, 1, nq, which_u)
     try:
         if which_v is None:
-            out = form_fn(*U, W)
+            out = form_fn(*U, _NoParams())
         else:
-            out = form_fn(*U, *_unit_fields(Dv, dim, reps, 1, nq, which_v), W)
-    except (AttributeError, TypeError, IndexError, ValueError):
+            out = form_fn(*U, *_unit_fields(Dv, dim, reps, 1, nq, which_v), _NoParams())
+        out = np.broadcast_to(np.asarray(out, dtype=np.float64), (reps, nq))
+    except Exception:  # noqa: BLE001 -- _Touched, or any failure: not provably constant
         return None
-    if W.read:
-        return None
-    out = np.broadcast_to(np.asarray(out, dtype=np.float64), (reps, nq))
     if not (out == out[:, :1]).all():
         return None
     return out[:, 0].copy()
@@ -596,8 +573,7 @@ def _coefficients(form, basis, kwargs, Du, Dv, which_u, which_v):
     ne, nq = basis.dx.shape
     w = {**basis.default_parameters(), **form._normalize_asm_kwargs(kwargs, basis)}
     reps = len(which_u)
-    const = _constant_coefficients(form.form, Du, Dv, dim, which_u, which_v, nq,
-                                   _split_kwargs(w, slice(0, 1), ne))
+    const = _constant_coefficients(form.form, Du, Dv, dim, which_u, which_v, nq)
     fields = {}
     for e0, e1 in _chunks(ne, 1 if const is not None else reps):
         if const is not None:

@@ -9,6 +9,7 @@ from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
                        delaunay_mesh, sibson_coordinates)
+from skfem_nem.nodesets import box_nodes
 
 
 def square_nodes(n=300, nb=12, seed=0):
@@ -431,3 +432,25 @@ def test_whole_mesh_assembly_equals_pairwise(monkeypatch):
     (rows, cols), data, shape, _ = linear_elasticity(*lame_parameters(1.0, 0.3))._assemble(vb)
     key = rows.astype(np.int64) * shape[1] + cols
     assert np.all(np.diff(key) > 0)
+
+
+def test_constant_coefficients_only_for_forms_that_never_touch_w():
+    """A form is evaluated on one element and applied everywhere only when it
+    provably ignores ``w``; any use of ``w`` (here through ``copy``, ``get``,
+    ``len``, ``in`` and iteration, which a read-watcher could miss) gives the
+    per-element probe, and the same matrix as reading ``w["eta"]`` directly."""
+    from skfem_nem import _assembly
+    mesh = delaunay_mesh(box_nodes(120, seed=4))
+    b = NaturalNeighbourBasis(mesh)
+    eta = np.repeat(1.0 + np.arange(mesh.nelements)[:, None] % 3, b.dx.shape[1], axis=1)
+    uses = [lambda w: w.copy()["eta"], lambda w: w.get("eta"),
+            lambda w: w["eta"] * (len(w) > 0), lambda w: w["eta"] if "eta" in w else 1.0,
+            lambda w: dict(w)["eta"]]
+    direct = BilinearForm(lambda u, v, w: w["eta"] * dot(grad(u), grad(v))).assemble(b, eta=eta)
+    which = np.arange(3)
+    for use in uses:
+        form = BilinearForm(lambda u, v, w, use=use: use(w) * dot(grad(u), grad(v)))
+        assert _assembly._constant_coefficients(form.form, 1, 1, 2, which, which, 3) is None
+        assert abs(form.assemble(b, eta=eta) - direct).max() < 1e-12 * abs(direct).max()
+    c = _assembly._constant_coefficients(laplace.form, 1, 1, 2, which, which, 3)
+    assert c is not None and c.tolist() == [0.0, 1.0, 1.0]

@@ -6,6 +6,7 @@ basis (:mod:`~skfem_nem.meshes`: Delaunay meshes checked and adopted;
 :mod:`~skfem_nem.smoothing`: consistent integration; :mod:`~skfem_nem.basis`: NEM trial
 functions inside scikit-fem's assembly).
 """
+from ._assembly import restore_scikit_fem_assembly
 from .basis import (ElementNaturalNeighbour, ElementTetNaturalNeighbour, NaturalNeighbourBasis,
                     NaturalNeighbourFacetBasis)
 from .coordinates import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
@@ -28,5 +29,6 @@ __all__ = [
     "sibson_coordinates",
     "laplace_coordinates",
     "natural_neighbour_coordinates",
+    "restore_scikit_fem_assembly",
     "__version__",
 ]

@@ -5,7 +5,9 @@ with equal stencil size; each group is an ordinary scikit-fem basis. The
 wrappers installed here make ``BilinearForm`` and ``LinearForm`` (and
 therefore ``asm``) loop over those groups and concatenate
 their COO contributions, so user code is unchanged. Forms on ordinary bases
-take scikit-fem's own code path untouched.
+take scikit-fem's own code path untouched. The wrappers are installed when
+the first natural-neighbour basis (a :class:`StencilBasis`) is built, not on
+import, and :func:`restore_scikit_fem_assembly` takes them out again.
 
 Keyword arguments are split with the groups: dof vectors are interpolated by
 each group, arrays and ``DiscreteField`` objects defined over all elements
@@ -46,9 +48,14 @@ PROBE = True
 WHOLE = True
 
 
+class StencilBasis:
+    """Marks bases whose local functions differ from element to element
+    (natural-neighbour stencils): forms on them are assembled here; forms on
+    any other basis take scikit-fem's own code, untouched."""
+
+
 def _is_nn(basis) -> bool:
-    # (reading ``groups`` would build them: test for the stencil arrays)
-    return hasattr(basis, "stencil_ptr") and hasattr(basis, "_grads")
+    return isinstance(basis, StencilBasis)
 
 
 def _split_value(v, idx, nelems):
@@ -682,15 +689,32 @@ def _whole_linear(form, v, kwargs):
     return np.array([rows]), data
 
 
+def restore_scikit_fem_assembly() -> bool:
+    """Put scikit-fem's own ``BilinearForm._assemble`` and
+    ``LinearForm._assemble`` back (the next natural-neighbour basis built
+    installs the wrappers again). Returns whether they were installed."""
+    global _INSTALLED
+    if not _INSTALLED:
+        return False
+    BilinearForm._assemble, LinearForm._assemble = _SCIKIT_FEM
+    _INSTALLED = False
+    return True
+
+
+#: scikit-fem's own assembly methods, as found before the first install
+_SCIKIT_FEM = (BilinearForm._assemble, LinearForm._assemble)
+
+
 def install():
-    """Install the group-wise assembly wrappers (idempotent)."""
+    """Install the assembly wrappers (idempotent). Natural-neighbour bases
+    call it when they are built, so importing the package changes nothing
+    in scikit-fem; :func:`restore_scikit_fem_assembly` undoes it."""
     global _INSTALLED
     if _INSTALLED:
         return
     _INSTALLED = True
 
-    bil = BilinearForm._assemble
-    lin = LinearForm._assemble
+    bil, lin = _SCIKIT_FEM
 
     def bilinear_assemble(self, ubasis, vbasis=None, **kwargs):
         if vbasis is None:

@@ -46,7 +46,6 @@ __all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeig
            "NaturalNeighbourFacetBasis", "delaunay_mesh", "gauss_rule", "QUADRATURE_POINTS",
            "INTEGRATIONS"]
 
-_assembly.install()
 
 #: number of quadrature points -> scikit-fem integration order on triangles
 QUADRATURE_POINTS = {3: 2, 4: 3, 6: 4, 7: 5, 12: 6, 13: 7}
@@ -277,7 +276,7 @@ def _take(f, idx):
     return f
 
 
-class _NaturalNeighbourBasisBase(AbstractBasis):
+class _NaturalNeighbourBasisBase(AbstractBasis, _assembly.StencilBasis):
     """Shared machinery of the cell and facet bases: stencils and groups."""
 
     coordinates: str
@@ -326,7 +325,9 @@ class _NaturalNeighbourBasisBase(AbstractBasis):
 
     def _set_functions(self, Phi, G, ne, nq):
         """Values (CSR, one row per quadrature point) and gradients (dim, nnz)
-        on their pattern; the stencils follow."""
+        on their pattern; the stencils follow. Forms on the basis are
+        assembled from these from now on (:mod:`skfem_nem._assembly`)."""
+        _assembly.install()
         self._Phi, self._grads = Phi, G
         self._D = [type(Phi)((G[k], Phi.indices, Phi.indptr), shape=Phi.shape)
                    for k in range(G.shape[0])]

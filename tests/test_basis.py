@@ -454,3 +454,47 @@ def test_constant_coefficients_only_for_forms_that_never_touch_w():
         assert abs(form.assemble(b, eta=eta) - direct).max() < 1e-12 * abs(direct).max()
     c = _assembly._constant_coefficients(laplace.form, 1, 1, 2, which, which, 3)
     assert c is not None and c.tolist() == [0.0, 1.0, 1.0]
+
+
+def test_scikit_fem_assembly_untouched_by_import_and_by_the_hook():
+    """Importing the package changes nothing in scikit-fem; the assembly hook
+    is installed by the first natural-neighbour basis, passes other bases
+    through bit for bit, and can be taken out again."""
+    import subprocess
+    import sys
+
+    from skfem import ElementTriP2, LinearForm, MeshTri
+    from skfem.assembly.form import BilinearForm as BF
+
+    from skfem_nem import restore_scikit_fem_assembly
+    code = ("import skfem; f = skfem.BilinearForm._assemble; g = skfem.LinearForm._assemble; "
+            "import skfem_nem; assert skfem.BilinearForm._assemble is f; "
+            "assert skfem.LinearForm._assemble is g")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+    mesh = MeshTri.init_symmetric().refined(3)
+    p1 = Basis(mesh, ElementTriP1(), intorder=4)
+    p2 = Basis(mesh, ElementVector(ElementTriP2()), intorder=4)
+    load = LinearForm(lambda v, w: w.x[0] * v)
+
+    def plain():
+        return [laplace.assemble(p1), linear_elasticity(*lame_parameters(1.0, 0.3)).assemble(p2),
+                BilinearForm(lambda u, v, w: u * v[0]).assemble(p1, p2), load.assemble(p1)]
+
+    mesh_nn = delaunay_mesh(box_nodes(40, seed=1))
+    NaturalNeighbourBasis(mesh_nn)
+    assert BF._assemble.__module__ == "skfem_nem._assembly"
+    on = plain()
+    try:
+        assert restore_scikit_fem_assembly() is True and restore_scikit_fem_assembly() is False
+        assert BF._assemble.__module__.startswith("skfem.")
+        off = plain()
+    finally:
+        NaturalNeighbourBasis(mesh_nn)          # installs it again (other tests need it)
+    assert BF._assemble.__module__ == "skfem_nem._assembly"
+    for a, b in zip(on, off):
+        if hasattr(a, "tocsr"):
+            a, b = a.tocsr(), b.tocsr()
+            assert (a.indptr == b.indptr).all() and (a.indices == b.indices).all()
+            a, b = a.data, b.data
+        assert np.array_equal(a, b)

@@ -14,13 +14,24 @@ import sys
 
 import numpy as np
 
+#: exit status of a user error (as argparse's own): one line on stderr, no traceback
+USER_ERROR = 2
+#: parameters a restarted run may change: when it ends and how often it writes
+RESTART_CHANGEABLE = ("end_time", "output_interval", "checkpoint_every")
+
+
+def _fail(message: str):
+    """One line naming the problem on stderr, exit status 2."""
+    print(f"skfem-nem: {message}", file=sys.stderr)
+    raise SystemExit(USER_ERROR)
+
 
 def _read_csv(path: str, min_cols: int, what: str) -> np.ndarray:
     try:
         with open(path) as fh:
             lines = [ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")]
     except OSError as err:
-        raise SystemExit(f"skfem-nem: cannot read {what} file {path!r}: {err.strerror}")
+        _fail(f"cannot read {what} file {path!r}: {err.strerror}")
     if lines and not _numeric(lines[0]):
         lines = lines[1:]
     rows = []
@@ -28,13 +39,13 @@ def _read_csv(path: str, min_cols: int, what: str) -> np.ndarray:
         try:
             rows.append([float(v) for v in ln.replace(";", ",").split(",")])
         except ValueError:
-            raise SystemExit(f"skfem-nem: {what} file {path!r}: data line {k} is not numeric: "
+            _fail(f"{what} file {path!r}: data line {k} is not numeric: "
                              f"{ln.strip()!r}")
     if not rows:
-        raise SystemExit(f"skfem-nem: {what} file {path!r} holds no data")
+        _fail(f"{what} file {path!r} holds no data")
     ncol = {len(r) for r in rows}
     if len(ncol) != 1 or min(ncol) < min_cols:
-        raise SystemExit(f"skfem-nem: {what} file {path!r} needs at least {min_cols} columns on "
+        _fail(f"{what} file {path!r} needs at least {min_cols} columns on "
                          f"every line (found {sorted(ncol)})")
     return np.array(rows)
 
@@ -57,7 +68,7 @@ def interpolate(args) -> int:
         out = natural_neighbour_coordinates(nodes[:, :2], queries, gradient=args.gradient,
                                             kind=args.kind, undefined="nan")
     except ValueError as err:
-        raise SystemExit(f"skfem-nem: {err}")
+        _fail(str(err))
     if args.gradient:
         Phi, (Dx, Dy) = out
         cols = [Phi @ values, Dx @ values, Dy @ values]
@@ -76,18 +87,19 @@ def interpolate(args) -> int:
 def sinking_plate(args) -> int:
     from dataclasses import fields as dfields
 
-    from .sinking_plate import PlateConfig, SinkingPlate, load_config
+    from .sinking_plate import PlateConfig, SinkingPlate, load_config, stored_config
 
-    overrides = {f.name: getattr(args, f.name) for f in dfields(PlateConfig)}
+    given = {f.name: getattr(args, f.name) for f in dfields(PlateConfig)
+             if getattr(args, f.name) is not None}
     try:
-        cfg = load_config(args.config, overrides)
-    except (ValueError, OSError) as err:
-        raise SystemExit(f"skfem-nem sinking-plate: {err}")
-    try:
+        if args.restart:
+            cfg = _restart_config(args, given, stored_config)
+        else:
+            cfg = load_config(args.config, given)
         sim = (SinkingPlate.restart(args.output, cfg) if args.restart
                else SinkingPlate(cfg, args.output))
-    except (ValueError, FileNotFoundError) as err:
-        raise SystemExit(f"skfem-nem sinking-plate: {err}")
+    except (ValueError, OSError) as err:
+        _fail(f"sinking-plate: {err}")
     print(f"sinking plate: {sim.lm.nodes.shape[0]} nodes, {sim.lm.triangles.shape[0]} "
           f"triangles, t = {sim.lm.time:g} -> {cfg.end_time:g}; output in {args.output}")
     try:
@@ -100,6 +112,24 @@ def sinking_plate(args) -> int:
         print("wrote", p)
     print("wrote", sim.out / "plate.pvd", "and", sim.out / "diagnostics.csv")
     return 0
+
+
+def _restart_config(args, given, stored_config):
+    """The configuration stored with the run in ``args.output``, with the
+    options a restart may change; anything else is refused, naming it."""
+    if args.config:
+        raise ValueError("--config cannot be combined with --restart: a restarted run "
+                         "continues with the configuration stored in its checkpoint")
+    fixed = [k for k in given if k not in RESTART_CHANGEABLE]
+    if fixed:
+        allowed = ", ".join("--" + k.replace("_", "-") for k in RESTART_CHANGEABLE)
+        raise ValueError(f"--{fixed[0].replace('_', '-')} cannot change when a run is "
+                         f"restarted (it continues with its stored configuration; only "
+                         f"{allowed} may change)")
+    cfg = stored_config(args.output, given)
+    for k, v in given.items():
+        print(f"restart: {k} = {v:g} (was {stored_config(args.output).__dict__[k]:g})")
+    return cfg
 
 
 def _add_plate_parser(sub):
@@ -118,7 +148,9 @@ def _add_plate_parser(sub):
     sp.add_argument("-o", "--output", default="out/sinking-plate", help="output folder")
     sp.add_argument("--config", help="TOML file with parameters")
     sp.add_argument("--restart", action="store_true",
-                    help="continue from the last checkpoint in the output folder")
+                    help="continue the run stored in the output folder from its last "
+                    "checkpoint, with its own configuration (only --end-time, "
+                    "--output-interval and --checkpoint-every may change)")
     sp.add_argument("--max-steps", type=int, default=None,
                     help="stop after this many steps (a checkpoint is written)")
     sp.add_argument("--quiet", action="store_true", help="no progress bar")

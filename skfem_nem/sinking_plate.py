@@ -47,7 +47,7 @@ from .rheology import Material, from_ip_field, second_invariant, to_ip_field, ve
 from .stokes import outline_flux, stokes_spaces
 from .triangulation import _count_non_delaunay
 
-__all__ = ["PlateConfig", "SinkingPlate", "load_config", "run"]
+__all__ = ["PlateConfig", "SinkingPlate", "load_config", "run", "stored_config"]
 
 
 @dataclass
@@ -188,28 +188,65 @@ HELP = {
 
 def load_config(path: Optional[str] = None, overrides: Optional[Dict] = None) -> PlateConfig:
     """A validated :class:`PlateConfig` from a TOML file (optional) and
-    overrides; unknown keys raise ``ValueError`` naming the key."""
+    overrides. The file's keys stand at its top level or all under a
+    ``[sinking-plate]`` table. Unknown keys, values of the wrong type, NaN
+    and bad values raise ``ValueError`` naming the key (and the file)."""
     data: Dict = {}
     if path is not None:
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            import tomli as tomllib
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-        data = data.get("sinking-plate", data)
+        data = _read_toml(path)
     data.update({k: v for k, v in (overrides or {}).items() if v is not None})
+    return _config_from(data)
+
+
+def stored_config(out, overrides: Optional[Dict] = None) -> PlateConfig:
+    """The configuration of the run whose checkpoint is in ``out``, with
+    ``overrides`` applied and validated; ``FileNotFoundError`` without one."""
+    out = Path(out)
+    if not (out / "checkpoint.json").exists():
+        raise FileNotFoundError(f"no checkpoint in {out} (checkpoint.json missing)")
+    data = dict(json.loads((out / "checkpoint.json").read_text())["config"])
+    data.update(overrides or {})
+    return _config_from(data)
+
+
+def _read_toml(path) -> Dict:
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+    with open(path, "rb") as fh:
+        try:
+            data = tomllib.load(fh)
+        except tomllib.TOMLDecodeError as err:
+            raise ValueError(f"{path}: not valid TOML ({err})") from None
+    if "sinking-plate" in data:
+        table, rest = data["sinking-plate"], sorted(k for k in data if k != "sinking-plate")
+        if rest or not isinstance(table, dict):
+            raise ValueError(f"{path}: key {rest[0] if rest else 'sinking-plate'!r} stands "
+                             f"outside the [sinking-plate] table; put every parameter "
+                             f"under the table or all at the top level")
+        data = table
+    return data
+
+
+def _config_from(data: Dict) -> PlateConfig:
+    """Check names and types, coerce ints to floats where floats are meant
+    (and "inf"), then validate."""
     known = {f.name: f for f in fields(PlateConfig)}
-    for k in data:
-        if k not in known:
-            raise ValueError(f"unknown configuration key {k!r} (known: {', '.join(known)})")
     kw = {}
     for k, v in data.items():
+        if k not in known:
+            raise ValueError(f"unknown configuration key {k!r} (known: {', '.join(known)})")
         default = getattr(PlateConfig, k)
-        if isinstance(default, float) and isinstance(v, int) and not isinstance(v, bool):
-            v = float(v)
         if isinstance(default, float) and isinstance(v, str) and v.lower() in ("inf", "infinity"):
             v = math.inf
+        if isinstance(default, float) and isinstance(v, int) and not isinstance(v, bool):
+            v = float(v)
+        if type(v) is not type(default):
+            raise ValueError(f"{k} must be {type(default).__name__} (like {default!r}), got "
+                             f"{v!r}")
+        if isinstance(v, float) and math.isnan(v):
+            raise ValueError(f"{k} must be a number, got nan")
         kw[k] = v
     cfg = PlateConfig(**kw)
     cfg.validate()
@@ -474,11 +511,9 @@ class SinkingPlate:
         """Continue from the checkpoint in ``out`` (its configuration unless
         ``cfg`` is given)."""
         out = Path(out)
-        if not (out / "checkpoint.json").exists():
-            raise FileNotFoundError(f"no checkpoint in {out} (checkpoint.json missing)")
-        meta = json.loads((out / "checkpoint.json").read_text())
         if cfg is None:
-            cfg = PlateConfig(**meta["config"])  # json keeps inf as Infinity
+            cfg = stored_config(out)   # (json keeps inf as Infinity)
+        meta = json.loads((out / "checkpoint.json").read_text())
         lm = LagrangianMesh.load(out / "checkpoint.npz")
         return cls(cfg, out, _state=(lm, meta))
 

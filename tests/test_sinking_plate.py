@@ -82,7 +82,17 @@ def test_restart_continues_identically(tmp_path):
     assert np.array_equal(da["plate_depth"], dc["plate_depth"])
 
 
-def test_bad_configuration(tmp_path):
+def user_error(capsys, argv):
+    """Run the command line expecting a user error: exit status 2, one line."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("skfem-nem: "), err
+    return err
+
+
+def test_bad_configuration(tmp_path, capsys):
     with pytest.raises(ValueError, match="plate_x"):
         load_config(overrides={"plate_x": 0.3})
     with pytest.raises(ValueError, match="eta_lower"):
@@ -96,11 +106,46 @@ def test_bad_configuration(tmp_path):
     p.write_text("nodes = 800\nend_time = 50\n")
     cfg = load_config(str(p))
     assert cfg.nodes == 800 and cfg.end_time == 50.0
-    with pytest.raises(SystemExit, match="plate_z"):
-        main(["sinking-plate", "-o", str(tmp_path / "x"), "--plate-z", "0.99", "--quiet"])
+    # wrong types, NaN, keys beside the table, broken TOML: named, never a traceback
+    for text, word in (('plate_x = "middle"', "plate_x must be float"),
+                       ("plate_x = nan", "plate_x must be a number"),
+                       ("nodes = 1500.0", "nodes must be int"),
+                       ('remap = 3', "remap must be str"),
+                       ("nodes = 800\n[sinking-plate]\nseed = 1", "'nodes' stands outside"),
+                       ("nodes = = 3", "not valid TOML")):
+        p.write_text(text + "\n")
+        with pytest.raises(ValueError, match=word):
+            load_config(str(p))
+        assert word in user_error(capsys, ["sinking-plate", "--config", str(p), "-o",
+                                           str(tmp_path / "y"), "--quiet"])
+    assert "plate_z" in user_error(capsys, ["sinking-plate", "-o", str(tmp_path / "x"),
+                                            "--plate-z", "0.99", "--quiet"])
     assert not (tmp_path / "x").exists()   # rejected before anything runs
-    with pytest.raises(SystemExit, match="no checkpoint"):
-        main(["sinking-plate", "-o", str(tmp_path / "none"), "--restart", "--quiet"])
+    assert not (tmp_path / "y").exists()
+    assert "no checkpoint" in user_error(capsys, ["sinking-plate", "-o", str(tmp_path / "none"),
+                                                  "--restart", "--quiet"])
+
+
+def test_restart_keeps_the_stored_configuration(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["sinking-plate", "-o", str(out), "--nodes", "400", "--end-time", "3",
+                 "--max-dt", "3", "--output-interval", "3", "--eta-lower", "3",
+                 "--quiet"]) == 0
+    capsys.readouterr()
+    # the physics of the stored run cannot change on restart
+    err = user_error(capsys, ["sinking-plate", "-o", str(out), "--restart", "--eta-lower", "5",
+                              "--quiet"])
+    assert "--eta-lower cannot change" in err
+    assert "--config cannot be combined" in user_error(
+        capsys, ["sinking-plate", "-o", str(out), "--restart", "--config", "x.toml"])
+    # its end time can: the run continues with eta_lower = 3 and its own nodes
+    assert main(["sinking-plate", "-o", str(out), "--restart", "--end-time", "6",
+                 "--quiet"]) == 0
+    said = capsys.readouterr().out
+    assert "restart: end_time = 6 (was 3)" in said
+    cfg = json.loads((out / "checkpoint.json").read_text())["config"]
+    assert cfg["eta_lower"] == 3.0 and cfg["nodes"] == 400 and cfg["end_time"] == 6.0
+    assert SinkingPlate.restart(out).lm.time == pytest.approx(6.0)
 
 
 def test_command_line_short_run(tmp_path):

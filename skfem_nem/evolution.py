@@ -224,6 +224,26 @@ def _evaluate_velocity(velocity, x, on_wall=None):
     return v
 
 
+def _check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject):
+    """``ValueError`` (``TypeError`` for velocity) naming the first bad
+    argument of :meth:`LagrangianMesh.advance`, before anything moves."""
+    if not callable(velocity):
+        raise TypeError(f"velocity must be a callable x (n, 2) -> (n, 2), got "
+                        f"{type(velocity).__name__}")
+
+    def number(v):
+        return isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool)
+
+    for name, v in (("dt", dt), ("tol", tol)):
+        if not (number(v) and np.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be positive and finite, got {v!r}")
+    for name, v in (("maxiter", maxiter), ("max_substeps", max_substeps)):
+        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1):
+            raise ValueError(f"{name} must be a positive integer, got {v!r}")
+    if inject is not None and not (number(inject) and np.isfinite(inject) and inject > 1):
+        raise ValueError(f"inject must be None or a factor above 1, got {inject!r}")
+
+
 def _predictor_corrector(velocity, x0, dt, tol, maxiter, step):
     """Trapezoidal update x = x0 + dt/2 (v(x0) + v(x)), iterated from the Euler
     predictor until the largest change is below ``tol`` times the size of the
@@ -438,21 +458,29 @@ class LagrangianMesh:
             If given, inject nodes where a node's area has grown past
             ``inject`` times its initial area (see :meth:`inject_nodes`).
 
-        Returns the step's report (also appended to ``history``). On any error
-        the mesh is left exactly as it was before the step.
+        Returns the step's report (also appended to ``history``). The
+        arguments are checked before anything moves, and on any error (or
+        interruption) in any stage -- velocity, move, relocation, injection --
+        the mesh, its fields, clock and history are left exactly as they were.
         """
+        _check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject)
+        state = self._state()
+        try:
+            report = self._advance(velocity, dt, tol, maxiter, max_substeps, inject)
+        except BaseException:
+            self._restore(state)
+            raise
+        self.history.append(report)
+        return report
+
+    def _advance(self, velocity, dt, tol, maxiter, max_substeps, inject):
         x0 = self.nodes.copy()
         x, it, converged = _predictor_corrector(lambda y: self._velocity(velocity, y), x0, dt,
                                                 tol, maxiter, self.step + 1)
         if self.walls == "box":
             x = _keep_in_box(x, x0, self._on_wall, self._box)
-        state = self._state()
         self._touched = []
-        try:
-            flips, substeps, relocated = self._move(x0, x, max_substeps)
-        except BaseException:
-            self._restore(state)
-            raise
+        flips, substeps, relocated = self._move(x0, x, max_substeps)
         self._invalidate()
         report = {"step": self.step + 1, "time": self.time + dt, "dt": dt,
                   "iterations": it, "converged": converged, "substeps": substeps,
@@ -471,19 +499,29 @@ class LagrangianMesh:
         nb = self.triangulation.neighbours[changed].ravel()
         report["triangles_changed"] = int(changed.size)
         report["stencils_affected"] = int(np.union1d(changed, nb[nb >= 0]).size)
-        self.history.append(report)
         return report
 
     def _state(self):
+        """Everything a step may change, copied."""
         tri = self.triangulation
-        return (tri.nodes, tri.triangles.copy(), tri.neighbours.copy(),
-                {k: v.copy() for k, v in self.ip_fields.items()})
+        return {"nodes": tri.nodes, "triangles": tri.triangles.copy(),
+                "neighbours": tri.neighbours.copy(),
+                "ip_fields": {k: v.copy() for k, v in self.ip_fields.items()},
+                "node_fields": {k: v.copy() for k, v in self.node_fields.items()},
+                "on_wall": self._on_wall.copy(), "ref_area": self._ref_area.copy(),
+                "time": self.time, "step": self.step, "history": len(self.history)}
 
     def _restore(self, state):
         tri = self.triangulation
-        tri.nodes, tri.triangles, tri.neighbours = state[0], state[1].copy(), state[2].copy()
+        tri.nodes = state["nodes"]
+        tri.triangles, tri.neighbours = state["triangles"].copy(), state["neighbours"].copy()
         tri._changed()
-        self.ip_fields = {k: v.copy() for k, v in state[3].items()}
+        self.ip_fields = {k: v.copy() for k, v in state["ip_fields"].items()}
+        self.node_fields = {k: v.copy() for k, v in state["node_fields"].items()}
+        self._on_wall, self._ref_area = state["on_wall"].copy(), state["ref_area"].copy()
+        self.time, self.step = state["time"], state["step"]
+        del self.history[state["history"]:]
+        self._invalidate()
 
     def _set_positions(self, x):
         x = np.ascontiguousarray(x)
@@ -503,7 +541,7 @@ class LagrangianMesh:
         if not _inverted(self.nodes, self.triangles):
             return self.triangulation.make_delaunay(on_flips=self._on_flips), 1, 0
         self._set_positions(x0)
-        nsub = max(1, min(max_substeps, 8))
+        nsub = max_substeps
         flips = relocated = 0
         xa = x0
         for s in range(1, nsub + 1):

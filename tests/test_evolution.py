@@ -207,3 +207,93 @@ def test_predictor_corrector_warns_when_not_converged():
     assert not r["converged"]
     r = lm.advance(vortex, 0.02)
     assert r["converged"] and r["iterations"] < 10
+
+
+def saved_state(lm, path):
+    """The whole state as the checkpoint writes it (nodes, triangles,
+    neighbours, every field, reference areas, walls, clock, history)."""
+    lm.save(path)
+    with np.load(path) as z:
+        return {k: z[k].copy() for k in z.files}
+
+
+def assert_same_state(a, b):
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+def spread(x):
+    X, Y = x[:, 0], x[:, 1]
+    return -0.3 * np.c_[np.sin(2 * np.pi * X) * np.sin(np.pi * Y),
+                        np.sin(2 * np.pi * Y) * np.sin(np.pi * X)]
+
+
+def jitter(seed):
+    """A velocity that varies within elements (random, about 0.3 spacings per
+    unit time in the middle, vanishing at the walls): triangles invert."""
+    def v(x):
+        bump = 16 * x[:, 0] * (1 - x[:, 0]) * x[:, 1] * (1 - x[:, 1])
+        return 0.015 * bump[:, None] * np.random.default_rng(seed).standard_normal(x.shape)
+    return v
+
+
+@pytest.mark.parametrize("stage", ["velocity", "_move", "_relocate", "inject_nodes",
+                                   "min_angle"])
+def test_failed_step_leaves_the_whole_state_unchanged(stage, tmp_path, monkeypatch):
+    """Each stage of a step fails in turn, after doing its work: nodes,
+    triangles, fields, reference areas, clock and history come back exactly."""
+    p = box_nodes(300)
+    lm = LagrangianMesh(p, node_fields={"rho": 1 + p[:, 0]}, ip_fields={"s": np.arange(3.0)})
+    lm.advance(spread, 0.1, inject=1.5)
+    before = saved_state(lm, tmp_path / "before.npz")
+    history = [dict(h) for h in lm.history]
+    calls = {"n": 0}
+
+    def failing(original):
+        def f(*args, **kwargs):
+            out = original(*args, **kwargs)
+            calls["n"] += 1
+            raise RuntimeError(f"{stage} failed")
+        return f
+
+    velocity = jitter(1)
+    if stage == "velocity":
+        def velocity(x, v=jitter(1)):
+            calls["n"] += 1
+            if calls["n"] == 2:                  # the corrector, after the predictor
+                raise RuntimeError("velocity failed")
+            return v(x)
+    else:
+        monkeypatch.setattr(lm, stage, failing(getattr(lm, stage)))
+    with pytest.raises(RuntimeError, match=f"{stage} failed"):
+        lm.advance(velocity, 1.0, inject=1.2, max_substeps=4)
+    assert calls["n"] >= 1                        # the stage did run
+    assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
+    assert lm.history == history
+    monkeypatch.undo()
+    lm.advance(spread, 0.1, inject=1.5)          # and the mesh goes on
+    check_mesh(lm, lm.triangulation.npoints)
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"maxiter": 0}, "maxiter"), ({"max_substeps": 0}, "max_substeps"),
+    ({"inject": 1.0}, "inject"), ({"tol": -1.0}, "tol"), ({"dt": float("nan")}, "dt"),
+    ({"velocity": 3.0}, "velocity")])
+def test_step_arguments_checked_before_anything_moves(kw, match, tmp_path):
+    p = box_nodes(150)
+    lm = LagrangianMesh(p, ip_fields={"s": np.arange(3.0)})
+    calls = []
+    args = {"velocity": lambda x: calls.append(1) or vortex(x), "dt": 0.02, **kw}
+    before = saved_state(lm, tmp_path / "before.npz")
+    with pytest.raises((ValueError, TypeError), match=match):
+        lm.advance(**args)
+    assert not calls
+    assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
+
+
+def test_more_than_eight_substeps():
+    lm = LagrangianMesh(box_nodes(300))
+    r = lm.advance(jitter(2), 1.0, max_substeps=12)
+    assert r["substeps"] == 12
+    check_mesh(lm, lm.triangulation.npoints)

@@ -16,8 +16,11 @@ import numpy as np
 
 #: exit status of a user error (as argparse's own): one line on stderr, no traceback
 USER_ERROR = 2
-#: parameters a restarted run may change: when it ends and how often it writes
-RESTART_CHANGEABLE = ("end_time", "output_interval", "checkpoint_every")
+#: parameters a restarted run may change: when it ends, how often it writes,
+#: and how large its time steps may be (the physics and the node set stay)
+RESTART_CHANGEABLE = ("end_time", "output_interval", "checkpoint_every", "max_dt", "cfl")
+#: exit status of a run that stopped (its outputs and a checkpoint are kept)
+STOPPED = 1
 
 
 def _fail(message: str):
@@ -108,6 +111,16 @@ def sinking_plate(args) -> int:
         sim.checkpoint()
         print(f"interrupted at t = {sim.lm.time:g}; continue with --restart")
         return 130
+    except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError) as err:
+        # the mesh and fields are those of the last completed step: keep them
+        sim.checkpoint()
+        sim.figures()
+        reason = (str(err).splitlines() or [type(err).__name__])[0]
+        print(f"skfem-nem: sinking-plate stopped at t = {sim.lm.time:g} (step {sim.lm.step}): "
+              f"{reason}. Outputs and a checkpoint up to there are in {args.output}; try "
+              f"--restart with a smaller --max-dt or --cfl, or a new run with more --nodes",
+              file=sys.stderr)
+        return STOPPED
     for p in sim.figures():
         print("wrote", p)
     print("wrote", sim.out / "plate.pvd", "and", sim.out / "diagnostics.csv")
@@ -150,7 +163,7 @@ def _add_plate_parser(sub):
     sp.add_argument("--restart", action="store_true",
                     help="continue the run stored in the output folder from its last "
                     "checkpoint, with its own configuration (only --end-time, "
-                    "--output-interval and --checkpoint-every may change)")
+                    "--output-interval, --checkpoint-every, --max-dt and --cfl may change)")
     sp.add_argument("--max-steps", type=int, default=None,
                     help="stop after this many steps (a checkpoint is written)")
     sp.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -213,3 +213,32 @@ def test_step_retried_with_half_dt_and_fields_restored(tmp_path):
     sim.lm.advance = broken
     with pytest.raises(ValueError, match="non-finite"):
         sim.step(1.0)
+
+
+def test_stopped_run_keeps_its_outputs_and_says_why(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "run"
+    real = SinkingPlate._step
+    calls = {"n": 0}
+
+    def failing(self, dt):
+        calls["n"] += 1
+        if calls["n"] > 2:
+            raise RuntimeError("Schur CG did not converge in 5 iterations\nsecond line")
+        return real(self, dt)
+
+    monkeypatch.setattr(SinkingPlate, "_step", failing)
+    rc = main(["sinking-plate", "-o", str(out), "--nodes", "400", "--end-time", "12",
+               "--max-dt", "3", "--output-interval", "3", "--quiet"])
+    assert rc == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    stopped = SinkingPlate.restart(out).lm         # the checkpoint: the last completed step
+    assert stopped.step == 2
+    assert f"stopped at t = {stopped.time:g} (step 2): Schur CG did not converge" in err
+    assert "--restart" in err
+    assert (out / "fig6.png").exists() and (out / "diagnostics.png").exists()
+    monkeypatch.undo()
+    # the run continues from there, with a smaller time step allowed on restart
+    assert main(["sinking-plate", "-o", str(out), "--restart", "--max-dt", "2",
+                 "--quiet"]) == 0
+    assert SinkingPlate.restart(out).lm.time == pytest.approx(12.0)

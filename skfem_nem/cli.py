@@ -105,6 +105,9 @@ def sinking_plate(args) -> int:
         _fail(f"sinking-plate: {err}")
     print(f"sinking plate: {sim.lm.nodes.shape[0]} nodes, {sim.lm.triangles.shape[0]} "
           f"triangles, t = {sim.lm.time:g} -> {cfg.end_time:g}; output in {args.output}")
+    if not kernels_cached():
+        print("first run after installing: compiling the numerical kernels (about a minute, "
+              "once) before the first step", flush=True)
     try:
         sim.run(progress=not args.quiet, max_steps=args.max_steps)
     except KeyboardInterrupt:
@@ -125,6 +128,18 @@ def sinking_plate(args) -> int:
         print("wrote", p)
     print("wrote", sim.out / "plate.pvd", "and", sim.out / "diagnostics.csv")
     return 0
+
+
+def kernels_cached(folder=None) -> bool:
+    """Whether numba's on-disk cache holds the package's main kernels (the
+    coordinate queries and the smoothing), i.e. whether this is not the
+    first run after installing (``folder``: where the cache lives, by
+    default the package's ``__pycache__``)."""
+    from pathlib import Path
+    if folder is None:
+        folder = Path(__file__).resolve().parent / "__pycache__"
+    folder = Path(folder)
+    return all(any(folder.glob(f"{m}.*.nbi")) for m in ("coordinates", "smoothing"))
 
 
 def _restart_config(args, given, stored_config):

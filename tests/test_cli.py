@@ -44,3 +44,21 @@ def test_interpolate_errors(tmp_path, capsys):
         ["interpolate", str(tmp_path / "bad.csv"), str(tmp_path / "q.csv")])
     assert "cannot read nodes" in user_error(
         ["interpolate", str(tmp_path / "missing.csv"), str(tmp_path / "q.csv")])
+
+
+def test_first_run_notice(tmp_path, monkeypatch, capsys):
+    from skfem_nem import cli
+    assert not cli.kernels_cached(tmp_path)
+    (tmp_path / "coordinates._query_all-453.py311.nbi").write_text("")
+    assert not cli.kernels_cached(tmp_path)
+    (tmp_path / "smoothing._smoothed_rows-245.py311.nbi").write_text("")
+    assert cli.kernels_cached(tmp_path)
+    # the command says so before the first step when the cache is empty
+    monkeypatch.setattr(cli, "kernels_cached", lambda folder=None: False)
+    assert main(["sinking-plate", "-o", str(tmp_path / "run"), "--nodes", "300",
+                 "--end-time", "1", "--quiet"]) == 0
+    assert "compiling the numerical kernels" in capsys.readouterr().out
+    monkeypatch.setattr(cli, "kernels_cached", lambda folder=None: True)
+    assert main(["sinking-plate", "-o", str(tmp_path / "run2"), "--nodes", "300",
+                 "--end-time", "1", "--quiet"]) == 0
+    assert "compiling" not in capsys.readouterr().out

@@ -410,7 +410,8 @@ class LagrangianMesh:
         return float(np.degrees(out.min()))
 
     def ip_integral(self, name: str) -> np.ndarray:
-        """Integral over the domain of an integration-point field (3-point rule)."""
+        """Integral over the domain of an integration-point field (weights |T|/3:
+        the 3-point rule, and the areas of the smoothing cells)."""
         P, T = self.nodes, self.triangles
         a = 0.5 * np.abs(_cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
         return np.einsum("t,tk...->...", a / 3.0, self.ip_fields[name])

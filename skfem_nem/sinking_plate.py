@@ -14,8 +14,9 @@ proportional to the distance from the plate, so some Delaunay triangles are
 very elongated.
 
 Each step: a visco-elasto-plastic Stokes solve on natural-neighbour velocity
-(bubble-enriched, P1 pressure, 3-point rule so that the stress lives where
-the evolving mesh stores it), the plate's stress history rotated (Jaumann)
+(bubble-enriched, P1 pressure, gradients smoothed over three cells per
+triangle, whose points are where the evolving mesh stores the stress), the
+plate's stress history rotated (Jaumann)
 and updated by return mapping, nodes moved by the iterative
 predictor-corrector, the triangulation repaired by Lawson flips with the
 stress remapped on every flip, and nodes injected where the mesh thins. No

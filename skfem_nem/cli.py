@@ -121,7 +121,7 @@ def sinking_plate(args) -> int:
         reason = (str(err).splitlines() or [type(err).__name__])[0]
         print(f"skfem-nem: sinking-plate stopped at t = {sim.lm.time:g} (step {sim.lm.step}): "
               f"{reason}. Outputs and a checkpoint up to there are in {args.output}; try "
-              f"--restart with a smaller --max-dt or --cfl, or a new run with more --nodes",
+              f"a new run with more --nodes, or --restart with a smaller --max-dt or --cfl",
               file=sys.stderr)
         return STOPPED
     for p in sim.figures():

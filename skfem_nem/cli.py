@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 import numpy as np
 
@@ -21,6 +22,12 @@ USER_ERROR = 2
 RESTART_CHANGEABLE = ("end_time", "output_interval", "checkpoint_every", "max_dt", "cfl")
 #: exit status of a run that stopped (its outputs and a checkpoint are kept)
 STOPPED = 1
+
+
+def _one_line_warning(message, category, *args, **kwargs):
+    """Warnings of a run (a step retried with a smaller time step, ...) as
+    one line each on stderr, without the source line."""
+    print(f"skfem-nem: {category.__name__}: {message}", file=sys.stderr)
 
 
 def _fail(message: str):
@@ -109,7 +116,9 @@ def sinking_plate(args) -> int:
         print("first run after installing: compiling the numerical kernels (about a minute, "
               "once) before the first step", flush=True)
     try:
-        sim.run(progress=not args.quiet, max_steps=args.max_steps)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning
+            sim.run(progress=not args.quiet, max_steps=args.max_steps)
     except KeyboardInterrupt:
         sim.checkpoint()
         print(f"interrupted at t = {sim.lm.time:g}; continue with --restart")

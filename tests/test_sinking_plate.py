@@ -242,3 +242,19 @@ def test_stopped_run_keeps_its_outputs_and_says_why(tmp_path, capsys, monkeypatc
     assert main(["sinking-plate", "-o", str(out), "--restart", "--max-dt", "2",
                  "--quiet"]) == 0
     assert SinkingPlate.restart(out).lm.time == pytest.approx(12.0)
+
+
+def test_run_warnings_are_one_line_each(tmp_path, capsys, monkeypatch):
+    import warnings
+    real = SinkingPlate._step
+
+    def warning(self, dt):
+        warnings.warn(f"step at t = {self.lm.time:g}: a test warning", RuntimeWarning)
+        return real(self, dt)
+
+    monkeypatch.setattr(SinkingPlate, "_step", warning)
+    assert main(["sinking-plate", "-o", str(tmp_path / "w"), "--nodes", "300", "--end-time",
+                 "2", "--quiet"]) == 0
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert err and all(ln.startswith("skfem-nem: RuntimeWarning: step at t = ") for ln in err)
+    assert warnings.showwarning.__module__ == "warnings"      # restored after the run

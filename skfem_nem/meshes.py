@@ -16,7 +16,7 @@ from scipy.spatial import Delaunay
 from skfem import MeshTet, MeshTri
 
 from .lasserre import delaunay_of
-from .triangulation import Triangulation, _count_non_delaunay, validate_nodes
+from .triangulation import Triangulation, validate_nodes
 
 __all__ = ["adopt", "delaunay_mesh", "triangulation_of"]
 
@@ -112,7 +112,7 @@ def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
     p, t = mesh.p.T, mesh.t.T
     _check_used(p, t, "triangle")
     tri = Triangulation.from_triangles(p, t, make_delaunay=False)
-    bad = _count_non_delaunay(tri.nodes, tri.triangles, tri.neighbours)
+    bad = tri.non_delaunay_edges()
     if bad:
         raise ValueError(
             f"the mesh is not a Delaunay triangulation ({bad} edge(s) fail the in-circle "

@@ -46,7 +46,6 @@ from .nodesets import box_nodes, polyline_nodes
 from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
 from .rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
 from .stokes import outline_flux, stokes_spaces
-from .triangulation import _count_non_delaunay
 
 __all__ = ["PlateConfig", "SinkingPlate", "load_config", "run", "stored_config"]
 
@@ -444,8 +443,7 @@ class SinkingPlate:
                "plate_area": A, "fluid_area": c.width * c.height - A,
                "outline_crossings": _self_intersections(self.plate_polygon),
                "inverted_triangles": int(np.count_nonzero(lm.triangulation.orientation() <= 0)),
-               "non_delaunay_edges": int(_count_non_delaunay(lm.nodes, lm.triangles,
-                                                             lm.triangulation.neighbours)),
+               "non_delaunay_edges": lm.triangulation.non_delaunay_edges(),
                "max_plastic_strain": float(r.plastic_strain.max()),
                "yielded_points": int(r.yielded.sum()),
                "max_plate_stress": float(tauII[plate].max()) if plate.any() else 0.0,

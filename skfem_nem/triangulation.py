@@ -1037,7 +1037,11 @@ class Triangulation:
         triangles are strictly counter-clockwise."""
         if np.any(self.orientation() <= 0.0):
             return False
-        return _count_non_delaunay(self.nodes, self.triangles, self.neighbours) == 0
+        return self.non_delaunay_edges() == 0
+
+    def non_delaunay_edges(self) -> int:
+        """Number of interior edges that fail the exact in-circle test."""
+        return int(_count_non_delaunay(self.nodes, self.triangles, self.neighbours))
 
     def __repr__(self) -> str:
         return f"Triangulation({self.npoints} nodes, {self.ntriangles} triangles)"

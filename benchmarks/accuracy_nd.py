@@ -20,7 +20,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, Delaunay, Voronoi, cKDTree
 
 from skfem_nem import sibson_coordinates
-from skfem_nem.lasserre import sibson_coordinates_nd
+from skfem_nem.coordinates.lasserre import sibson_coordinates_nd
 
 SIZES = {2: 2000, 3: 1000, 4: 300}
 

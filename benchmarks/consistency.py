@@ -2,7 +2,7 @@
 
 Prints the tables of docs/verification.md (sections 1-3 and 6) for the
 default natural-neighbour basis (gradients smoothed over three cells per
-Delaunay triangle, :mod:`skfem_nem.smoothing`) next to Gauss quadrature of
+Delaunay triangle, :mod:`skfem_nem.basis.smoothing`) next to Gauss quadrature of
 the gradients with 3, 6 and 13 points per triangle and scikit-fem's P1 and P2
 on the same triangles:
 
@@ -46,9 +46,9 @@ from test_consistency import (_stokes_l2p as _l2p, _stokes_l2u as _l2u, cube_nod
 
 from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis,  # noqa: E402
                        delaunay_mesh)
-from skfem_nem.analytic import DoneaHuerta  # noqa: E402
-from skfem_nem.nodesets import box_nodes  # noqa: E402
-from skfem_nem.stokes import inf_sup_constant, solve_stokes, stokes_spaces  # noqa: E402
+from skfem_nem.models.analytic import DoneaHuerta  # noqa: E402
+from skfem_nem.geometry.nodesets import box_nodes  # noqa: E402
+from skfem_nem.models.stokes import inf_sup_constant, solve_stokes, stokes_spaces  # noqa: E402
 
 POISSON_METHODS = ("NEM", "NEM-3", "NEM-6", "NEM-13", "P1", "P2")
 

@@ -16,7 +16,7 @@ machine with other load the 2-thread figures suffer first (a thread that
 loses its core holds up the others at each synchronisation); take the best
 of several runs.
 
-The second table is the paper's Box 1 (:mod:`skfem_nem.lasserre`, through
+The second table is the paper's Box 1 (:mod:`skfem_nem.coordinates.lasserre`, through
 ``sibson_coordinates(..., method="lasserre")``) on 1 thread: in 2D (random
 nodes in the unit square) and in 3D (random nodes in the unit cube, queries
 uniform inside the Delaunay tetrahedra, 3 per node, sorted by buckets of the
@@ -58,7 +58,7 @@ def _region_driver():
     import numpy as np
     from numba import njit
 
-    from skfem_nem import lasserre as L
+    from skfem_nem.coordinates import lasserre as L
 
     @njit
     def run(P, S, NB, Q, start, ncap, ccap, tols, cached, CC, SH):
@@ -102,7 +102,7 @@ def run_nd(n: int, d: int, repeat: int) -> dict:
     import numpy as np
     from scipy.spatial import Delaunay, cKDTree
 
-    from skfem_nem import lasserre as L
+    from skfem_nem.coordinates import lasserre as L
     from skfem_nem import sibson_coordinates
 
     numba.set_num_threads(1)

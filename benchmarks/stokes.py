@@ -19,8 +19,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 from ex07_solcx import errors, nodes  # noqa: E402
 
 from skfem_nem import delaunay_mesh  # noqa: E402
-from skfem_nem.analytic import SolCx  # noqa: E402
-from skfem_nem.stokes import assemble_stokes, solve_stokes, stokes_spaces  # noqa: E402
+from skfem_nem.models.analytic import SolCx  # noqa: E402
+from skfem_nem.models.stokes import assemble_stokes, solve_stokes, stokes_spaces  # noqa: E402
 
 
 def main(argv=None):

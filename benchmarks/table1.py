@@ -21,7 +21,7 @@ exactly 2 n - 6 triangles) and for two problems:
 * ``laplace``: ``laplace`` with the scalar elements.
 
 The paper's "method 2" column (their Box 1: 2.1 / 2.1 / 2.22) is the same NEM
-basis with ``method="lasserre"`` (:mod:`skfem_nem.lasserre`: second-order
+basis with ``method="lasserre"`` (:mod:`skfem_nem.coordinates.lasserre`: second-order
 Voronoi volumes by Lasserre's recursion, on Qhull's triangulation, which is
 adopted once per mesh like the method 1 triangulation and not timed).
 
@@ -130,7 +130,7 @@ def run_child(meshfile: str, problem: str, method: str, min_time: float, budget:
     from skfem import MeshTri
 
     import skfem_nem
-    from skfem_nem.meshes import adopt as _adopt
+    from skfem_nem.geometry.meshes import adopt as _adopt
 
     if threads:
         import numba

@@ -15,7 +15,7 @@ and the problem is solved on it with
 
 * ``NEM``: Sibson natural-neighbour trial functions with gradients smoothed
   over three cells per Delaunay triangle (the default of
-  ``NaturalNeighbourBasis``: consistent integration, :mod:`skfem_nem.smoothing`);
+  ``NaturalNeighbourBasis``: consistent integration, :mod:`skfem_nem.basis.smoothing`);
 * ``NEM-3``: the same trial functions with the paper's 3-point Gauss rule per
   triangle (``npoints=3``);
 * ``NEM-13``: with the 13-point rule;

@@ -2,7 +2,7 @@
 
 The unit square, density ``sin(pi z) cos(pi x)``, viscosity 1 for x < 0.5
 and 1e6 beyond, free slip on all walls (Zhong 1996; Duretz et al. 2011).
-The analytic solution is :class:`skfem_nem.analytic.SolCx`. Random nodes,
+The analytic solution is :class:`skfem_nem.models.analytic.SolCx`. Random nodes,
 with a row of nodes on the interface x = 0.5; natural-neighbour velocity
 with stabilised P1 pressure and scikit-fem's Taylor-Hood (P2-P1) are solved
 on the same Delaunay triangles. Prints the L2 errors of velocity and
@@ -15,9 +15,9 @@ import numpy as np
 from skfem import Functional
 
 from skfem_nem import delaunay_mesh
-from skfem_nem.analytic import SolCx
-from skfem_nem.nodesets import box_nodes
-from skfem_nem.stokes import solve_stokes, stokes_spaces
+from skfem_nem.models.analytic import SolCx
+from skfem_nem.geometry.nodesets import box_nodes
+from skfem_nem.models.stokes import solve_stokes, stokes_spaces
 
 SIZES = (250, 1000, 4000, 16000)
 

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from skfem_nem import delaunay_mesh
-from skfem_nem.nodesets import box_nodes, polyline_nodes
-from skfem_nem.stokes import solve_stokes, stokes_spaces
+from skfem_nem.geometry.nodesets import box_nodes, polyline_nodes
+from skfem_nem.models.stokes import solve_stokes, stokes_spaces
 
 L = 512e3          # m
 G = 10.0           # m / s^2

@@ -10,7 +10,7 @@ Mises yield stress of 100 MPa the stress must flatten at the cap.
 
 The box [0, 1] m^2 with random nodes is driven by the prescribed boundary
 velocity (edot x, -edot y); each step is one full natural-neighbour Stokes
-solve (:func:`skfem_nem.rheology.vep_step`) with the stress history stored at
+solve (:func:`skfem_nem.models.rheology.vep_step`) with the stress history stored at
 the quadrature points. Time steps of 1 to 25 kyr measure the error against
 dt; the area-weighted mean deviatoric stress sigma_xx is compared with the
 analytic curve.
@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from skfem_nem import delaunay_mesh
-from skfem_nem.analytic import viscoelastic_buildup
-from skfem_nem.nodesets import box_nodes
-from skfem_nem.rheology import Material, deviator, prescribed_velocity, vep_step
-from skfem_nem.stokes import stokes_spaces
+from skfem_nem.models.analytic import viscoelastic_buildup
+from skfem_nem.geometry.nodesets import box_nodes
+from skfem_nem.models.rheology import Material, deviator, prescribed_velocity, vep_step
+from skfem_nem.models.stokes import stokes_spaces
 
 ETA, MU, EDOT, YIELD = 1e22, 1e10, 1e-14, 1e8
 KYR = 1e3 * 3.15576e7

@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 from skfem import MeshTri
 
-from skfem_nem.output import read_csv_columns
-from skfem_nem.rheology import vep_step
-from skfem_nem.sinking_plate import PlateConfig, SinkingPlate, node_spacing
-from skfem_nem.stokes import outline_flux, stokes_spaces
+from skfem_nem.apps.output import read_csv_columns
+from skfem_nem.models.rheology import vep_step
+from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate, node_spacing
+from skfem_nem.models.stokes import outline_flux, stokes_spaces
 
 
 def min_angle(P, T):

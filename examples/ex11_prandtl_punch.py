@@ -6,7 +6,7 @@ sigma0 / sqrt(3)), modelled as the box [-5, 5] x [-4, 0] with the punch on
 the top side, traction-free elsewhere on top, no slip on the other walls.
 The material is elastic-perfectly plastic (shear modulus ``mu``, von Mises
 yield, incompressible), loaded by pushing the punch in increments (one
-:func:`skfem_nem.rheology.vep_step` per increment: the incremental elastic
+:func:`skfem_nem.models.rheology.vep_step` per increment: the incremental elastic
 step with return mapping and Picard iterations); the load comes from the
 reaction forces of the prescribed punch velocity. The mean punch pressure
 rises elastically and levels off at the limit load; Prandtl's solution is
@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from skfem_nem import delaunay_mesh
-from skfem_nem.nodesets import box_nodes
-from skfem_nem.rheology import Material, vep_step
-from skfem_nem.stokes import stokes_spaces
+from skfem_nem.geometry.nodesets import box_nodes
+from skfem_nem.models.rheology import Material, vep_step
+from skfem_nem.models.stokes import stokes_spaces
 
 K = 1.0          # shear yield stress
 V = 1.0          # punch velocity

@@ -19,8 +19,8 @@ from skfem import BilinearForm, condense, solve
 from skfem.helpers import dot, grad
 
 from skfem_nem import NaturalNeighbourBasis, delaunay_mesh
-from skfem_nem.nodesets import box_nodes
-from skfem_nem.smoothing import cells_2d
+from skfem_nem.geometry.nodesets import box_nodes
+from skfem_nem.basis.smoothing import cells_2d
 
 nodes = box_nodes(300, seed=2)
 mesh = delaunay_mesh(nodes)

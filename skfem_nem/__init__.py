@@ -1,19 +1,22 @@
 """skfem-nem: the Natural Element Method (Braun & Sambridge, Nature 1995) for scikit-fem.
 
-Layers (bottom to top): geometry (:mod:`~skfem_nem.predicates`,
-:mod:`~skfem_nem.triangulation`), coordinates (:mod:`~skfem_nem.coordinates`),
-basis (:mod:`~skfem_nem.meshes`: Delaunay meshes checked and adopted;
-:mod:`~skfem_nem.smoothing`: consistent integration; :mod:`~skfem_nem.basis`: NEM trial
-functions inside scikit-fem's assembly).
+Layers as sub-packages, bottom to top; a lower layer never imports a higher one:
+
+- :mod:`skfem_nem.geometry`: exact predicates, the Delaunay triangulation, meshes, node sets;
+- :mod:`skfem_nem.coordinates`: Sibson and Laplace coordinates (2D area method, n-D recursion);
+- :mod:`skfem_nem.basis`: NEM trial functions inside scikit-fem's assembly, consistent
+  integration by gradient smoothing;
+- :mod:`skfem_nem.evolution`: the Lagrangian evolving mesh;
+- :mod:`skfem_nem.models`: Stokes flow, visco-elasto-plastic rheology, analytic solutions;
+- :mod:`skfem_nem.apps`: the sinking plate, the command line, output writers.
+
+This module only re-exports the public names.
 """
-from ._assembly import restore_scikit_fem_assembly
 from .basis import (ElementNaturalNeighbour, ElementTetNaturalNeighbour, NaturalNeighbourBasis,
-                    NaturalNeighbourFacetBasis)
+                    NaturalNeighbourFacetBasis, restore_scikit_fem_assembly)
 from .coordinates import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
-from .evolution import LagrangianMesh
-from .evolution3d import LagrangianMesh3D
-from .meshes import delaunay_mesh
-from .triangulation import Triangulation
+from .evolution import LagrangianMesh, LagrangianMesh3D
+from .geometry import Triangulation, delaunay_mesh
 
 __version__ = "0.1.0"
 

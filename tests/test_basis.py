@@ -9,7 +9,7 @@ from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
                        delaunay_mesh, sibson_coordinates)
-from skfem_nem.nodesets import box_nodes
+from skfem_nem.geometry.nodesets import box_nodes
 
 
 def square_nodes(n=300, nb=12, seed=0):
@@ -256,7 +256,7 @@ def test_bad_meshes_and_elements():
     # flip one interior edge: still a valid mesh, no longer Delaunay
     from skfem_nem import Triangulation
     tri = Triangulation(p)
-    from skfem_nem.triangulation import _flip
+    from skfem_nem.geometry.triangulation import _flip
     T, N = tri.triangles.copy(), tri.neighbours.copy()
     t, k = np.argwhere(N >= 0)[0]
     _flip(T, N, t, k)
@@ -298,7 +298,7 @@ def test_p2_on_same_mesh_for_comparison(mesh):
 
 def test_stacked_assembly_equals_pairwise(mesh, basis, vbasis, monkeypatch):
     """The stacked assembly (few form calls) gives scikit-fem's per-pair result."""
-    import skfem_nem._assembly as assembly
+    import skfem_nem.basis.assembly as assembly
 
     @BilinearForm
     def weighted(u, v, w):
@@ -333,7 +333,8 @@ def test_probed_assembly_equals_stacked_pairs():
     from skfem.helpers import ddot, div, dot, grad, sym_grad
     from skfem.models.elasticity import lame_parameters, linear_elasticity
 
-    from skfem_nem import ElementNaturalNeighbour, NaturalNeighbourBasis, _assembly, delaunay_mesh
+    from skfem_nem import ElementNaturalNeighbour, NaturalNeighbourBasis, delaunay_mesh
+    from skfem_nem.basis import assembly as _assembly
     rng = np.random.default_rng(3)
     mesh = delaunay_mesh(np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], rng.random((300, 2))])
     sb = NaturalNeighbourBasis(mesh)
@@ -372,7 +373,8 @@ def test_whole_mesh_assembly_equals_pairwise(monkeypatch):
     from skfem.models.elasticity import lame_parameters, linear_elasticity
 
     from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis,
-                           NaturalNeighbourFacetBasis, _assembly, delaunay_mesh)
+                           NaturalNeighbourFacetBasis, delaunay_mesh)
+    from skfem_nem.basis import assembly as _assembly
     rng = np.random.default_rng(5)
     mesh = delaunay_mesh(np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], rng.random((250, 2))])
     vec = ElementVector(ElementNaturalNeighbour())
@@ -439,7 +441,7 @@ def test_constant_coefficients_only_for_forms_that_never_touch_w():
     provably ignores ``w``; any use of ``w`` (here through ``copy``, ``get``,
     ``len``, ``in`` and iteration, which a read-watcher could miss) gives the
     per-element probe, and the same matrix as reading ``w["eta"]`` directly."""
-    from skfem_nem import _assembly
+    from skfem_nem.basis import assembly as _assembly
     mesh = delaunay_mesh(box_nodes(120, seed=4))
     b = NaturalNeighbourBasis(mesh)
     eta = np.repeat(1.0 + np.arange(mesh.nelements)[:, None] % 3, b.dx.shape[1], axis=1)
@@ -483,7 +485,7 @@ def test_scikit_fem_assembly_untouched_by_import_and_by_the_hook():
 
     mesh_nn = delaunay_mesh(box_nodes(40, seed=1))
     NaturalNeighbourBasis(mesh_nn)
-    assert BF._assemble.__module__ == "skfem_nem._assembly"
+    assert BF._assemble.__module__ == "skfem_nem.basis.assembly"
     on = plain()
     try:
         assert restore_scikit_fem_assembly() is True and restore_scikit_fem_assembly() is False
@@ -491,7 +493,7 @@ def test_scikit_fem_assembly_untouched_by_import_and_by_the_hook():
         off = plain()
     finally:
         NaturalNeighbourBasis(mesh_nn)          # installs it again (other tests need it)
-    assert BF._assemble.__module__ == "skfem_nem._assembly"
+    assert BF._assemble.__module__ == "skfem_nem.basis.assembly"
     for a, b in zip(on, off):
         if hasattr(a, "tocsr"):
             a, b = a.tocsr(), b.tocsr()

@@ -3,7 +3,7 @@ import re
 import numpy as np
 import pytest
 
-from skfem_nem.cli import main
+from skfem_nem.apps.cli import main
 
 
 def test_interpolate_csv(tmp_path):
@@ -47,7 +47,7 @@ def test_interpolate_errors(tmp_path, capsys):
 
 
 def test_first_run_notice(tmp_path, monkeypatch, capsys):
-    from skfem_nem import cli
+    from skfem_nem.apps import cli as cli
     assert not cli.kernels_cached(tmp_path)
     (tmp_path / "coordinates._query_all-453.py311.nbi").write_text("")
     assert not cli.kernels_cached(tmp_path)

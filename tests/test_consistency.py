@@ -13,9 +13,9 @@ from skfem.models.elasticity import lame_parameters, linear_elasticity
 from conftest import load_example
 from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis,
                        NaturalNeighbourFacetBasis, delaunay_mesh)
-from skfem_nem.analytic import DoneaHuerta
-from skfem_nem.nodesets import box_nodes
-from skfem_nem.stokes import solve_stokes, stokes_spaces
+from skfem_nem.models.analytic import DoneaHuerta
+from skfem_nem.geometry.nodesets import box_nodes
+from skfem_nem.models.stokes import solve_stokes, stokes_spaces
 
 #: patch-test bound on the largest nodal error relative to the largest value
 PATCH_TOL = 1e-10

@@ -433,7 +433,7 @@ def test_output_arrays_grow_past_the_first_estimate():
 def test_filtered_incircle_agrees_with_exact():
     """The cached-circumcircle filter decides exactly as the exact predicate."""
     from numba import njit
-    from skfem_nem.triangulation import _in_cavity, _in_circumcircle
+    from skfem_nem.geometry.triangulation import _in_cavity, _in_circumcircle
 
     @njit
     def both(P, T, CC, tris, Q, out):
@@ -469,7 +469,7 @@ def test_filtered_incircle_agrees_with_exact():
 def test_fallback_cavity_search_agrees():
     # the general cavity search (used for overflow and for triangulations
     # that are not Delaunay) gives the traversal's results
-    from skfem_nem import coordinates as C
+    from skfem_nem.coordinates import area2d as C
     p, tri, _ = grid_triangulations()
     tri2 = Triangulation(random_nodes(200, seed=37))
     for t in (tri, tri2):
@@ -492,7 +492,7 @@ def test_non_delaunay_triangulation_terminates():
     # flip convex interior edges at random: the cavities of the result need
     # not be trees; the coordinates must still come back (values are only
     # meaningful on Delaunay triangulations)
-    from skfem_nem.triangulation import _edge_violates, _flip
+    from skfem_nem.geometry.triangulation import _edge_violates, _flip
     p = random_nodes(200, seed=39)
     tri = Triangulation(p)
     T, N = tri.triangles.copy(), tri.neighbours.copy()

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from scipy.spatial import Delaunay
 
 from skfem_nem import Triangulation, natural_neighbour_coordinates, sibson_coordinates
-from skfem_nem.lasserre import sibson_coordinates_nd
+from skfem_nem.coordinates.lasserre import sibson_coordinates_nd
 
 
 def _dense(M):

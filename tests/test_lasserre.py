@@ -1,4 +1,4 @@
-"""Sibson coordinates in 2-4 dimensions by Lasserre's volume recursion (skfem_nem.lasserre)."""
+"""Sibson coordinates in 2-4 dimensions by Lasserre's volume recursion (skfem_nem.coordinates.lasserre)."""
 import itertools
 
 import numpy as np
@@ -8,7 +8,7 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, Delaunay, HalfspaceIntersection, Voronoi
 
 from skfem_nem import Triangulation, sibson_coordinates
-from skfem_nem.lasserre import sibson_coordinates_nd
+from skfem_nem.coordinates.lasserre import sibson_coordinates_nd
 
 
 def dense(A):
@@ -402,7 +402,7 @@ def test_3d_faces_from_combinatorics_match_the_recursion(monkeypatch):
     counts as ill-shaped) the general recursion must give the same values,
     gradients and sparsity pattern to round-off -- inside, on Delaunay faces
     and edges, near nodes and near the hull."""
-    from skfem_nem import lasserre as L
+    from skfem_nem.coordinates import lasserre as L
 
     p = cube_nodes(400, 3, seed=28)
     tri = Delaunay(p)

@@ -3,7 +3,7 @@ defining properties in 3D and 4D."""
 import numpy as np
 
 from skfem_nem import sibson_coordinates
-from skfem_nem.lasserre import sibson_coordinates_nd
+from skfem_nem.coordinates.lasserre import sibson_coordinates_nd
 
 
 def test_2d_agrees_with_area_method():

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from skfem_nem import predicates as P
-from skfem_nem.predicates import (
+from skfem_nem.geometry import predicates as P
+from skfem_nem.geometry.predicates import (
     INCIRCLE_REL_ERROR,
     ORIENT2D_REL_ERROR,
     incircle,

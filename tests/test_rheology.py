@@ -3,13 +3,13 @@ import numpy as np
 import pytest
 
 from skfem_nem import delaunay_mesh
-from skfem_nem.analytic import SolCx, viscoelastic_buildup
-from skfem_nem.nodesets import box_nodes
-from skfem_nem.rheology import (Material, combine_materials, deviator, from_ip_field, maxwell_coefficients,
+from skfem_nem.models.analytic import SolCx, viscoelastic_buildup
+from skfem_nem.geometry.nodesets import box_nodes
+from skfem_nem.models.rheology import (Material, combine_materials, deviator, from_ip_field, maxwell_coefficients,
                                 prescribed_velocity, return_map, rotate_stress, second_invariant,
                                 solve_stokes_bc, to_ip_field, velocity_gradient, vep_step,
                                 vep_update)
-from skfem_nem.stokes import solve_stokes, stokes_spaces
+from skfem_nem.models.stokes import solve_stokes, stokes_spaces
 
 KYR = 1e3 * 3.15576e7
 ETA, MU, EDOT = 1e22, 1e10, 1e-14

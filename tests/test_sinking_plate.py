@@ -5,9 +5,9 @@ import meshio
 import numpy as np
 import pytest
 
-from skfem_nem.cli import main
-from skfem_nem.output import read_csv_columns
-from skfem_nem.sinking_plate import PlateConfig, SinkingPlate, load_config
+from skfem_nem.apps.cli import main
+from skfem_nem.apps.output import read_csv_columns
+from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate, load_config
 
 SMALL = dict(nodes=500, end_time=24.0, max_dt=4.0, output_interval=8.0, checkpoint_every=2)
 

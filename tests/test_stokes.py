@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from skfem_nem import delaunay_mesh
-from skfem_nem.analytic import SolCx
-from skfem_nem.nodesets import box_nodes
-from skfem_nem.stokes import inf_sup_constant, solve_stokes, stokes_spaces
+from skfem_nem.models.analytic import SolCx
+from skfem_nem.geometry.nodesets import box_nodes
+from skfem_nem.models.stokes import inf_sup_constant, solve_stokes, stokes_spaces
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 import ex07_solcx  # noqa: E402
@@ -157,8 +157,8 @@ def test_outline_flux_constraint_keeps_region_area():
     """A dense square sinking in a box: the nodal-velocity flux through its
     outline is not zero on its own (discrete divergence is only weakly zero),
     and exactly zero with the constraint, at almost the same sinking speed."""
-    from skfem_nem.nodesets import polyline_nodes
-    from skfem_nem.stokes import outline_flux
+    from skfem_nem.geometry.nodesets import polyline_nodes
+    from skfem_nem.models.stokes import outline_flux
     sq = [[0.35, 0.45], [0.65, 0.45], [0.65, 0.75], [0.35, 0.75]]
     line = polyline_nodes(sq, 0.03, closed=True)
     pts = box_nodes(800, lines=[np.r_[line, line[:1]]], seed=4)

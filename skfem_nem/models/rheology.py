@@ -37,7 +37,7 @@ strain. The yield stress is therefore the shear yield stress ``k``; a von
 Mises tensile yield stress ``sigma0`` corresponds to ``k = sigma0 / sqrt(3)``.
 
 Prescribed non-zero wall velocities (pure shear, a punch) are handled here by
-:func:`solve_stokes_bc`, which reuses :func:`skfem_nem.stokes.assemble_stokes`
+:func:`solve_stokes_bc`, which reuses :func:`skfem_nem.models.stokes.assemble_stokes`
 and solves the saddle-point system directly with the prescribed values lifted
 to the right side; it also returns the reaction forces on the prescribed
 dofs, and fixes the pressure mean only where the walls confine the flow.
@@ -352,19 +352,19 @@ def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
                     no_slip: Union[str, Sequence[str], None] = None,
                     pressure_mean: Optional[bool] = None, solver: str = "schur",
                     tol: float = 1e-10, constraints=None) -> StokesSolution:
-    """Stokes solve with prescribed velocities: :func:`skfem_nem.stokes.solve_stokes`
+    """Stokes solve with prescribed velocities: :func:`skfem_nem.models.stokes.solve_stokes`
     with ``prescribed`` (kept for its reaction forces and defaults).
 
     Parameters
     ----------
     eta, f, tau0
         Viscosity (Pa s), body force (N m^-3) and known stress (Pa), see
-        :func:`skfem_nem.stokes.assemble_stokes`.
+        :func:`skfem_nem.models.stokes.assemble_stokes`.
     prescribed
         ``(dofs, values)`` from :func:`prescribed_velocity` (m/s); they
         override the zero wall conditions on the same dofs.
     free_slip, no_slip
-        Zero wall conditions (see :func:`skfem_nem.stokes.wall_dofs`).
+        Zero wall conditions (see :func:`skfem_nem.models.stokes.wall_dofs`).
     pressure_mean
         Fix the pressure by its mean (zero). Default: only if every boundary
         node has a constrained velocity component (no free surface).
@@ -454,7 +454,7 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     Parameters
     ----------
     spaces
-        From :func:`skfem_nem.stokes.stokes_spaces`.
+        From :func:`skfem_nem.models.stokes.stokes_spaces`.
     material
         The :class:`Material` (per-element or per-point arrays allowed).
     tau_old
@@ -487,7 +487,7 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         clipped to ``[min_viscosity, eta_ve]``. Default ``eta_ve``.
     constraints
         Extra linear constraints on the velocity, passed to
-        :func:`skfem_nem.stokes.solve_stokes` (e.g. zero net flux through a
+        :func:`skfem_nem.models.stokes.solve_stokes` (e.g. zero net flux through a
         material outline).
 
     Raises

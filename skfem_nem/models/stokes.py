@@ -88,7 +88,7 @@ from skfem.element import ElementH1, ElementTriP0, ElementTriP1, ElementTriP2, E
 from skfem.refdom import RefTri
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
-from .basis import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
+from ..basis.natural_neighbour import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
 
 __all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes", "outline_flux",
            "boundary_flux",
@@ -185,7 +185,7 @@ def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: Optional[int] = N
     npoints
         Gauss points per triangle (1, 3, 4, 6, 7, 12, 13). Natural-neighbour
         velocities: ``None`` (default) integrates them consistently by
-        gradient smoothing (:mod:`skfem_nem.smoothing`; 3 points per
+        gradient smoothing (:mod:`skfem_nem.basis.smoothing`; 3 points per
         triangle, one per smoothing cell); a number asks for Gauss quadrature
         of their gradients with that rule. Taylor-Hood: default 6, which
         integrates its forms exactly.

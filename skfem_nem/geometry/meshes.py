@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial import Delaunay
 from skfem import MeshTet, MeshTri
 
-from .lasserre import delaunay_of
+from .delaunay_nd import delaunay_of
 from .triangulation import Triangulation, validate_nodes
 
 __all__ = ["adopt", "delaunay_mesh", "triangulation_of"]

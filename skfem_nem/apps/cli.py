@@ -69,7 +69,7 @@ def _numeric(line: str) -> bool:
 
 
 def interpolate(args) -> int:
-    from .coordinates import natural_neighbour_coordinates
+    from ..coordinates.area2d import natural_neighbour_coordinates
 
     nodes = _read_csv(args.nodes, 3, "nodes")
     queries = _read_csv(args.queries, 2, "queries")[:, :2]
@@ -201,7 +201,7 @@ def _add_plate_parser(sub):
 
 
 def main(argv=None) -> int:
-    from . import __version__
+    from .. import __version__
 
     ap = argparse.ArgumentParser(prog="skfem-nem", description="The Natural Element Method "
                                  "(Braun & Sambridge 1995) for scikit-fem.")

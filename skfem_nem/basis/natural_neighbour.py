@@ -6,9 +6,9 @@ coordinates and their gradients at the quadrature points of a Delaunay
 ``BilinearForm``, ``LinearForm`` and ``Functional`` exactly like a
 ``CellBasis`` does for P1.
 
-In 2D the coordinates come from the area method (:mod:`skfem_nem.coordinates`,
+In 2D the coordinates come from the area method (:mod:`skfem_nem.coordinates.area2d`,
 the default) or from the paper's Box 1 (``method="lasserre"``,
-:mod:`skfem_nem.lasserre`); on tetrahedra always from Box 1, with scikit-fem's
+:mod:`skfem_nem.coordinates.lasserre`); on tetrahedra always from Box 1, with scikit-fem's
 tetrahedral quadrature and the Delaunay tetrahedra of Qhull.
 
 Stencils
@@ -20,7 +20,7 @@ tails above 30 near the hull), while a scikit-fem basis has one number of
 local functions for all its elements. The basis therefore splits the
 triangles into groups of equal stencil size; each group is an ordinary
 basis with a fixed ``Nbfun``, and assembly sums the groups' contributions
-(see :mod:`skfem_nem._assembly`). Cost scales with the sum over triangles of
+(see :mod:`skfem_nem.basis.assembly`). Cost scales with the sum over triangles of
 the stencil size squared, not with the largest stencil.
 """
 from __future__ import annotations
@@ -36,10 +36,10 @@ from skfem.element import DiscreteField, Element, ElementTetP1, ElementTriP1, El
 from skfem.quadrature import get_quadrature
 from skfem.refdom import RefTet, RefTri
 
-from . import _assembly
-from ._assembly import stencil_position
-from .coordinates import natural_neighbour_coordinates
-from .meshes import adopt, delaunay_mesh
+from . import assembly
+from .assembly import stencil_position
+from ..coordinates.area2d import natural_neighbour_coordinates
+from ..geometry.meshes import adopt, delaunay_mesh
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
 __all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeighbourBasis",
@@ -50,7 +50,7 @@ __all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeig
 #: number of quadrature points -> scikit-fem integration order on triangles
 QUADRATURE_POINTS = {3: 2, 4: 3, 6: 4, 7: 5, 12: 6, 13: 7}
 #: integration schemes: gradients smoothed over cells (consistent, the
-#: default; :mod:`skfem_nem.smoothing`) or Gauss quadrature of the gradients
+#: default; :mod:`skfem_nem.basis.smoothing`) or Gauss quadrature of the gradients
 INTEGRATIONS = ("smoothed", "gauss")
 
 
@@ -276,7 +276,7 @@ def _take(f, idx):
     return f
 
 
-class _NaturalNeighbourBasisBase(AbstractBasis, _assembly.StencilBasis):
+class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
     """Shared machinery of the cell and facet bases: stencils and groups."""
 
     coordinates: str
@@ -307,7 +307,7 @@ class _NaturalNeighbourBasisBase(AbstractBasis, _assembly.StencilBasis):
     def _build_smoothed(self, x, elems, cell_of):
         """Values at the (dim, ne, nq) points x (in the elements ``elems``)
         and smoothed gradients over the cells ``cell_of`` (ne * nq,) of the
-        cells of ``np.unique(elems)`` (:mod:`skfem_nem.smoothing`)."""
+        cells of ``np.unique(elems)`` (:mod:`skfem_nem.basis.smoothing`)."""
         dim, ne, nq = x.shape
         pts = x.transpose(1, 2, 0).reshape(-1, dim)
         mesh = self.mesh
@@ -326,8 +326,8 @@ class _NaturalNeighbourBasisBase(AbstractBasis, _assembly.StencilBasis):
     def _set_functions(self, Phi, G, ne, nq):
         """Values (CSR, one row per quadrature point) and gradients (dim, nnz)
         on their pattern; the stencils follow. Forms on the basis are
-        assembled from these from now on (:mod:`skfem_nem._assembly`)."""
-        _assembly.install()
+        assembled from these from now on (:mod:`skfem_nem.basis.assembly`)."""
+        assembly.install()
         self._Phi, self._grads = Phi, G
         self._D = [type(Phi)((G[k], Phi.indices, Phi.indptr), shape=Phi.shape)
                    for k in range(G.shape[0])]
@@ -498,7 +498,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     integration
         ``"smoothed"`` (the default when no Gauss rule is given): gradients
         smoothed over cells, the boundary integral of each function times the
-        normal over the cell's area (:mod:`skfem_nem.smoothing`). Three cells
+        normal over the cell's area (:mod:`skfem_nem.basis.smoothing`). Three cells
         per triangle (one at each vertex, one integration point each: the
         3-point rule's points, weights |T|/3) or one per tetrahedron (4
         points). Consistent: the linear patch test passes to round-off and
@@ -707,7 +707,7 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
 
     def _cells_of(self, x, tind):
         """The smoothing cell of each facet point (dim, nf, nq), numbered as
-        :func:`~skfem_nem.smoothing.cells_2d` numbers the cells of
+        :func:`~skfem_nem.basis.smoothing.cells_2d` numbers the cells of
         ``np.unique(tind)``: in 2D the cell of the triangle's vertex nearest to
         the point (the facet's half it lies on), in 3D the tetrahedron."""
         elems, j = np.unique(tind, return_inverse=True)

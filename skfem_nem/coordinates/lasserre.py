@@ -3,7 +3,7 @@
 This is the paper's "method 2": natural-neighbour (Sibson) coordinates from the
 volumes of second-order Voronoi cells, each a convex polytope ``{y : A y <= b}``
 whose volume is computed with Lasserre's recursive formula. The 2D area method
-is :mod:`skfem_nem.coordinates`; this module works in any of d = 2, 3, 4.
+is :mod:`skfem_nem.coordinates.area2d`; this module works in any of d = 2, 3, 4.
 
 Natural neighbours
     The Delaunay triangulation comes from :class:`scipy.spatial.Delaunay`
@@ -130,7 +130,7 @@ Gradients
     half-spaces there, and at good angles to it). Then
     ``grad phi_i = (grad V_i - phi_i sum_j grad V_j) / V``, with the
     dominant neighbour's gradient from complement sums (as in
-    :mod:`skfem_nem.coordinates`).
+    :mod:`skfem_nem.coordinates.area2d`).
 
 Special points
     At a node: the Kronecker delta (gradients undefined). On the convex hull
@@ -169,12 +169,12 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
-from scipy.spatial import Delaunay, QhullError, cKDTree
+from scipy.spatial import cKDTree
 
-from ._batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, UNBOUNDED, check_queries,
+from .batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, UNBOUNDED, check_queries,
                      compress, index_dtype, raise_outside, raise_undefined)
-from ._numba import serial_twin
-from .triangulation import validate_nodes
+from .._numba import serial_twin
+from ..geometry.delaunay_nd import check_delaunay, check_nodes, delaunay_of, triangulate
 
 __all__ = ["sibson_coordinates_nd"]
 
@@ -1729,50 +1729,6 @@ _PARALLEL_MIN = 2000
 # Python orchestration
 # ---------------------------------------------------------------------------
 
-def _check_nodes(nodes):
-    shape = np.shape(nodes)
-    if len(shape) != 2 or shape[1] not in (2, 3, 4):
-        raise ValueError(f"nodes must have shape (n, d) with d = 2, 3 or 4, got {shape}")
-    return validate_nodes(nodes, dim=shape[1])
-
-
-def _triangulate(p):
-    d = p.shape[1]
-    try:
-        tri = Delaunay(p)
-    except QhullError as err:
-        rank = np.linalg.matrix_rank(p[1:] - p[0])
-        if rank < d:
-            raise ValueError(
-                f"the {p.shape[0]} nodes are degenerate: they span only {rank} of "
-                f"{d} dimensions (flat node set), so no {d}D triangulation exists") from None
-        raise ValueError(f"Qhull failed to triangulate the nodes: {err}") from None
-    return tri
-
-
-def _check_delaunay(tri, p):
-    if not isinstance(tri, Delaunay):
-        raise ValueError(f"delaunay must be a scipy.spatial.Delaunay, got {type(tri).__name__}")
-    if tri.points.shape != p.shape or not np.array_equal(tri.points, p):
-        raise ValueError("delaunay was built on other points than nodes")
-    used = np.zeros(p.shape[0], dtype=bool)
-    used[tri.simplices.ravel()] = True
-    if not used.all():
-        i = int(np.flatnonzero(~used)[0])
-        raise ValueError(
-            f"node {i} at {p[i].tolist()} is not a vertex of any Delaunay simplex "
-            f"({np.count_nonzero(~used)} such node(s); Qhull drops nodes that nearly "
-            f"coincide with others)")
-
-
-def delaunay_of(p) -> Delaunay:
-    """Qhull's Delaunay triangulation of the checked (n, d) nodes p, with every
-    node a vertex (``ValueError`` naming the node otherwise)."""
-    tri = _triangulate(p)
-    _check_delaunay(tri, p)
-    return tri
-
-
 def _circumcentre_cache(P, S, m):
     """``(cached, CC, SH)`` for the kernels: the circumcentres and shape
     measures of all simplices (:func:`_circumcentres`) when m queries will
@@ -1890,7 +1846,7 @@ def _on_hull(p, tri, Q, facets):
             lam = np.clip(np.c_[1.0 - lam.sum(1), lam], 0.0, None)
             H = sp.csr_matrix(lam / lam.sum(1, keepdims=True))
         else:
-            ftri = _triangulate(pn)
+            ftri = triangulate(pn)
             H, status, info = _coordinates(pn, xn, False, ftri, "nan", 2, hull_status=True)
             edge = np.flatnonzero(status == ON_HULL)
             if edge.size:
@@ -1948,7 +1904,7 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
     of the points q; see :func:`sibson_coordinates_nd`."""
     d = p.shape[1]
     if tri is None:
-        tri = _triangulate(p)
+        tri = triangulate(p)
     m, n = q.shape[0], p.shape[0]
     S = np.ascontiguousarray(tri.simplices, dtype=np.int64)
     NB = np.ascontiguousarray(tri.neighbors, dtype=np.int64)
@@ -2070,12 +2026,12 @@ def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
     ``_raw=True`` (for tests) returns the second-order volumes ``V_i`` and
     their gradients instead, for points inside the hull and off the nodes.
     """
-    p = _check_nodes(nodes)
+    p = check_nodes(nodes)
     if undefined not in ("raise", "nan"):
         raise ValueError(f"undefined must be 'raise' or 'nan', got {undefined!r}")
     q = check_queries(x, p.shape[1])
     if delaunay is not None:
-        _check_delaunay(delaunay, p)
+        check_delaunay(delaunay, p)
         tri = delaunay
     else:
         tri = delaunay_of(p)

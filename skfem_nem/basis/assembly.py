@@ -35,7 +35,7 @@ from skfem.assembly.form import BilinearForm, LinearForm
 from skfem.assembly.form.form import FormExtraParams
 from skfem.element import DiscreteField, ElementVector
 
-from ._numba import serial_twin
+from .._numba import serial_twin
 
 _INSTALLED = False
 #: element-pairs evaluated per form call in the stacked assembly

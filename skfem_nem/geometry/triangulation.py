@@ -4,7 +4,7 @@ The :class:`Triangulation` holds counter-clockwise triangles and their
 edge-adjacency, and offers the local operations the natural element method is
 built on: point location by walking, the conflict (Bowyer--Watson) cavity of a
 point, Lawson edge flips and a Delaunay check.  All geometric decisions go
-through the exact predicates of :mod:`skfem_nem.predicates`, so structured grids
+through the exact predicates of :mod:`skfem_nem.geometry.predicates`, so structured grids
 (every quad co-circular), collinear runs on the hull and slivers are handled
 consistently.
 
@@ -861,7 +861,7 @@ class Triangulation:
         """(nt, 2) circumcentre of each triangle minus its first vertex.
 
         Stored relative to the vertex (computed with the accurate
-        :func:`~skfem_nem.predicates.orient2d`) so that the circumcentre
+        :func:`~skfem_nem.geometry.predicates.orient2d`) so that the circumcentre
         relative to a nearby point x is ``(nodes[T[t, 0]] - x) + offset``
         without cancellation, however far the nodes are from the origin.
         (A view of the first two columns of :attr:`circumcircles`.)

@@ -40,12 +40,12 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from .evolution import LagrangianMesh
-from .coordinates import sibson_coordinates
-from .nodesets import box_nodes, polyline_nodes
+from ..evolution.lagrangian import LagrangianMesh
+from ..coordinates.area2d import sibson_coordinates
+from ..geometry.nodesets import box_nodes, polyline_nodes
 from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
-from .rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
-from .stokes import outline_flux, stokes_spaces
+from ..models.rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
+from ..models.stokes import outline_flux, stokes_spaces
 
 __all__ = ["PlateConfig", "SinkingPlate", "load_config", "run", "stored_config"]
 
@@ -365,7 +365,7 @@ class SinkingPlate:
         return _polygon_area_centroid(self.plate_polygon)
 
     def materials(self, spaces, polygon: Optional[np.ndarray] = None):
-        """Per-point :class:`~skfem_nem.rheology.Material`, body force
+        """Per-point :class:`~skfem_nem.models.rheology.Material`, body force
         (2, ne, nq) and plate mask (ne, nq) at the quadrature points of
         ``spaces`` (plate: inside ``polygon``, default the current outline)."""
         c = self.cfg

@@ -1,7 +1,7 @@
 """Plumbing shared by the coordinate kernels of every dimension.
 
-The 2D area method (:mod:`skfem_nem.coordinates`) and the n-D Lasserre
-method (:mod:`skfem_nem.lasserre`) both check query points the same way,
+The 2D area method (:mod:`skfem_nem.coordinates.area2d`) and the n-D Lasserre
+method (:mod:`skfem_nem.coordinates.lasserre`) both check query points the same way,
 turn the rows their numba kernels write into one CSR sparsity pattern shared
 by values and gradients (the Lasserre kernel's padded rows through
 :func:`compress`, the area kernel's flat rows through :class:`RowStore`), and

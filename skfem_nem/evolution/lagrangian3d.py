@@ -25,9 +25,9 @@ from typing import Callable, Dict, Optional
 
 import numpy as np
 
-from .basis import NaturalNeighbourBasis
-from .evolution import _check_node_fields, _evaluate_velocity, _keep_in_box, _predictor_corrector
-from .meshes import delaunay_mesh
+from ..basis.natural_neighbour import NaturalNeighbourBasis
+from .lagrangian import _check_node_fields, _evaluate_velocity, _keep_in_box, _predictor_corrector
+from ..geometry.meshes import delaunay_mesh
 
 __all__ = ["LagrangianMesh3D"]
 

@@ -38,9 +38,9 @@ from typing import Callable, Dict, Optional
 import numpy as np
 from numba import njit
 
-from .coordinates import sibson_coordinates
-from .predicates import incircle, orient2d
-from .triangulation import Triangulation, _insert
+from ..coordinates.area2d import sibson_coordinates
+from ..geometry.predicates import incircle, orient2d
+from ..geometry.triangulation import Triangulation, _insert
 
 __all__ = ["LagrangianMesh"]
 
@@ -374,7 +374,7 @@ class LagrangianMesh:
         integration-point fields' slots: point k of triangle t near its
         vertex k. ``integration="smoothed"`` (default): gradients smoothed
         over the vertex cells of the triangles; ``"gauss"``: the 3-point rule."""
-        from .basis import NaturalNeighbourBasis
+        from ..basis.natural_neighbour import NaturalNeighbourBasis
         key = ("basis", None if elem is None else repr(elem), integration)
         if key not in self._cache:
             rule = {"quadrature": (_X3, _W3)} if integration == "gauss" else {}

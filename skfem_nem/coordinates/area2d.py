@@ -1,7 +1,7 @@
 """Sibson and Laplace natural-neighbour coordinates in 2D, with exact gradients.
 
 (The public functions also take 3D and 4D nodes, and ``method="lasserre"`` in
-2D: those go to the paper's Box 1 method, :mod:`skfem_nem.lasserre`.)
+2D: those go to the paper's Box 1 method, :mod:`skfem_nem.coordinates.lasserre`.)
 
 For a query point x inside the convex hull of the nodes, the natural
 neighbours of x are the vertices of the Delaunay triangles whose circumcircle
@@ -29,7 +29,7 @@ Robustness
     Every quantity is computed in coordinates relative to x, and the
     denominators (twice the signed areas of the triangles (x, p_i, p_{i+1})
     and of the cavity triangles) come from the adaptive exact predicate
-    :func:`skfem_nem.predicates.orient2d`, accurate to a few ulps however flat
+    :func:`skfem_nem.geometry.predicates.orient2d`, accurate to a few ulps however flat
     the triangle. Nothing divides by a quantity that vanishes on an interior
     Delaunay edge, so values and gradients are exact there; co-circular nodes
     (structured grids) give the same result whichever diagonal the
@@ -65,11 +65,11 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import Delaunay
 
-from ._batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, RowStore, check_queries,
+from .batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, RowStore, check_queries,
                      index_dtype, raise_outside, raise_undefined)
 from .lasserre import sibson_coordinates_nd
-from .predicates import orient2d
-from .triangulation import (Triangulation, _cavity_boundary, _conflict_cycle, _grow_cavity,
+from ..geometry.predicates import orient2d
+from ..geometry.triangulation import (Triangulation, _cavity_boundary, _conflict_cycle, _grow_cavity,
                             _locate)
 
 __all__ = ["sibson_coordinates", "laplace_coordinates", "natural_neighbour_coordinates"]
@@ -608,11 +608,11 @@ def natural_neighbour_coordinates(
         diagonal of the nodes' bounding box are round-off: they are moved onto
         the nearest hull edge. Farther points are an error. (Area method; the
         Lasserre method has its own relative tolerance, see
-        :mod:`skfem_nem.lasserre`.)
+        :mod:`skfem_nem.coordinates.lasserre`.)
     method
         ``"area"``: the 2D area method of this module (the paper's method 1;
         the default in 2D). ``"lasserre"``: volumes of second-order Voronoi
-        cells by Lasserre's recursion, :func:`skfem_nem.lasserre.sibson_coordinates_nd`
+        cells by Lasserre's recursion, :func:`skfem_nem.coordinates.lasserre.sibson_coordinates_nd`
         (the paper's Box 1, method 2; the default and only method in 3D and
         4D; Sibson coordinates only, no ``hint`` or ``return_triangles``).
 

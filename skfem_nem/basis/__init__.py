@@ -1,0 +1,11 @@
+"""Natural-neighbour trial functions inside scikit-fem's assembly.
+
+The elements and bases, the gradient-smoothing cells of the consistent default integration, and
+the assembly hook that lets scikit-fem's forms assemble natural-neighbour stencils.
+"""
+from .assembly import restore_scikit_fem_assembly
+from .natural_neighbour import (ElementNaturalNeighbour, ElementTetNaturalNeighbour,
+                                NaturalNeighbourBasis, NaturalNeighbourFacetBasis, gauss_rule)
+
+__all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeighbourBasis",
+           "NaturalNeighbourFacetBasis", "gauss_rule", "restore_scikit_fem_assembly"]

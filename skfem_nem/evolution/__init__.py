@@ -1,0 +1,8 @@
+"""The Lagrangian evolving mesh: nodes move with the flow, flips repair the triangulation.
+
+Integration-point fields are remapped on flips and nodes are injected where the mesh thins.
+"""
+from .lagrangian import LagrangianMesh
+from .lagrangian3d import LagrangianMesh3D
+
+__all__ = ["LagrangianMesh", "LagrangianMesh3D"]

@@ -58,7 +58,7 @@ def _region_driver():
     import numpy as np
     from numba import njit
 
-    from skfem_nem.coordinates import lasserre as L
+    from skfem_nem.geometry.simplices_nd import conflict_region
 
     @njit
     def run(P, S, NB, Q, start, ncap, ccap, tols, cached, CC, SH):
@@ -86,7 +86,7 @@ def _region_driver():
         og = np.empty((ncap, d))
         total = 0
         for r in range(Q.shape[0]):
-            st, info, ncav, K, nbf, deg = L._region(
+            st, info, ncav, K, nbf, deg = conflict_region(
                 P, S, NB, ctr, Q[r], start[r], d, r + 1, tols[2], tols[3], tols[4], tols[6],
                 cached, CC, SH, smark, mark, cav, cst, live, bf, nn, Tc, zc, zq, E, Mn, rhs,
                 lam, oi, ov, og)
@@ -102,8 +102,9 @@ def run_nd(n: int, d: int, repeat: int) -> dict:
     import numpy as np
     from scipy.spatial import Delaunay, cKDTree
 
-    from skfem_nem.coordinates import lasserre as L
     from skfem_nem import sibson_coordinates
+    from skfem_nem.coordinates import lasserre as L
+    from skfem_nem.geometry.simplices_nd import FLAT, circumcentre_cache
 
     numba.set_num_threads(1)
     rng = np.random.default_rng(0)
@@ -141,10 +142,10 @@ def run_nd(n: int, d: int, repeat: int) -> dict:
         out["stage_start"] = best_of(lambda: tri.vertex_to_simplex[cKDTree(p).query(q)[1]])
         start = np.ascontiguousarray(tri.vertex_to_simplex[cKDTree(p).query(q)[1]],
                                      dtype=np.int64)
-        out["stage_cache"] = best_of(lambda: L._circumcentre_cache(p, S, m))
-        cache = L._circumcentre_cache(p, S, m)
+        out["stage_cache"] = best_of(lambda: circumcentre_cache(p, S, m))
+        cache = circumcentre_cache(p, S, m)
         ncap, ccap, _ = L._CAPS[d]
-        tols = np.array([L._ZERO_ROW, L._TIE, L._INSPHERE, L._FLAT, L._HULL, L._LINEAR,
+        tols = np.array([L._ZERO_ROW, L._TIE, L._INSPHERE, FLAT, L._HULL, L._LINEAR,
                          L._WALK, L._VERTEX, L._SHAPE, L._LINEAR3, L._GRAD3, L._NEAR3])
         drv = _region_driver()
         drv(p, S, NB, q[:100], start[:100], ncap, ccap, tols, *cache)

@@ -256,10 +256,10 @@ def test_bad_meshes_and_elements():
     # flip one interior edge: still a valid mesh, no longer Delaunay
     from skfem_nem import Triangulation
     tri = Triangulation(p)
-    from skfem_nem.geometry.triangulation import _flip
+    from skfem_nem.geometry.delaunay2d import flip_edge
     T, N = tri.triangles.copy(), tri.neighbours.copy()
     t, k = np.argwhere(N >= 0)[0]
-    _flip(T, N, t, k)
+    flip_edge(T, N, t, k)
     bad = MeshTri(p.T, T.T)
     with pytest.raises(ValueError, match="delaunay_mesh"):
         NaturalNeighbourBasis(bad)

@@ -177,7 +177,7 @@ def test_facet_basis_on_boundary_triangles(mesh, basis):
     flux = Functional(lambda w: dot(w["u"].grad, w.n) * w.x[0]).assemble(fb, u=u)
     assert abs(flux - g[0]) < 1e-7      # divergence theorem: int g.n x dS = g_x
     # on the hull the values reduce to the facet's nodes
-    F = fb._Phi.tocoo()
+    F = fb.values_matrix.tocoo()
     bnodes = np.unique(mesh.facets[:, mesh.boundary_facets()])
     assert np.isin(F.col[np.abs(F.data) > 1e-14], bnodes).all()
     # a Neumann load assembles with the facet basis
@@ -204,9 +204,9 @@ def test_tet_coordinates_match_the_public_function(mesh, basis):
     x = np.asarray(basis.global_coordinates()).reshape(3, -1).T
     Phi, D = sibson_coordinates(mesh.p.T, x, gradient=True)
     # values at the points, on the (wider) pattern of the smoothed gradients
-    assert abs(Phi - basis._Phi).max() < 1e-14
+    assert abs(Phi - basis.values_matrix).max() < 1e-14
     gauss = NaturalNeighbourBasis(mesh, intorder=2)
-    assert abs(Phi - gauss._Phi).max() < 1e-14
+    assert abs(Phi - gauss.values_matrix).max() < 1e-14
     assert max(abs(a - b).max() for a, b in zip(D, gauss._D)) < 1e-10
 
 

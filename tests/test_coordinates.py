@@ -433,13 +433,13 @@ def test_output_arrays_grow_past_the_first_estimate():
 def test_filtered_incircle_agrees_with_exact():
     """The cached-circumcircle filter decides exactly as the exact predicate."""
     from numba import njit
-    from skfem_nem.geometry.triangulation import _in_cavity, _in_circumcircle
+    from skfem_nem.geometry.delaunay2d import in_cavity, in_circumcircle
 
     @njit
     def both(P, T, CC, tris, Q, out):
         for i in range(tris.shape[0]):
-            out[i, 0] = _in_circumcircle(P, T, CC, tris[i], Q[i, 0], Q[i, 1])
-            out[i, 1] = _in_cavity(P, T, tris[i], Q[i, 0], Q[i, 1])
+            out[i, 0] = in_circumcircle(P, T, CC, tris[i], Q[i, 0], Q[i, 1])
+            out[i, 1] = in_cavity(P, T, tris[i], Q[i, 0], Q[i, 1])
 
     rng = np.random.default_rng(34)
     g = np.stack(np.meshgrid(np.arange(7.0), np.arange(7.0)), -1).reshape(-1, 2)
@@ -492,7 +492,7 @@ def test_non_delaunay_triangulation_terminates():
     # flip convex interior edges at random: the cavities of the result need
     # not be trees; the coordinates must still come back (values are only
     # meaningful on Delaunay triangulations)
-    from skfem_nem.geometry.triangulation import _edge_violates, _flip
+    from skfem_nem.geometry.delaunay2d import edge_violates, flip_edge
     p = random_nodes(200, seed=39)
     tri = Triangulation(p)
     T, N = tri.triangles.copy(), tri.neighbours.copy()
@@ -507,8 +507,8 @@ def test_non_delaunay_triangulation_terminates():
             d = [T[u, j] for j in range(3) if N[u, j] == t][0]
             o1 = (p[b, 0] - p[a, 0]) * (p[d, 1] - p[a, 1]) - (p[b, 1] - p[a, 1]) * (p[d, 0] - p[a, 0])
             o2 = (p[d, 0] - p[a, 0]) * (p[c, 1] - p[a, 1]) - (p[d, 1] - p[a, 1]) * (p[c, 0] - p[a, 0])
-            if o1 > 1e-9 and o2 > 1e-9 and not _edge_violates(p, T, N, t, k):
-                _flip(T, N, t, k)
+            if o1 > 1e-9 and o2 > 1e-9 and not edge_violates(p, T, N, t, k):
+                flip_edge(T, N, t, k)
                 flips += 1
                 break
     bad = Triangulation.from_triangles(p, T, make_delaunay=False)

@@ -93,6 +93,11 @@ def test_bad_input_leaves_the_mesh_unchanged():
         m.advance(lambda x: np.tile([0.0, 0.0, 5.0], (x.shape[0], 1)), 1.0)
     with pytest.raises(ValueError, match="dt must be positive"):
         m.advance(vortex, -1.0)
+    with pytest.raises(ValueError, match="maxiter must be a positive integer"):
+        m.advance(vortex, 0.01, maxiter=0)
+    with pytest.raises(TypeError, match="velocity must be a callable"):
+        m.advance(np.zeros((p.shape[0], 3)), 0.01)
+    assert m.step == 0 and np.array_equal(m.mesh.t, t0)
     with pytest.raises(ValueError, match="node field 'c'"):
         LagrangianMesh3D(p, {"c": np.ones(3)})
     # a flow that collapses two nodes onto each other is refused, naming them

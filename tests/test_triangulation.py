@@ -172,3 +172,103 @@ def test_clusters_of_nearly_coincident_nodes(scale):
     used = np.zeros(p.shape[0], bool)
     used[tri.triangles.ravel()] = True
     assert used.all()
+
+
+# -- the mutation API (what the evolving mesh uses) ------------------------------
+
+def _interior(tri):
+    hull = np.unique(tri.hull_edges)
+    return np.setdiff1d(np.arange(tri.npoints), hull)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(8, 60), st.booleans())
+def test_remove_and_reinsert_vertex(seed, n, grid):
+    """Removing an interior node refills its star with Delaunay triangles (the moves
+    keep per-triangle data aligned); re-inserting it gives a Delaunay triangulation
+    with the same edges as before (unique up to co-circular ties)."""
+    rng = np.random.default_rng(seed)
+    if grid:
+        k = int(np.sqrt(n)) + 2
+        x, y = np.meshgrid(np.linspace(0, 1, k), np.linspace(0, 1, k))
+        p = np.c_[x.ravel(), y.ravel()]
+    else:
+        p = np.r_[rng.random((n, 2)), [[-1, -1], [2, -1], [2, 2], [-1, 2]]]
+    tri = Triangulation(p)
+    v = int(rng.choice(_interior(tri)))
+    before, nt = edge_set(tri.triangles), tri.ntriangles
+    label = np.arange(nt)  # data stored per triangle, follows the moves
+    star = tri.star(v)
+    slots, moves = tri.remove_vertex(v)
+    for src, dst in moves:
+        label[dst] = label[src]
+    label = label[:tri.ntriangles]
+    assert tri.ntriangles == label.size == nt - 2
+    assert not (tri.triangles == v).any()
+    assert slots.size == star.size - 2
+    # triangles not in the star kept their data
+    untouched = np.setdiff1d(np.arange(tri.ntriangles), slots)
+    assert np.isin(label[untouched], star, invert=True).all()
+    check_valid_without(tri, v)
+    cav, new = tri.reinsert_vertex(v)
+    assert new.size == 2
+    check_valid(tri)
+    if not grid:  # random nodes: the Delaunay triangulation is unique
+        assert edge_set(tri.triangles) == before
+
+
+def check_valid_without(tri, v):
+    """A valid Delaunay triangulation of all nodes but v."""
+    T, N = tri.triangles, tri.neighbours
+    for t, k in zip(*np.nonzero(N >= 0)):
+        u = N[t, k]
+        assert t in N[u] and {T[t, (k + 1) % 3], T[t, (k + 2) % 3]} <= set(T[u])
+    assert (tri.orientation() > 0).all()
+    assert tri.non_delaunay_edges() == 0
+    used = np.zeros(tri.npoints, bool)
+    used[tri.triangles.ravel()] = True
+    assert used.sum() == tri.npoints - 1 and not used[v]
+
+
+def test_star_of_hull_node_raises():
+    tri = Triangulation(np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0.4, 0.5]]))
+    with pytest.raises(ValueError, match="node 0 is on the hull"):
+        tri.star(0)
+    assert tri.star(4).size == 4
+
+
+def test_move_snapshot_restore_split():
+    rng = np.random.default_rng(3)
+    tri = Triangulation(rng.random((40, 2)))
+    snap = tri.snapshot()
+    with pytest.raises(ValueError, match=r"moved nodes must have shape \(40, 2\)"):
+        tri.move_nodes(np.zeros((39, 2)))
+    x = tri.nodes @ np.array([[1.0, 0.0], [0.8, 1.0]])  # a shear: no triangle inverts
+    tri.move_nodes(x)
+    assert np.array_equal(tri.nodes, x) and not tri.nodes.flags.writeable
+    assert (tri.orientation() > 0).all() and not tri.is_delaunay()
+    assert tri.make_delaunay() > 0
+    t = int(np.argmax(tri.orientation()))
+    i = tri.split_triangle(t, tri.nodes[tri.triangles[t]].mean(axis=0))
+    assert i == 40 and tri.ntriangles == snap["triangles"].shape[0] + 2
+    assert (tri.orientation() > 0).all()
+    tri.make_delaunay()
+    check_valid(tri)
+    tri.restore(snap)
+    assert tri.nodes is snap["nodes"]
+    assert np.array_equal(tri.triangles, snap["triangles"])
+    assert np.array_equal(tri.neighbours, snap["neighbours"])
+    assert tri.triangles is not snap["triangles"]  # the snapshot stays reusable
+    check_valid(tri)
+
+
+def test_from_arrays_checks_shapes():
+    tri = Triangulation(np.random.default_rng(0).random((20, 2)))
+    copy = Triangulation.from_arrays(tri.nodes, tri.triangles, tri.neighbours)
+    assert np.array_equal(copy.triangles, tri.triangles) and copy.is_delaunay()
+    with pytest.raises(ValueError, match="inconsistent shapes"):
+        Triangulation.from_arrays(tri.nodes, tri.triangles, tri.neighbours[:-1])
+    bad = tri.triangles.copy()
+    bad[0, 0] = 99
+    with pytest.raises(ValueError, match="out of range"):
+        Triangulation.from_arrays(tri.nodes, bad, tri.neighbours)

@@ -69,7 +69,7 @@ def _numeric(line: str) -> bool:
 
 
 def interpolate(args) -> int:
-    from ..coordinates.area2d import natural_neighbour_coordinates
+    from ..coordinates import natural_neighbour_coordinates
 
     nodes = _read_csv(args.nodes, 3, "nodes")
     queries = _read_csv(args.queries, 2, "queries")[:, :2]

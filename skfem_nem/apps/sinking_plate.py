@@ -41,7 +41,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from ..evolution.lagrangian import LagrangianMesh
-from ..coordinates.area2d import sibson_coordinates
+from ..coordinates import sibson_coordinates
 from ..geometry.nodesets import box_nodes, polyline_nodes
 from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
 from ..models.rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
@@ -395,8 +395,7 @@ class SinkingPlate:
             except ValueError as err:
                 # the evolving mesh leaves itself unchanged on errors; restore
                 # the integration-point fields that the solve had updated
-                self.lm.ip_fields = {k: v.copy() for k, v in saved.items()}
-                self.lm._invalidate()
+                self.lm.replace_ip_fields(saved)
                 if attempt == retries or "reduce dt" not in str(err):
                     raise
                 import warnings

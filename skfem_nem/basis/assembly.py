@@ -35,7 +35,7 @@ from skfem.assembly.form import BilinearForm, LinearForm
 from skfem.assembly.form.form import FormExtraParams
 from skfem.element import DiscreteField, ElementVector
 
-from .._numba import serial_twin
+from ..jit import serial_twin
 
 _INSTALLED = False
 #: element-pairs evaluated per form call in the stacked assembly
@@ -52,6 +52,11 @@ class StencilBasis:
     """Marks bases whose local functions differ from element to element
     (natural-neighbour stencils): forms on them are assembled here; forms on
     any other basis take scikit-fem's own code, untouched."""
+
+
+class StencilGroup:
+    """Marks the per-stencil-size group bases of a natural-neighbour basis; they hold
+    ``stencil_values = (V, G)`` and ``stacked(idx)`` for the stacked assembly."""
 
 
 def _is_nn(basis) -> bool:
@@ -78,7 +83,7 @@ def _split_kwargs(kwargs, idx, nelems):
 def _partner(basis, nn, idx, key):
     """``basis`` restricted to the elements ``idx`` of the NEM basis ``nn``."""
     if _is_nn(basis):
-        return basis._restricted(idx, key)
+        return basis.restricted(idx, key)
     if isinstance(basis, CellBasis):
         if basis.tind is not None or basis.nelems != nn.nelems:
             raise ValueError("a CellBasis mixed with a natural-neighbour basis must live "
@@ -106,7 +111,7 @@ def _pairs(ubasis, vbasis):
         bounds = np.flatnonzero(np.diff(key[order])) + 1
         for idx in np.split(order, bounds):
             k = int(key[idx[0]])
-            yield idx, ubasis._restricted(idx, ("pair", k)), vbasis._restricted(idx, ("pair", k))
+            yield idx, ubasis.restricted(idx, ("pair", k)), vbasis.restricted(idx, ("pair", k))
         return
     for g in nn.groups:
         idx = g.tind
@@ -136,13 +141,13 @@ def _tile_array(x, reps):
 
 
 def _stackable(b):
-    return hasattr(b, "stacked") and hasattr(b, "_raw")
+    return isinstance(b, StencilGroup)
 
 
 def _probes(g, ne, nq):
     """Unit fields, one per scalar component of (value, gradient) of the
     element of group basis g: (D, 1 + dim) of them for a D-vector element."""
-    dim = g._raw[1].shape[0]
+    dim = g.stencil_values[1].shape[0]
     vec = isinstance(g.elem, ElementVector)
     D = g.elem.dim if vec else 1
     out = []
@@ -164,7 +169,7 @@ def _probe_pays(u, v) -> bool:
     data each; stacking all pairs costs about one call per 65k element-pairs.
     Probe when the saved pair evaluations outweigh the extra calls (small
     groups are cheaper stacked: their cost is call overhead)."""
-    dim = u._raw[1].shape[0]
+    dim = u.stencil_values[1].shape[0]
     P = (u.elem.dim if isinstance(u.elem, ElementVector) else 1) * (1 + dim)
     Q = (v.elem.dim if isinstance(v.elem, ElementVector) else 1) * (1 + dim)
     pairs = u.Nbfun * v.Nbfun
@@ -187,8 +192,8 @@ def _probed_bilinear(form, u, v, kwargs):
         for b, Vb in enumerate(pv):
             C[a, b] = form.form(*Ua, *Vb, w)
     C *= u.dx
-    Pu = np.concatenate([u._raw[0][None], u._raw[1]])   # (1 + dim, S_u, ne, nq)
-    Pv = np.concatenate([v._raw[0][None], v._raw[1]])
+    Pu = np.concatenate([u.stencil_values[0][None], u.stencil_values[1]])   # (1 + dim, S_u, ne, nq)
+    Pv = np.concatenate([v.stencil_values[0][None], v.stencil_values[1]])
     C = C.reshape(Du, 1 + dim, Dv, 1 + dim, ne, nq)
     K = np.einsum("dlckeq,lteq,kseq->sctde", C, Pu, Pv, optimize=True)
     Su, Sv = Pu.shape[1], Pv.shape[1]
@@ -612,7 +617,7 @@ def _whole_bilinear(form, u, v, kwargs):
     Dv, _ = _components(v)
     P, Q = Du * (1 + dim), Dv * (1 + dim)
     pa, pb = (x.ravel() for x in np.meshgrid(np.arange(P), np.arange(Q), indexing="ij"))
-    Phi, G = u._Phi, u._grads
+    Phi, G = u.values_matrix, u.gradient_entries
     ptr, sten = u.stencil_ptr, u.stencil_nodes
     nq = u.dx.shape[1]
     S = np.diff(ptr)
@@ -671,7 +676,7 @@ def _whole_linear(form, v, kwargs):
         return None
     Dv, dim = _components(v)
     pb = np.arange(Dv * (1 + dim))
-    Phi, G = v._Phi, v._grads
+    Phi, G = v.values_matrix, v.gradient_entries
     ptr, sten = v.stencil_ptr, v.stencil_nodes
     nq = v.dx.shape[1]
     off = np.zeros(ptr.shape[0], dtype=np.int64)

@@ -38,7 +38,7 @@ from skfem.refdom import RefTet, RefTri
 
 from . import assembly
 from .assembly import stencil_position
-from ..coordinates.area2d import natural_neighbour_coordinates
+from ..coordinates import natural_neighbour_coordinates
 from ..geometry.meshes import adopt, delaunay_mesh
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
@@ -195,7 +195,7 @@ def _fill(elems, ptr, sten, indptr, indices, data, grads, nq, V, G):
                     G[c, lo, k, q] = grads[c][kk]
 
 
-class _GroupBasis(AbstractBasis):
+class _GroupBasis(AbstractBasis, assembly.StencilGroup):
     """The triangles of one stencil size: an ordinary basis with fixed Nbfun.
 
     Built by :class:`NaturalNeighbourBasis`; users never see it, scikit-fem's
@@ -232,12 +232,12 @@ class _GroupBasis(AbstractBasis):
             basis = [(DiscreteField(V[j], G[:, j]),) for j in range(S)]
         self.basis = basis
         self.Nbfun = len(basis)
-        self._raw = (V, G)  # for the stacked assembly in _assembly
+        self.stencil_values = (V, G)  # (V, G) arrays for the stacked assembly
 
     def stacked(self, idx):
         """Local functions ``idx`` (P,) stacked along the element axis: a
         one-tuple of DiscreteField over P * nelems elements (pair-major)."""
-        V, G = self._raw
+        V, G = self.stencil_values
         nq = V.shape[2]
         if isinstance(self.elem, ElementVector):
             dim = self.elem.dim
@@ -328,7 +328,9 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         on their pattern; the stencils follow. Forms on the basis are
         assembled from these from now on (:mod:`skfem_nem.basis.assembly`)."""
         assembly.install()
-        self._Phi, self._grads = Phi, G
+        # values_matrix: (ne * nq, N) CSR of the functions' values at the points;
+        # gradient_entries: (dim, nnz) their gradients on that same sparsity pattern
+        self.values_matrix, self.gradient_entries = Phi, G
         self._D = [type(Phi)((G[k], Phi.indices, Phi.indptr), shape=Phi.shape)
                    for k in range(G.shape[0])]
         ptr, sten = _stencils(Phi.indptr.astype(np.int64), Phi.indices.astype(np.int64), nq, ne)
@@ -356,13 +358,13 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         nq = self.dx.shape[1]
         V = np.zeros((S, elems.size, nq))
         G = np.zeros((len(self._D), S, elems.size, nq))
-        Phi = self._Phi
+        Phi = self.values_matrix
         _fill(elems, ptr, sten, Phi.indptr, Phi.indices, Phi.data,
               tuple(Dk.data for Dk in self._D), nq, V, G)
         stencils = sten[ptr[elems][None, :] + np.arange(S)[:, None]]
         return self._group(elems, stencils, V, G)
 
-    def _restricted(self, idx, key=None):
+    def restricted(self, idx, key=None):
         """A group basis on the elements ``idx`` (equal stencil sizes), cached."""
         cache = self.__dict__.setdefault("_restrict_cache", {})
         k = (idx.size, hash(np.ascontiguousarray(idx).tobytes()))
@@ -443,7 +445,7 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         sh = self.dx.shape
 
         def field(u):
-            return ((self._Phi @ u).reshape(sh),
+            return ((self.values_matrix @ u).reshape(sh),
                     np.stack([(Dk @ u).reshape(sh) for Dk in self._D]))
 
         if isinstance(self.elem, ElementVector):

@@ -57,7 +57,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .._numba import serial_twin
+from ..jit import serial_twin
 
 #: Gauss-Legendre points per cell edge (2D). Any rule exact for linear
 #: functions passes the patch test. Measured on the Poisson problem of

@@ -2,7 +2,7 @@
 
 Built on :mod:`skfem_nem.geometry`; the basis and everything above build on these.
 """
-from .area2d import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
+from .dispatch import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
 from .lasserre import sibson_coordinates_nd
 
 __all__ = ["sibson_coordinates", "laplace_coordinates", "natural_neighbour_coordinates",

@@ -1,7 +1,8 @@
-"""Sibson and Laplace natural-neighbour coordinates in 2D, with exact gradients.
+"""Sibson and Laplace natural-neighbour coordinates in 2D, with exact gradients (the area method).
 
-(The public functions also take 3D and 4D nodes, and ``method="lasserre"`` in
-2D: those go to the paper's Box 1 method, :mod:`skfem_nem.coordinates.lasserre`.)
+The public functions (:mod:`skfem_nem.coordinates.dispatch`) send 2D queries here by default;
+3D and 4D nodes, and ``method="lasserre"`` in 2D, go to the paper's Box 1 method,
+:mod:`skfem_nem.coordinates.lasserre`. :func:`area_coordinates` is this method's entry point.
 
 For a query point x inside the convex hull of the nodes, the natural
 neighbours of x are the vertices of the Delaunay triangles whose circumcircle
@@ -59,20 +60,17 @@ Undefined gradients
 """
 from __future__ import annotations
 
-from typing import Literal, Optional
-
 import numpy as np
 from numba import njit, prange
-from scipy.spatial import Delaunay
 
-from .batch import (AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW, RowStore, check_queries,
-                     index_dtype, raise_outside, raise_undefined)
-from .lasserre import sibson_coordinates_nd
+from .batch import RowStore, check_queries, index_dtype, raise_outside, raise_undefined
+from ..geometry.status import AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW
 from ..geometry.predicates import orient2d
-from ..geometry.triangulation import (Triangulation, _cavity_boundary, _conflict_cycle, _grow_cavity,
-                            _locate)
+from ..geometry.triangulation import Triangulation
+from ..geometry.delaunay2d import (cavity_boundary, conflict_cycle, grow_cavity,
+                            locate_walk)
 
-__all__ = ["sibson_coordinates", "laplace_coordinates", "natural_neighbour_coordinates"]
+__all__ = ["area_coordinates"]
 
 SIBSON = 0
 LAPLACE = 1
@@ -109,14 +107,14 @@ def _at_node(P, T, t, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad):
 @njit(cache=True, inline="always")
 def _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn, be_b, be_c, be_u,
                     cpar, cchd, cpa, cpb):
-    """The cavity by :func:`_grow_cavity` (any triangulation), in the form
-    :func:`_conflict_cycle` gives: returns ``(ncav, nb, nedge)`` and the
+    """The cavity by :func:`grow_cavity` (any triangulation), in the form
+    :func:`conflict_cycle` gives: returns ``(ncav, nb, nedge)`` and the
     internal edges e = 1..nedge in ``cpar, cchd, cpa, cpb``; ncav < 0 if the
     buffers are too small."""
-    ncav = _grow_cavity(P, T, N, qx, qy, t, cav, cnb, rej)
+    ncav = grow_cavity(P, T, N, qx, qy, t, cav, cnb, rej)
     if ncav < 0:
         return -1, -1, 0
-    nb = _cavity_boundary(T, N, cav, cnb, ncav, nn, be_b, be_c, be_u)
+    nb = cavity_boundary(T, N, cav, cnb, ncav, nn, be_b, be_c, be_u)
     if nb < 0:
         return -1, -1, 0
     nedge = 0
@@ -328,10 +326,10 @@ def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, g
 
     ``start`` (m,): the triangle each walk starts from, or empty: then the
     bucket grid ``grid`` (nc * nc,) over the box ``glo`` (2,) + ``gspan`` (2,)
-    gives one (see :meth:`Triangulation._seeds`); consecutive queries also
+    gives one (see :meth:`Triangulation.seed_grid`); consecutive queries also
     try the previous query's triangle. ``CC``: :attr:`Triangulation.circumcircles`.
-    ``general``: find cavities with :func:`_grow_cavity` (any triangulation)
-    instead of the traversal :func:`_conflict_cycle` (Delaunay
+    ``general``: find cavities with :func:`grow_cavity` (any triangulation)
+    instead of the traversal :func:`conflict_cycle` (Delaunay
     triangulations; the fast path).
 
     Outputs: the rows, one after another from position ``pos`` on, in the
@@ -347,6 +345,9 @@ def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, g
     arguments of the functions it calls with atomic operations, which cost
     more than the geometry and keep threads from scaling.
     """
+    # Long kernel: one pass over a block of queries keeps each query's walk, cavity, areas
+    # and row in registers and reuses the block's buffers; split into calls, every stage
+    # would pass the 25 buffers again per query.
     ccap = width
     cav = np.empty(ccap, np.int64)
     cpar = np.empty(ccap, np.int64)
@@ -398,7 +399,7 @@ def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, g
             db = (P[b, 0] - qx) ** 2 + (P[b, 1] - qy) ** 2
             if db < da:
                 t0 = prev
-        t, k = _locate(P, T, N, qx, qy, t0)
+        t, k = locate_walk(P, T, N, qx, qy, t0)
         tri[q] = t
         cnt = 0
         st = OK
@@ -416,7 +417,7 @@ def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, g
                 ncav, nb, nedge = _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn,
                                                   be_b, be_c, be_u, cpar, cchd, cpa, cpb)
             else:
-                ncav, nb = _conflict_cycle(P, T, N, CC, qx, qy, t, cav, cpar, cpa, cpb,
+                ncav, nb = conflict_cycle(P, T, N, CC, qx, qy, t, cav, cpar, cpa, cpb,
                                            cedge, cstep, stk, nn, be_u, be_c)
                 nedge = ncav - 1
                 for e in range(1, ncav):
@@ -542,162 +543,9 @@ def _grown(a, cap, n):
     return b
 
 
-def _dimension(nodes_or_triangulation) -> int:
-    """Space dimension of nodes, a Triangulation or a scipy Delaunay (2 if unclear:
-    the 2D checks then name the problem)."""
-    if isinstance(nodes_or_triangulation, Triangulation):
-        return 2
-    if isinstance(nodes_or_triangulation, Delaunay):
-        return int(nodes_or_triangulation.points.shape[1])
-    shape = np.shape(nodes_or_triangulation)
-    return int(shape[1]) if len(shape) == 2 and shape[1] in (3, 4) else 2
-
-
-def _as_triangulation(nodes_or_triangulation) -> Triangulation:
-    if isinstance(nodes_or_triangulation, Triangulation):
-        return nodes_or_triangulation
-    if isinstance(nodes_or_triangulation, Delaunay):
-        return Triangulation(nodes_or_triangulation.points)
-    return Triangulation(nodes_or_triangulation)
-
-
 def _threads() -> int:
     import numba
     return numba.get_num_threads()
-
-
-def natural_neighbour_coordinates(
-    nodes_or_triangulation,
-    x,
-    gradient: bool = False,
-    kind: Literal["sibson", "laplace"] = "sibson",
-    undefined: Literal["raise", "nan"] = "raise",
-    chunk: int = 1 << 15,
-    return_triangles: bool = False,
-    hint=None,
-    hull_tol: float = 1e-13,
-    method: Optional[Literal["area", "lasserre"]] = None,
-):
-    """Natural-neighbour coordinates (and gradients) of points in 2, 3 or 4 dimensions.
-
-    Parameters
-    ----------
-    nodes_or_triangulation
-        (n, d) nodes with d = 2, 3 or 4; or, to reuse a triangulation over
-        many calls, a :class:`~skfem_nem.Triangulation` (2D) or a
-        :class:`scipy.spatial.Delaunay` of the nodes (any d, Lasserre method).
-    x
-        (m, d) query points, inside the convex hull (its boundary included).
-    gradient
-        Also return the gradients.
-    kind
-        ``"sibson"`` (area) or ``"laplace"`` (non-Sibsonian) coordinates.
-    undefined
-        What to do when gradients are requested at a node or on a convex-hull
-        edge, where this module does not define them: ``"raise"`` a
-        ``ValueError`` naming the query, or set that row's gradients to NaN.
-    chunk
-        Queries are processed in chunks of this many points (bounds memory).
-    return_triangles
-        Also return the (m,) index of a triangle containing each point.
-    hint
-        Optional (m,) triangle indices to start each point's search from
-        (e.g. the triangle known to contain it); a bucket grid otherwise.
-    hull_tol
-        Points outside the convex hull by less than ``hull_tol`` times the
-        diagonal of the nodes' bounding box are round-off: they are moved onto
-        the nearest hull edge. Farther points are an error. (Area method; the
-        Lasserre method has its own relative tolerance, see
-        :mod:`skfem_nem.coordinates.lasserre`.)
-    method
-        ``"area"``: the 2D area method of this module (the paper's method 1;
-        the default in 2D). ``"lasserre"``: volumes of second-order Voronoi
-        cells by Lasserre's recursion, :func:`skfem_nem.coordinates.lasserre.sibson_coordinates_nd`
-        (the paper's Box 1, method 2; the default and only method in 3D and
-        4D; Sibson coordinates only, no ``hint`` or ``return_triangles``).
-
-    Returns
-    -------
-    Phi : scipy.sparse.csr_matrix, shape (m, n)
-        ``Phi[q, i] = phi_i(x_q)``, so ``Phi @ f`` interpolates nodal values f.
-    dPhi : list of d csr_matrix, shape (m, n)
-        Only with ``gradient=True``: ``dPhi[k][q, i] = d phi_i / d x_k (x_q)``
-        (units: 1 / length), with the same sparsity pattern as ``Phi``.
-
-    Raises
-    ------
-    ValueError
-        For bad nodes (see :class:`~skfem_nem.Triangulation`), non-finite
-        queries, queries outside the convex hull (naming the first and the
-        count), and gradients at nodes or hull edges with
-        ``undefined="raise"``; for an unknown ``method``, or options the
-        chosen method does not have.
-    """
-    d = _dimension(nodes_or_triangulation)
-    if method is None:
-        method = "area" if d == 2 else "lasserre"
-    if method not in ("area", "lasserre"):
-        raise ValueError(f"method must be 'area' or 'lasserre', got {method!r}")
-    if method == "lasserre":
-        if kind != "sibson":
-            raise ValueError(f"the Lasserre method computes Sibson coordinates only, got "
-                             f"kind={kind!r}")
-        if hint is not None or return_triangles:
-            raise ValueError("hint and return_triangles are options of the 2D area method "
-                             "(method='area')")
-        src = nodes_or_triangulation
-        if isinstance(src, Triangulation):
-            src = src.nodes
-        if isinstance(src, Delaunay):
-            return sibson_coordinates_nd(src.points, x, gradient=gradient, delaunay=src,
-                                         undefined=undefined, chunk=chunk)
-        return sibson_coordinates_nd(src, x, gradient=gradient, undefined=undefined,
-                                     chunk=chunk)
-    if d != 2:
-        raise ValueError(f"the area method works in 2D only; {d}D nodes need "
-                         f"method='lasserre'")
-    tri = _as_triangulation(nodes_or_triangulation)
-    if kind not in ("sibson", "laplace"):
-        raise ValueError(f"kind must be 'sibson' or 'laplace', got {kind!r}")
-    if undefined not in ("raise", "nan"):
-        raise ValueError(f"undefined must be 'raise' or 'nan', got {undefined!r}")
-    q = check_queries(x, 2)
-    m = q.shape[0]
-    ikind = SIBSON if kind == "sibson" else LAPLACE
-    if hint is None:
-        start = np.empty(0, dtype=np.int64)
-    else:
-        start = np.asarray(hint, dtype=np.int64).reshape(-1)
-        if start.shape[0] != m or (m and (start.min() < 0 or start.max() >= tri.ntriangles)):
-            raise ValueError(f"hint must hold {m} triangle indices in [0, {tri.ntriangles})")
-    status = np.empty(m, dtype=np.int64)
-    tri_out = np.empty(m, dtype=np.int64)
-    rows = _run(tri, q, start, ikind, gradient, False, _CAP, _ROOM, chunk, status, tri_out)
-    # points outside by round-off only: move them onto the hull and redo
-    redo = _snap_to_hull(tri, q, np.flatnonzero(status == OUTSIDE), hull_tol)
-    # rare: more natural neighbours than the buffers hold (co-circular
-    # clusters, or a block of queries with more than _ROOM on average), or a
-    # cavity that is not a tree (a triangulation that is not Delaunay): redo
-    # with more room, from the second round on with the general cavity search
-    redo = np.union1d(redo, np.flatnonzero(status == OVERFLOW))
-    width, room, general = 4 * _CAP, 2 * _ROOM, False
-    while redo.size:
-        st2 = np.empty(redo.size, dtype=np.int64)
-        t2 = np.empty(redo.size, dtype=np.int64)
-        extra = _run(tri, q[redo], tri_out[redo], ikind, gradient, general, width, room, chunk,
-                     st2, t2)
-        done = st2 != OVERFLOW
-        status[redo] = st2
-        tri_out[redo] = t2
-        rows.replace(redo[done], extra, np.flatnonzero(done))
-        redo = redo[~done]
-        width, room, general = 4 * width, min(4 * width, 2 * room), True
-    _check_status(status, q, 0, gradient, undefined, tri)
-    out = rows.matrices()
-    result = (out[0], out[1:]) if gradient else out[0]
-    if return_triangles:
-        return result, tri_out
-    return result
 
 
 # natural neighbours a query may have in the first pass (more: redone with
@@ -747,7 +595,7 @@ def _run(tri, q, start, ikind, gradient, general, width, room, chunk, status, tr
     import numba
     m = q.shape[0]
     n = tri.npoints
-    lo, span, nc, grid = tri._seeds()
+    lo, span, nc, grid = tri.seed_grid()
     indptr = np.empty(m + 1, dtype=np.int64)
     proto = np.empty(0, dtype=index_dtype(n, m * width))
     with numba.parallel_chunksize(1):
@@ -766,23 +614,57 @@ def _check_status(status, q, offset, gradient, undefined, tri):
         raise_undefined(status, q, tri.nodes, "a convex-hull edge", offset)
 
 
-def sibson_coordinates(nodes_or_triangulation, x, gradient: bool = False, **kwargs):
-    """Sibson natural-neighbour coordinates of points x (m, d), d = 2, 3, 4.
+def area_coordinates(tri: Triangulation, x, gradient: bool = False, kind: str = "sibson",
+                     undefined: str = "raise", chunk: int = 1 << 15,
+                     return_triangles: bool = False, hint=None, hull_tol: float = 1e-13):
+    """The 2D area method on a triangulation; the options and results of
+    :func:`~skfem_nem.coordinates.natural_neighbour_coordinates` (``method="area"``)."""
+    if kind not in ("sibson", "laplace"):
+        raise ValueError(f"kind must be 'sibson' or 'laplace', got {kind!r}")
+    if undefined not in ("raise", "nan"):
+        raise ValueError(f"undefined must be 'raise' or 'nan', got {undefined!r}")
+    q = check_queries(x, 2)
+    m = q.shape[0]
+    ikind = SIBSON if kind == "sibson" else LAPLACE
+    if hint is None:
+        start = np.empty(0, dtype=np.int64)
+    else:
+        start = np.asarray(hint, dtype=np.int64).reshape(-1)
+        if start.shape[0] != m or (m and (start.min() < 0 or start.max() >= tri.ntriangles)):
+            raise ValueError(f"hint must hold {m} triangle indices in [0, {tri.ntriangles})")
+    status = np.empty(m, dtype=np.int64)
+    tri_out = np.empty(m, dtype=np.int64)
+    rows = _rows_with_retries(tri, q, start, ikind, gradient, chunk, status, tri_out, hull_tol)
+    _check_status(status, q, 0, gradient, undefined, tri)
+    out = rows.matrices()
+    result = (out[0], out[1:]) if gradient else out[0]
+    if return_triangles:
+        return result, tri_out
+    return result
 
-    Returns a CSR matrix ``Phi`` (m, n) with ``Phi[q, i] = phi_i(x_q)``; with
-    ``gradient=True`` returns ``(Phi, [dPhi/dx_1, ..., dPhi/dx_d])``. In 2D
-    the area method is the default (``method="lasserre"`` selects the paper's
-    Box 1); 3D and 4D nodes use the Lasserre method. See
-    :func:`natural_neighbour_coordinates` for all options and errors.
-    """
-    return natural_neighbour_coordinates(nodes_or_triangulation, x, gradient=gradient,
-                                         kind="sibson", **kwargs)
 
-
-def laplace_coordinates(nodes_or_triangulation, x, gradient: bool = False, **kwargs):
-    """Laplace (non-Sibsonian) natural-neighbour coordinates of points x (m, 2).
-
-    Same signature and outputs as :func:`sibson_coordinates`.
-    """
-    return natural_neighbour_coordinates(nodes_or_triangulation, x, gradient=gradient,
-                                         kind="laplace", **kwargs)
+def _rows_with_retries(tri, q, start, ikind, gradient, chunk, status, tri_out, hull_tol):
+    """Rows of all queries: a first pass with small buffers, then the few that
+    overflowed (or were outside by round-off, moved onto the hull) again with
+    more room. Fills ``status`` and ``tri_out``."""
+    rows = _run(tri, q, start, ikind, gradient, False, _CAP, _ROOM, chunk, status, tri_out)
+    # points outside by round-off only: move them onto the hull and redo
+    redo = _snap_to_hull(tri, q, np.flatnonzero(status == OUTSIDE), hull_tol)
+    # rare: more natural neighbours than the buffers hold (co-circular
+    # clusters, or a block of queries with more than _ROOM on average), or a
+    # cavity that is not a tree (a triangulation that is not Delaunay): redo
+    # with more room, from the second round on with the general cavity search
+    redo = np.union1d(redo, np.flatnonzero(status == OVERFLOW))
+    width, room, general = 4 * _CAP, 2 * _ROOM, False
+    while redo.size:
+        st2 = np.empty(redo.size, dtype=np.int64)
+        t2 = np.empty(redo.size, dtype=np.int64)
+        extra = _run(tri, q[redo], tri_out[redo], ikind, gradient, general, width, room, chunk,
+                     st2, t2)
+        done = st2 != OVERFLOW
+        status[redo] = st2
+        tri_out[redo] = t2
+        rows.replace(redo[done], extra, np.flatnonzero(done))
+        redo = redo[~done]
+        width, room, general = 4 * width, min(4 * width, 2 * room), True
+    return rows

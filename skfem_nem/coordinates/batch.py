@@ -13,13 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
-# status codes of the query kernels
-OK = 0
-OUTSIDE = 1
-OVERFLOW = 2
-AT_NODE = 3
-ON_HULL = 4
-UNBOUNDED = 5
+from ..geometry.status import AT_NODE, ON_HULL, OUTSIDE
 
 
 def check_queries(x, d: int) -> np.ndarray:

@@ -38,9 +38,11 @@ from typing import Callable, Dict, Optional
 import numpy as np
 from numba import njit
 
-from ..coordinates.area2d import sibson_coordinates
-from ..geometry.predicates import incircle, orient2d
-from ..geometry.triangulation import Triangulation, _insert
+from ..coordinates import sibson_coordinates
+from ..geometry.predicates import orient2d
+from ..geometry.triangulation import Triangulation
+from .stepping import (check_node_fields, check_step_arguments, evaluate_velocity,
+                       keep_in_box, predictor_corrector)
 
 __all__ = ["LagrangianMesh"]
 
@@ -195,92 +197,21 @@ def _cross(u, v):
 # the evolving mesh
 # ---------------------------------------------------------------------------
 
-def _check_node_fields(node_fields, n) -> Dict[str, np.ndarray]:
-    """Float copies of named per-node arrays (n, ...), checked finite."""
-    out = {}
-    for name, a in (node_fields or {}).items():
-        a = np.array(a, dtype=float, copy=True)
-        if a.shape[:1] != (n,):
-            raise ValueError(f"node field {name!r} has shape {a.shape}, expected ({n}, ...)")
-        if not np.isfinite(a).all():
-            raise ValueError(f"node field {name!r} has non-finite values "
-                             f"(first at node {np.argwhere(~np.isfinite(a))[0][0]})")
-        out[name] = a
-    return out
 
-
-def _evaluate_velocity(velocity, x, on_wall=None):
-    """``velocity(x)`` checked: shape of x, finite (naming the node); the
-    components normal to a wall (``on_wall`` (n, d) bool) set to zero."""
-    v = np.asarray(velocity(x.copy()), dtype=float)
-    if v.shape != x.shape:
-        raise ValueError(f"velocity returned shape {v.shape}, expected {x.shape}")
-    bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
-    if bad.size:
-        raise ValueError(f"velocity returned non-finite values at {bad.size} node(s), "
-                         f"first node {bad[0]} at {x[bad[0]].tolist()}")
-    if on_wall is not None:
-        v = np.where(on_wall, 0.0, v)
-    return v
-
-
-def _check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject):
-    """``ValueError`` (``TypeError`` for velocity) naming the first bad
-    argument of :meth:`LagrangianMesh.advance`, before anything moves."""
-    if not callable(velocity):
-        raise TypeError(f"velocity must be a callable x (n, 2) -> (n, 2), got "
-                        f"{type(velocity).__name__}")
-
-    def number(v):
-        return isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool)
-
-    for name, v in (("dt", dt), ("tol", tol)):
-        if not (number(v) and np.isfinite(v) and v > 0):
-            raise ValueError(f"{name} must be positive and finite, got {v!r}")
-    for name, v in (("maxiter", maxiter), ("max_substeps", max_substeps)):
-        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1):
-            raise ValueError(f"{name} must be a positive integer, got {v!r}")
-    if inject is not None and not (number(inject) and np.isfinite(inject) and inject > 1):
-        raise ValueError(f"inject must be None or a factor above 1, got {inject!r}")
-
-
-def _predictor_corrector(velocity, x0, dt, tol, maxiter, step):
-    """Trapezoidal update x = x0 + dt/2 (v(x0) + v(x)), iterated from the Euler
-    predictor until the largest change is below ``tol`` times the size of the
-    node set (at most ``maxiter`` corrections; a RuntimeWarning if not).
-    Returns ``(x, iterations, converged)``."""
-    if not np.isfinite(dt) or dt <= 0:
-        raise ValueError(f"dt must be positive and finite, got {dt}")
-    size = float(np.ptp(x0, axis=0).max())
-    v0 = velocity(x0)
-    x = x0 + dt * v0
-    it = 0
-    converged = False
-    for it in range(1, maxiter + 1):
-        xn = x0 + 0.5 * dt * (v0 + velocity(x))
-        change = np.abs(xn - x).max()
-        x = xn
-        if change <= tol * size:
-            converged = True
-            break
-    if not converged:
-        import warnings
-        warnings.warn(f"step {step}: the predictor-corrector did not converge in "
-                      f"{maxiter} iterations (last change {change:.3e}, tolerance "
-                      f"{tol * size:.3e}); reduce dt", RuntimeWarning, stacklevel=3)
-    return x, it, converged
-
-
-def _keep_in_box(x, x0, on_wall, box):
-    """Wall coordinates kept exactly; ``ValueError`` naming the first node that
-    would leave the box."""
-    x = np.where(on_wall, x0, x)
-    lo, hi = box
-    out = np.flatnonzero(((x < lo) | (x > hi)).any(axis=1))
-    if out.size:
-        raise ValueError(f"{out.size} node(s) would leave the box, first node {out[0]} "
-                         f"to {x[out[0]].tolist()}: reduce dt")
-    return x
+def _split_values(P, parent, i, Ft):
+    """Values at the 3-point rule's points of the three children ``(i, b, c), (i, c, a),
+    (i, a, b)`` of ``parent = (a, b, c)`` from the parent's linear field (its values Ft
+    (3, m) at the parent's own points)."""
+    a, b, c = parent
+    Fv = 2.0 * Ft - Ft.sum(axis=0) / 3.0  # values at vertices a, b, c
+    M = np.array([[P[a, 0], P[b, 0], P[c, 0]], [P[a, 1], P[b, 1], P[c, 1]], [1, 1, 1]])
+    new = np.empty((3, 3, Ft.shape[1]))
+    for r, tri_v in enumerate(((i, b, c), (i, c, a), (i, a, b))):
+        q = P[list(tri_v)]
+        for k in range(3):
+            y = (2 / 3) * q[k] + (1 / 6) * (q[(k + 1) % 3] + q[(k + 2) % 3])
+            new[r, k] = np.linalg.solve(M, np.array([y[0], y[1], 1.0])) @ Fv
+    return new
 
 
 class LagrangianMesh:
@@ -325,7 +256,7 @@ class LagrangianMesh:
             raise ValueError(f"walls must be 'box' or None, got {walls!r}")
         self.remap = remap
         self.walls = walls
-        self.node_fields = _check_node_fields(node_fields, n)
+        self.node_fields = check_node_fields(node_fields, n)
         self.ip_fields = {}
         for name, a in (ip_fields or {}).items():
             a = np.array(a, dtype=float, copy=True)
@@ -409,6 +340,19 @@ class LagrangianMesh:
         _min_angles(self.nodes, self.triangles, out)
         return float(np.degrees(out.min()))
 
+    def replace_ip_fields(self, fields: Dict[str, np.ndarray]) -> None:
+        """Replace the integration-point fields by copies of ``fields`` (same names
+        and row counts), e.g. to undo what a failed solve had written into them."""
+        if set(fields) != set(self.ip_fields):
+            raise ValueError(f"ip fields {sorted(fields)} do not match the mesh's "
+                             f"{sorted(self.ip_fields)}")
+        for k, v in fields.items():
+            if np.shape(v)[:1] != (self.triangulation.ntriangles,):
+                raise ValueError(f"ip field {k!r} has {np.shape(v)[:1]} rows, the mesh "
+                                 f"{self.triangulation.ntriangles} triangles")
+        self.ip_fields = {k: np.array(v, copy=True) for k, v in fields.items()}
+        self._invalidate()
+
     def ip_integral(self, name: str) -> np.ndarray:
         """Integral over the domain of an integration-point field (weights |T|/3:
         the 3-point rule, and the areas of the smoothing cells)."""
@@ -434,7 +378,7 @@ class LagrangianMesh:
 
     # -- advection -------------------------------------------------------------
     def _velocity(self, velocity, x):
-        return _evaluate_velocity(velocity, x, self._on_wall if self.walls == "box" else None)
+        return evaluate_velocity(velocity, x, self._on_wall if self.walls == "box" else None)
 
     def advance(self, velocity: Callable[[np.ndarray], np.ndarray], dt: float,
                 tol: float = 1e-10, maxiter: int = 10, max_substeps: int = 8,
@@ -464,7 +408,7 @@ class LagrangianMesh:
         interruption) in any stage -- velocity, move, relocation, injection --
         the mesh, its fields, clock and history are left exactly as they were.
         """
-        _check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject)
+        check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject)
         state = self._state()
         try:
             report = self._advance(velocity, dt, tol, maxiter, max_substeps, inject)
@@ -476,10 +420,10 @@ class LagrangianMesh:
 
     def _advance(self, velocity, dt, tol, maxiter, max_substeps, inject):
         x0 = self.nodes.copy()
-        x, it, converged = _predictor_corrector(lambda y: self._velocity(velocity, y), x0, dt,
+        x, it, converged = predictor_corrector(lambda y: self._velocity(velocity, y), x0, dt,
                                                 tol, maxiter, self.step + 1)
         if self.walls == "box":
-            x = _keep_in_box(x, x0, self._on_wall, self._box)
+            x = keep_in_box(x, x0, self._on_wall, self._box)
         self._touched = []
         flips, substeps, relocated = self._move(x0, x, max_substeps)
         self._invalidate()
@@ -504,19 +448,14 @@ class LagrangianMesh:
 
     def _state(self):
         """Everything a step may change, copied."""
-        tri = self.triangulation
-        return {"nodes": tri.nodes, "triangles": tri.triangles.copy(),
-                "neighbours": tri.neighbours.copy(),
+        return {"tri": self.triangulation.snapshot(),
                 "ip_fields": {k: v.copy() for k, v in self.ip_fields.items()},
                 "node_fields": {k: v.copy() for k, v in self.node_fields.items()},
                 "on_wall": self._on_wall.copy(), "ref_area": self._ref_area.copy(),
                 "time": self.time, "step": self.step, "history": len(self.history)}
 
     def _restore(self, state):
-        tri = self.triangulation
-        tri.nodes = state["nodes"]
-        tri.triangles, tri.neighbours = state["triangles"].copy(), state["neighbours"].copy()
-        tri._changed()
+        self.triangulation.restore(state["tri"])
         self.ip_fields = {k: v.copy() for k, v in state["ip_fields"].items()}
         self.node_fields = {k: v.copy() for k, v in state["node_fields"].items()}
         self._on_wall, self._ref_area = state["on_wall"].copy(), state["ref_area"].copy()
@@ -525,10 +464,7 @@ class LagrangianMesh:
         self._invalidate()
 
     def _set_positions(self, x):
-        x = np.ascontiguousarray(x)
-        x.flags.writeable = False
-        self.triangulation.nodes = x
-        self.triangulation._changed()
+        self.triangulation.move_nodes(x)
 
     def _move(self, x0, x1, max_substeps):
         """Move the nodes from x0 to x1, flipping (and remapping) after the
@@ -612,109 +548,27 @@ class LagrangianMesh:
 
     def _remove_vertex(self, v):
         tri = self.triangulation
-        T, N, P = tri.triangles, tri.neighbours, tri.nodes
-        t0 = int(np.flatnonzero((T == v).any(axis=1))[0])
-        star, link, outer = [], [], []
-        t = t0
-        while True:
-            j = int(np.flatnonzero(T[t] == v)[0])
-            star.append(t)
-            link.append(int(T[t, (j + 1) % 3]))
-            outer.append(int(N[t, j]))
-            t = int(N[t, (j + 1) % 3])
-            if t < 0:
-                raise ValueError(f"node {v} is on the hull and cannot be relocated: reduce dt")
-            if t == t0:
-                break
-        snap = self._snapshot(np.array(star))
-        m = len(link)
-        poly = list(range(m))
-        new = []
-        while len(poly) > 3:
-            for idx in range(len(poly)):
-                i0, i1, i2 = poly[idx - 1], poly[idx], poly[(idx + 1) % len(poly)]
-                p, q, r = link[i0], link[i1], link[i2]
-                if orient2d(*P[p], *P[q], *P[r]) <= 0:
-                    continue
-                if any(incircle(*P[p], *P[q], *P[r], *P[link[s]]) > 0
-                       for s in poly if s not in (i0, i1, i2)):
-                    continue
-                new.append((p, q, r))
-                poly.pop(idx)
-                break
-            else:
-                raise RuntimeError(f"no Delaunay ear in the star of node {v}")
-        new.append(tuple(link[i] for i in poly))
-        slots = star[:m - 2]
-        polyedge = {(link[i], link[(i + 1) % m]): outer[i] for i in range(m)}
-        diag = {}
-        for s_, (p, q, r) in zip(slots, new):
-            T[s_] = (p, q, r)
-        for s_ in slots:
-            for k in range(3):
-                e1, e2 = int(T[s_, (k + 1) % 3]), int(T[s_, (k + 2) % 3])
-                if (e1, e2) in polyedge:
-                    nb = polyedge[(e1, e2)]
-                    N[s_, k] = nb
-                    if nb >= 0:
-                        N[nb, (T[nb] != e1) & (T[nb] != e2)] = s_
-                else:
-                    key = (min(e1, e2), max(e1, e2))
-                    if key in diag:
-                        o, ko = diag[key]
-                        N[s_, k] = o
-                        N[o, ko] = s_
-                    else:
-                        diag[key] = (s_, k)
-        self._fill_from(snap, np.array(slots))
-        self._touched.append(np.array(star, dtype=np.int64))
-        self._delete_triangles(sorted(star[m - 2:], reverse=True))
-
-    def _delete_triangles(self, dead):
-        """Remove dead triangle slots (descending), moving the last rows in."""
-        tri = self.triangulation
-        T, N = tri.triangles, tri.neighbours
-        fields = {k: F for k, F in self.ip_fields.items()}
-        nt = T.shape[0]
-        for d in dead:
-            last = nt - 1
-            if d != last:
-                T[d] = T[last]
-                N[d] = N[last]
-                for nb in N[d]:
-                    if nb >= 0:
-                        N[nb][N[nb] == last] = d
-                for F in fields.values():
-                    F[d] = F[last]
-            nt -= 1
-        tri.triangles = np.ascontiguousarray(T[:nt])
-        tri.neighbours = np.ascontiguousarray(N[:nt])
-        for k, F in fields.items():
-            self.ip_fields[k] = np.ascontiguousarray(F[:nt])
-        tri._changed()
+        try:
+            star = tri.star(v)
+        except ValueError:
+            raise ValueError(f"node {v} is on the hull and cannot be relocated: reduce dt") from None
+        snap = self._snapshot(star)
+        slots, moves = tri.remove_vertex(v)
+        for k, F in self.ip_fields.items():
+            for src, dst in moves:
+                F[dst] = F[src]
+            self.ip_fields[k] = np.ascontiguousarray(F[:tri.ntriangles])
+        self._fill_from(snap, slots)
+        self._touched.append(star)
 
     def _reinsert_vertex(self, v):
         tri = self.triangulation
-        x = tri.nodes[v]
-        cav = tri.cavity(x)
-        snap = self._snapshot(cav)
-        nt = tri.ntriangles
-        T = np.vstack([tri.triangles, np.zeros((2, 3), np.int64)])
-        N = np.vstack([tri.neighbours, np.zeros((2, 3), np.int64)])
-        cap = max(64, 4 * cav.size)
-        be = [np.empty(cap + 2, np.int64) for _ in range(5)]
-        r = _insert(tri.nodes, T, N, nt, v, int(cav[0]), np.empty(cap, np.int64),
-                    np.empty((cap, 3), np.int64), np.empty(cap + 4, np.int64), *be,
-                    np.array([nt, nt + 1], dtype=np.int64))
-        if r < 0:
-            raise ValueError(f"node {v} could not be re-inserted at {x.tolist()} (code {r})")
-        tri.triangles = np.ascontiguousarray(T[:nt + r])
-        tri.neighbours = np.ascontiguousarray(N[:nt + r])
-        tri._changed()
+        snap = self._snapshot(tri.cavity(tri.nodes[v]))
+        cav, new = tri.reinsert_vertex(v)
         for k, F in self.ip_fields.items():
-            self.ip_fields[k] = np.concatenate([F, np.zeros((r,) + F.shape[1:])])
-        self._fill_from(snap, np.r_[cav, np.arange(nt, nt + r)])
-        self._touched.append(np.r_[cav, np.arange(nt, nt + r)].astype(np.int64))
+            self.ip_fields[k] = np.concatenate([F, np.zeros((new.size,) + F.shape[1:])])
+        self._fill_from(snap, np.r_[cav, new])
+        self._touched.append(np.r_[cav, new].astype(np.int64))
 
     def _on_flips(self, log):
         self._touched.append(log[:, :2].ravel().copy())
@@ -788,43 +642,19 @@ class LagrangianMesh:
         return n_new
 
     def _split(self, t, x):
-        """Split triangle t into three at the interior point x (appended as a node)."""
+        """Split triangle t into three at the interior point x (appended as a node);
+        the ip fields of the children are the parent's linear field at their points."""
         tri = self.triangulation
-        P = np.vstack([tri.nodes, x[None]])
-        i = P.shape[0] - 1
-        T, N = tri.triangles, tri.neighbours
-        a, b, c = T[t]
-        na, nb, nc = N[t]
-        nt = T.shape[0]
-        t1, t2 = nt, nt + 1
+        nt = tri.ntriangles
+        parent = tri.triangles[t].copy()
+        i = tri.split_triangle(t, x)
         self._touched.append(np.array([t, nt, nt + 1], dtype=np.int64))
-        T = np.vstack([T, [[i, c, a], [i, a, b]]])
-        N = np.vstack([N, [[nb, t2, t], [nc, t, t1]]])
-        T[t] = (i, b, c)
-        N[t] = (na, t1, t2)
-        for nbr, new in ((nb, t1), (nc, t2)):
-            if nbr >= 0:
-                N[nbr][N[nbr] == t] = new
-        # ip fields: evaluate the parent's linear field at the children's points
         for name, F in self.ip_fields.items():
             flat = F.reshape(F.shape[0], 3, -1)
-            Fv = 2.0 * flat[t] - flat[t].sum(axis=0) / 3.0  # values at vertices a, b, c
-            M = np.array([[P[a, 0], P[b, 0], P[c, 0]], [P[a, 1], P[b, 1], P[c, 1]], [1, 1, 1]])
-
-            def at(y):
-                return np.linalg.solve(M, np.array([y[0], y[1], 1.0])) @ Fv
-
-            new = np.empty((3, 3, flat.shape[2]))
-            for r, tri_v in enumerate(((i, b, c), (i, c, a), (i, a, b))):
-                q = P[list(tri_v)]
-                for k in range(3):
-                    new[r, k] = at((2 / 3) * q[k] + (1 / 6) * (q[(k + 1) % 3] + q[(k + 2) % 3]))
+            new = _split_values(tri.nodes, parent, i, flat[t])
             flat = np.concatenate([flat, new[1:]])
             flat[t] = new[0]
             self.ip_fields[name] = flat.reshape((flat.shape[0],) + F.shape[1:])
-        P.flags.writeable = False
-        tri.nodes, tri.triangles, tri.neighbours = P, T, N
-        tri._changed()
 
     # -- checkpoints -------------------------------------------------------------
     def save(self, path) -> None:
@@ -860,14 +690,7 @@ class LagrangianMesh:
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
             self = cls.__new__(cls)
-            tri = Triangulation.__new__(Triangulation)
-            nodes = z["nodes"].copy()
-            nodes.flags.writeable = False
-            tri.nodes = nodes
-            tri.triangles = z["triangles"].copy()
-            tri.neighbours = z["neighbours"].copy()
-            tri.last_flips = 0
-            tri._changed()
+            tri = Triangulation.from_arrays(z["nodes"], z["triangles"], z["neighbours"])
             self.triangulation = tri
             self.remap = meta["remap"]
             self.walls = meta["walls"]

@@ -26,7 +26,8 @@ from typing import Callable, Dict, Optional
 import numpy as np
 
 from ..basis.natural_neighbour import NaturalNeighbourBasis
-from .lagrangian import _check_node_fields, _evaluate_velocity, _keep_in_box, _predictor_corrector
+from .stepping import (check_node_fields, check_step_arguments, evaluate_velocity, keep_in_box,
+                       predictor_corrector)
 from ..geometry.meshes import delaunay_mesh
 
 __all__ = ["LagrangianMesh3D"]
@@ -69,7 +70,7 @@ class LagrangianMesh3D:
         self._mesh = delaunay_mesh(nodes)
         p = self.nodes
         self.walls = walls
-        self.node_fields = _check_node_fields(node_fields, p.shape[0])
+        self.node_fields = check_node_fields(node_fields, p.shape[0])
         lo, hi = p.min(axis=0), p.max(axis=0)
         self._box = (lo, hi)
         self._on_wall = (p == lo) | (p == hi) if walls == "box" else None
@@ -130,12 +131,13 @@ class LagrangianMesh3D:
         :meth:`skfem_nem.LagrangianMesh.advance`. Returns the step's report
         (also appended to ``history``); on error nothing changes.
         """
+        check_step_arguments(velocity, dt, tol, maxiter, 1, None)
         x0 = np.array(self.nodes)
-        x, it, converged = _predictor_corrector(
-            lambda y: _evaluate_velocity(velocity, y, self._on_wall), x0, dt, tol, maxiter,
+        x, it, converged = predictor_corrector(
+            lambda y: evaluate_velocity(velocity, y, self._on_wall), x0, dt, tol, maxiter,
             self.step + 1)
         if self.walls == "box":
-            x = _keep_in_box(x, x0, self._on_wall, self._box)
+            x = keep_in_box(x, x0, self._on_wall, self._box)
         try:
             mesh = delaunay_mesh(x)
         except ValueError as err:

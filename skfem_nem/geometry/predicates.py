@@ -511,6 +511,8 @@ def _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy):
         det = lift(a) O(b,c,d) - lift(b) O(a,c,d)
             + lift(c) O(a,b,d) - lift(d) O(a,b,c)
     """
+    # Long kernel: Shewchuk's exact expansion arithmetic, written out term by term as in his
+    # predicates; a loop over the terms would allocate.
     adx, adxt = _two_diff(ax, dx)
     ady, adyt = _two_diff(ay, dy)
     bdx, bdxt = _two_diff(bx, dx)

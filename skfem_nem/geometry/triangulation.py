@@ -18,10 +18,11 @@ convex hull.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from scipy.spatial import Delaunay, QhullError
 
-from .predicates import incircle_sign, orient2d, orient2d_sign
+from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exact_hull, first_fold,
+                         grow_cavity, insert_vertex, lawson, locate_many, orientations)
+from .predicates import incircle_sign, orient2d
 
 __all__ = ["Triangulation", "validate_nodes"]
 
@@ -55,596 +56,6 @@ def validate_nodes(nodes, dim: int = 2, name: str = "nodes") -> np.ndarray:
             f"{same.size} duplicate node(s) in {name}; first: {name}[{j}] coincides "
             f"with {name}[{i}] at {p[i].tolist()}")
     return p
-
-
-# ---------------------------------------------------------------------------
-# numba kernels
-# ---------------------------------------------------------------------------
-
-@njit(cache=True, inline="always")
-def _locate(P, T, N, qx, qy, start):
-    """Visibility walk from triangle ``start`` towards (qx, qy).
-
-    Returns ``(t, k)``: ``t >= 0`` is a triangle containing the point (closed),
-    with ``k = -1``; if the point is outside the convex hull, ``t`` is the hull
-    triangle whose edge opposite its vertex ``k`` has the point strictly on its
-    outer side.
-
-    (Inlined into its callers: numba reference-counts array arguments with
-    atomic operations, which would cost more than the walk itself.)
-    """
-    nt = T.shape[0]
-    t = start
-    prev = -1
-    seed = 12345 + start
-    for step in range(4 * nt + 16):
-        seed = (seed * 1103515245 + 12345) & 0x7FFFFFFF
-        r = seed % 3
-        moved = False
-        for kk in range(3):
-            k = (r + kk) % 3
-            u = N[t, k]
-            if u == prev and u >= 0:
-                continue
-            a = T[t, (k + 1) % 3]
-            b = T[t, (k + 2) % 3]
-            if orient2d_sign(P[a, 0], P[a, 1], P[b, 0], P[b, 1], qx, qy) < 0.0:
-                if u < 0:
-                    return t, k
-                prev = t
-                t = u
-                moved = True
-                break
-        if not moved:
-            # the edge back to prev was skipped: the point is strictly on this
-            # side of it (that is why the walk crossed it), so t contains it
-            return t, -1
-    # the walk did not terminate (only possible on invalid triangulations):
-    # fall back to a scan
-    for t in range(nt):
-        inside = True
-        for k in range(3):
-            a = T[t, (k + 1) % 3]
-            b = T[t, (k + 2) % 3]
-            if orient2d_sign(P[a, 0], P[a, 1], P[b, 0], P[b, 1], qx, qy) < 0.0:
-                inside = False
-                break
-        if inside:
-            return t, -1
-    return -1, -1
-
-
-@njit(cache=True, inline="always")
-def _in_cavity(P, T, t, qx, qy):
-    a = T[t, 0]
-    b = T[t, 1]
-    c = T[t, 2]
-    return incircle_sign(P[a, 0], P[a, 1], P[b, 0], P[b, 1], P[c, 0], P[c, 1], qx, qy) > 0.0
-
-
-@njit(cache=True)
-def _grow_cavity(P, T, N, qx, qy, t0, cav, cnb, rej):
-    """Collect the triangles whose circumcircle strictly contains (qx, qy).
-
-    ``t0`` must contain the point and the point must not be a node. Fills
-    ``cav[:count]`` and the local adjacency ``cnb[c, k]`` (index in ``cav`` of
-    the neighbour across edge k of ``cav[c]``, or -1 if that neighbour is not
-    in the cavity); ``rej`` is scratch for the rejected neighbours (each is
-    tested once). Returns ``count``, or ``-1`` if the buffers are too small.
-    """
-    cap = cav.shape[0]
-    rcap = rej.shape[0]
-    cav[0] = t0
-    count = 1
-    nrej = 0
-    head = 0
-    while head < count:
-        t = cav[head]
-        for k in range(3):
-            u = N[t, k]
-            cnb[head, k] = -1
-            if u < 0:
-                continue
-            found = False
-            for j in range(count):
-                if cav[j] == u:
-                    cnb[head, k] = j
-                    found = True
-                    break
-            if found:
-                continue
-            for j in range(nrej):
-                if rej[j] == u:
-                    found = True
-                    break
-            if found:
-                continue
-            if _in_cavity(P, T, u, qx, qy):
-                if count == cap:
-                    return -1
-                cav[count] = u
-                cnb[head, k] = count
-                count += 1
-            else:
-                if nrej == rcap:
-                    return -1
-                rej[nrej] = u
-                nrej += 1
-        head += 1
-    return count
-
-
-@njit(cache=True)
-def _cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_c, be_u):
-    """Boundary edges of a cavity, ordered into a counter-clockwise cycle.
-
-    Edge j runs from ``be_a[j]`` to ``be_b[j]``, lies in cavity triangle
-    ``cav[be_c[j]]`` and has the triangle ``be_u[j]`` (or -1) outside;
-    ``be_b[j] == be_a[j + 1]``. Returns the number of edges, or -1 if they do
-    not fit.
-    """
-    cap = be_a.shape[0]
-    nb = 0
-    for c in range(ncav):
-        tc = cav[c]
-        for kk in range(3):
-            if cnb[c, kk] < 0:
-                if nb == cap:
-                    return -1
-                be_a[nb] = T[tc, (kk + 1) % 3]
-                be_b[nb] = T[tc, (kk + 2) % 3]
-                be_c[nb] = c
-                be_u[nb] = N[tc, kk]
-                nb += 1
-    for i in range(nb - 1):
-        want = be_b[i]
-        for j in range(i + 1, nb):
-            if be_a[j] == want:
-                if j != i + 1:
-                    be_a[i + 1], be_a[j] = be_a[j], be_a[i + 1]
-                    be_b[i + 1], be_b[j] = be_b[j], be_b[i + 1]
-                    be_c[i + 1], be_c[j] = be_c[j], be_c[i + 1]
-                    be_u[i + 1], be_u[j] = be_u[j], be_u[i + 1]
-                break
-    return nb
-
-
-@njit(cache=True, inline="always")
-def _conflict_cycle(P, T, N, CC, qx, qy, t0, cav, cpar, cpa, cpb, cedge, cstep, stk, nn, be_u,
-                    be_c):
-    """The Bowyer--Watson cavity of (qx, qy) and its boundary, in one traversal.
-
-    ``t0`` must contain the point and the point must not be a node; ``CC``:
-    :attr:`Triangulation.circumcircles`. In a Delaunay triangulation the cavity is a triangulated disc without interior
-    vertices, so its triangles form a tree under edge adjacency: a
-    depth-first traversal from ``t0`` that visits the edges of each triangle
-    counter-clockwise, starting after the edge it came in by, meets the
-    boundary edges in counter-clockwise order, and no triangle is reached
-    twice (so no search is needed).
-
-    Outputs (``ncav`` cavity triangles, ``nb = ncav + 2`` boundary edges):
-
-    * ``cav[c]``: the cavity triangles, ``cav[0] = t0``, each after its parent;
-    * ``cpar[c]`` (c >= 1): the parent's index in ``cav``; the shared edge runs
-      from node ``nn[cpa[c]]`` to node ``nn[cpb[c]]`` as seen from the parent
-      (counter-clockwise in the parent);
-    * ``nn[j]``: boundary edge j runs from node ``nn[j]`` to ``nn[(j + 1) % nb]``,
-      lies in triangle ``cav[be_c[j]]`` and has the triangle ``be_u[j]`` (-1 on
-      the hull) outside;
-    * ``cedge``, ``cstep``, ``stk``: scratch of the size of ``cav``.
-
-    Returns ``(ncav, nb)``, or ``(-1, -1)`` if the buffers (``cav``: ccap,
-    ``nn``: bcap) are too small -- also the only possible outcome if the
-    triangulation is not Delaunay and the cavity is not a tree (the traversal
-    then goes round a cycle): :func:`_grow_cavity` handles that case.
-    """
-    ccap = cav.shape[0]
-    bcap = nn.shape[0]
-    cav[0] = t0
-    cpar[0] = -1
-    cedge[0] = 0
-    cstep[0] = 0
-    stk[0] = 0
-    depth = 1
-    ncav = 1
-    nb = 0
-    while depth > 0:
-        c = stk[depth - 1]
-        s = cstep[c]
-        if s == (3 if c == 0 else 2):
-            depth -= 1
-            cpb[c] = nb
-            continue
-        cstep[c] = s + 1
-        t = cav[c]
-        k = cedge[c] + s
-        if k >= 3:
-            k -= 3
-        u = N[t, k]
-        if u >= 0 and _in_circumcircle(P, T, CC, u, qx, qy):
-            if ncav == ccap:
-                return -1, -1
-            l = 0 if N[u, 0] == t else (1 if N[u, 1] == t else 2)
-            cav[ncav] = u
-            cpar[ncav] = c
-            cpa[ncav] = nb
-            cedge[ncav] = l + 1 if l < 2 else 0
-            cstep[ncav] = 0
-            stk[depth] = ncav
-            depth += 1
-            ncav += 1
-        else:
-            if nb == bcap:
-                return -1, -1
-            nn[nb] = T[t, k + 1 if k < 2 else 0]
-            be_u[nb] = u
-            be_c[nb] = c
-            nb += 1
-    # the edge that closes the cycle ends where the first one starts
-    for c in range(1, ncav):
-        if cpb[c] == nb:
-            cpb[c] = 0
-    return ncav, nb
-
-
-@njit(cache=True)
-def _insert(P, T, N, nt, i, t0, cav, cnb, rej, be_a, be_b, be_t, be_u, newt, extra):
-    """Bowyer--Watson insertion of node i (inside the hull or on its boundary).
-
-    The (up to) two triangles the insertion adds go to the slots ``extra[0]``,
-    ``extra[1]`` (normally ``nt`` and ``nt + 1``). Returns how many extra slots
-    were used, or a negative code: -1 outside the hull, -2 the node coincides
-    with a vertex, -3 buffers too small.
-    """
-    qx = P[i, 0]
-    qy = P[i, 1]
-    t, k = _locate(P, T[:nt], N[:nt], qx, qy, t0)
-    if k >= 0 or t < 0:
-        return -1
-    for j in range(3):
-        a = T[t, j]
-        if P[a, 0] == qx and P[a, 1] == qy:
-            return -2
-    ncav = _grow_cavity(P, T, N, qx, qy, t, cav, cnb, rej)
-    if ncav < 0:
-        return -3
-    nb = _cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_t, be_u)
-    if nb < 0 or nb > ncav + 2:
-        return -3
-    # skip a hull edge the node lies on (it would give a flat triangle)
-    skip = -1
-    for j in range(nb):
-        if be_u[j] < 0:
-            a = be_a[j]
-            b = be_b[j]
-            if orient2d_sign(P[a, 0], P[a, 1], P[b, 0], P[b, 1], qx, qy) == 0.0:
-                skip = j
-    # slots for the new triangles: the cavity's, then appended ones
-    m = 0
-    for j in range(nb):
-        if j == skip:
-            newt[j] = -1
-            continue
-        newt[j] = cav[m] if m < ncav else extra[m - ncav]
-        m += 1
-    for j in range(nb):
-        s = newt[j]
-        if s < 0:
-            continue
-        T[s, 0] = i
-        T[s, 1] = be_a[j]
-        T[s, 2] = be_b[j]
-        u = be_u[j]
-        N[s, 0] = u
-        N[s, 1] = newt[(j + 1) % nb]
-        N[s, 2] = newt[(j - 1 + nb) % nb]
-        if u >= 0:
-            # the outer triangle's slot opposite the shared edge (matched by
-            # vertex, since cavity slots are being reused)
-            for jj in range(3):
-                if T[u, jj] != be_a[j] and T[u, jj] != be_b[j]:
-                    N[u, jj] = s
-    return max(0, m - ncav)
-
-
-@njit(cache=True)
-def _flip(T, N, t, k):
-    """Flip the edge opposite vertex k of triangle t. Returns the other triangle."""
-    u = N[t, k]
-    a = T[t, k]
-    b = T[t, (k + 1) % 3]
-    c = T[t, (k + 2) % 3]
-    ntb = N[t, (k + 1) % 3]  # across edge c-a
-    ntc = N[t, (k + 2) % 3]  # across edge a-b
-    l = 0
-    for j in range(3):
-        if N[u, j] == t:
-            l = j
-    d = T[u, l]
-    nuc = N[u, (l + 1) % 3]  # across edge b-d  (u = d, c, b)
-    nub = N[u, (l + 2) % 3]  # across edge d-c
-    T[t, 0] = a
-    T[t, 1] = b
-    T[t, 2] = d
-    N[t, 0] = nuc
-    N[t, 1] = u
-    N[t, 2] = ntc
-    T[u, 0] = a
-    T[u, 1] = d
-    T[u, 2] = c
-    N[u, 0] = nub
-    N[u, 1] = ntb
-    N[u, 2] = t
-    if nuc >= 0:
-        for j in range(3):
-            if N[nuc, j] == u:
-                N[nuc, j] = t
-    if ntb >= 0:
-        for j in range(3):
-            if N[ntb, j] == t:
-                N[ntb, j] = u
-    return u
-
-
-@njit(cache=True)
-def _edge_violates(P, T, N, t, k):
-    """True if the edge opposite vertex k of t fails the strict in-circle test
-    and its quadrilateral is strictly convex (so that it can be flipped)."""
-    u = N[t, k]
-    if u < 0:
-        return False
-    a = T[t, k]
-    b = T[t, (k + 1) % 3]
-    c = T[t, (k + 2) % 3]
-    d = -1
-    for j in range(3):
-        if N[u, j] == t:
-            d = T[u, j]
-    if incircle_sign(P[a, 0], P[a, 1], P[b, 0], P[b, 1], P[c, 0], P[c, 1],
-                     P[d, 0], P[d, 1]) <= 0.0:
-        return False
-    if orient2d_sign(P[a, 0], P[a, 1], P[b, 0], P[b, 1], P[d, 0], P[d, 1]) <= 0.0:
-        return False
-    if orient2d_sign(P[a, 0], P[a, 1], P[d, 0], P[d, 1], P[c, 0], P[c, 1]) <= 0.0:
-        return False
-    return True
-
-
-@njit(cache=True)
-def _lawson(P, T, N, stack, nstack, max_flips, log):
-    """Lawson's algorithm: flip non-Delaunay edges until none is left.
-
-    ``stack[:nstack]`` holds the triangles to check. Each flip is recorded in
-    ``log`` (if it has rows) as ``(t, u, k, l, a, b, c, d)``: triangle
-    t = (a, b, c) (a at position k) was flipped across its edge b-c with
-    triangle u = (d, c, b) (d at position l); afterwards t = (a, b, d) and
-    u = (a, d, c). Returns
-    ``(flips, done)``; ``done`` is False if the stack, the log or
-    ``max_flips`` ran out first (the flips made so far are valid and logged;
-    check all triangles again to finish).
-    """
-    flips = 0
-    cap = stack.shape[0]
-    logcap = log.shape[0]
-    while nstack > 0:
-        nstack -= 1
-        t = stack[nstack]
-        for k in range(3):
-            if _edge_violates(P, T, N, t, k):
-                if flips == max_flips or nstack + 2 > cap or (logcap > 0 and flips == logcap):
-                    return flips, False
-                u = N[t, k]
-                if logcap > 0:
-                    l = 0
-                    for j in range(3):
-                        if N[u, j] == t:
-                            l = j
-                    log[flips, 0] = t
-                    log[flips, 1] = u
-                    log[flips, 2] = k
-                    log[flips, 3] = l
-                    log[flips, 4] = T[t, k]
-                    log[flips, 5] = T[t, (k + 1) % 3]
-                    log[flips, 6] = T[t, (k + 2) % 3]
-                    log[flips, 7] = T[u, l]
-                _flip(T, N, t, k)
-                flips += 1
-                stack[nstack] = t
-                stack[nstack + 1] = u
-                nstack += 2
-                break
-    return flips, True
-
-
-@njit(cache=True)
-def _count_non_delaunay(P, T, N):
-    bad = 0
-    for t in range(T.shape[0]):
-        for k in range(3):
-            u = N[t, k]
-            if u > t:
-                a = T[t, 0]
-                b = T[t, 1]
-                c = T[t, 2]
-                d = -1
-                for j in range(3):
-                    if N[u, j] == t:
-                        d = T[u, j]
-                if incircle_sign(P[a, 0], P[a, 1], P[b, 0], P[b, 1], P[c, 0], P[c, 1],
-                                 P[d, 0], P[d, 1]) > 0.0:
-                    bad += 1
-    return bad
-
-
-# The cached circumcircles are used as a float filter for the in-circle test
-# only while every coordinate difference is zero or within [2**-300, 2**300],
-# the circumcentre offset below 2**400 and the doubled area above 2**-900:
-# then nothing overflows or underflows and the error bounds below hold.
-_CIRCLE_LO = 2.0 ** -300
-_CIRCLE_HI = 2.0 ** 300
-_CIRCLE_MAX = 2.0 ** 400
-_CIRCLE_MIN_AREA = 2.0 ** -900
-_CIRCLE_ABS = 2.0 ** -900
-
-
-@njit(cache=True, inline="always")
-def _filter_range(x):
-    x = abs(x)
-    return x == 0.0 or (x >= _CIRCLE_LO and x <= _CIRCLE_HI)
-
-
-@njit(cache=True)
-def _circumcircles(P, T, out):
-    """Circumcentre offsets, their error bounds and the first vertices, ``out`` (nt, 5).
-
-    ``out[t, :2]`` is the circumcentre of triangle t minus its first vertex a
-    (with b, c relative to a: ``(c_y |b|^2 - b_y |c|^2, b_x |c|^2 - c_x |b|^2)
-    / (2 d)``, d = cross(b, c) from :func:`orient2d`, relative error 2**-42).
-    ``out[t, 2]`` bounds the error of the two components together: the
-    numerators carry at most 8 rounding errors relative to the sums of
-    their terms' magnitudes, the division the error of d; both are doubled
-    here. Triangles outside the range where these bounds hold get ``inf``.
-    ``out[t, 3:]`` is the vertex a itself (so that the in-circle filter needs
-    no second, dependent memory access).
-    """
-    for t in range(T.shape[0]):
-        a = T[t, 0]
-        b = T[t, 1]
-        c = T[t, 2]
-        bx = P[b, 0] - P[a, 0]
-        by = P[b, 1] - P[a, 1]
-        cx = P[c, 0] - P[a, 0]
-        cy = P[c, 1] - P[a, 1]
-        d = orient2d(P[b, 0], P[b, 1], P[c, 0], P[c, 1], P[a, 0], P[a, 1])
-        b2 = bx * bx + by * by
-        c2 = cx * cx + cy * cy
-        f = 0.5 / d
-        ox = (cy * b2 - by * c2) * f
-        oy = (bx * c2 - cx * b2) * f
-        out[t, 0] = ox
-        out[t, 1] = oy
-        err = np.inf
-        if (_filter_range(bx) and _filter_range(by) and _filter_range(cx)
-                and _filter_range(cy) and abs(d) >= _CIRCLE_MIN_AREA):
-            err = (2.0 ** -49 * (abs(cy) * b2 + abs(by) * c2 + abs(bx) * c2 + abs(cx) * b2)
-                   * abs(f) + 2.0 ** -41 * (abs(ox) + abs(oy)))
-            if not (abs(ox) + abs(oy) < _CIRCLE_MAX and err < _CIRCLE_MAX):
-                err = np.inf
-        out[t, 2] = err
-        out[t, 3] = P[a, 0]
-        out[t, 4] = P[a, 1]
-
-
-@njit(cache=True, inline="always")
-def _in_circumcircle(P, T, CC, t, qx, qy):
-    """Strict in-circle test of (qx, qy) against triangle t, with the cached
-    circumcircle ``CC[t]`` (see :func:`_circumcircles`) as a float filter.
-
-    With u = x - a (a the first vertex) and c the circumcentre offset, x is
-    strictly inside iff D = u . (2 c - u) > 0. The computed D is within
-    B = 2 |u|_1 err_c + 16 eps |u|_1 (|u|_1 + |c|_1) (+ a tiny absolute term
-    for underflow) of the exact one; only when |D| <= B does the exact
-    :func:`incircle_sign` decide. Same answer as :func:`_in_cavity`, for a
-    fraction of its cost.
-    """
-    ux = qx - CC[t, 3]
-    uy = qy - CC[t, 4]
-    cx = CC[t, 0]
-    cy = CC[t, 1]
-    s = abs(ux) + abs(uy)
-    g = abs(cx) + abs(cy)
-    if s < _CIRCLE_MAX and g < _CIRCLE_MAX:
-        det = ux * (2.0 * cx - ux) + uy * (2.0 * cy - uy)
-        bound = 2.01 * s * CC[t, 2] + 2.0 ** -49 * s * (s + g) + _CIRCLE_ABS
-        if det > bound:
-            return True
-        if det < -bound:
-            return False
-    return _in_cavity(P, T, t, qx, qy)
-
-
-@njit(cache=True)
-def _orientations(P, T, out):
-    for t in range(T.shape[0]):
-        a = T[t, 0]
-        b = T[t, 1]
-        c = T[t, 2]
-        out[t] = orient2d(P[a, 0], P[a, 1], P[b, 0], P[b, 1], P[c, 0], P[c, 1])
-
-
-# ---------------------------------------------------------------------------
-# adjacency from a triangle list
-# ---------------------------------------------------------------------------
-
-@njit(cache=True)
-def _first_fold(T, N):
-    """First triangle whose neighbour lists their shared edge in the same
-    direction (a fold, for counter-clockwise triangles), or -1."""
-    for t in range(T.shape[0]):
-        for k in range(3):
-            u = N[t, k]
-            if u < 0:
-                continue
-            b = T[t, (k + 1) % 3]
-            c = T[t, (k + 2) % 3]
-            ok = False
-            for j in range(3):
-                if T[u, j] == c and T[u, (j + 1) % 3] == b:
-                    ok = True
-            if not ok:
-                return t
-    return -1
-
-
-@njit(cache=True)
-def _exact_hull(P, order):
-    """Convex-hull vertices (no collinear ones) by Andrew's monotone chain
-    with the exact orientation predicate; ``order`` sorts P by x, then y."""
-    n = order.shape[0]
-    h = np.empty(2 * n + 1, np.int64)
-    k = 0
-    for ii in range(n):
-        i = order[ii]
-        while k >= 2 and orient2d_sign(P[h[k - 2], 0], P[h[k - 2], 1], P[h[k - 1], 0],
-                                       P[h[k - 1], 1], P[i, 0], P[i, 1]) <= 0.0:
-            k -= 1
-        h[k] = i
-        k += 1
-    lower = k + 1
-    for ii in range(n - 2, -1, -1):
-        i = order[ii]
-        while k >= lower and orient2d_sign(P[h[k - 2], 0], P[h[k - 2], 1], P[h[k - 1], 0],
-                                           P[h[k - 1], 1], P[i, 0], P[i, 1]) <= 0.0:
-            k -= 1
-        h[k] = i
-        k += 1
-    return h[:k - 1].copy()
-
-
-def _adjacency(triangles: np.ndarray, n: int) -> np.ndarray:
-    """Neighbour array for (nt, 3) triangles; raises on non-manifold edges."""
-    nt = triangles.shape[0]
-    # edge opposite vertex k: (T[:, k+1], T[:, k+2])
-    a = np.concatenate([triangles[:, 1], triangles[:, 2], triangles[:, 0]])
-    b = np.concatenate([triangles[:, 2], triangles[:, 0], triangles[:, 1]])
-    lo = np.minimum(a, b).astype(np.int64)
-    hi = np.maximum(a, b).astype(np.int64)
-    key = lo * n + hi
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    nb = np.full(3 * nt, -1, dtype=np.int64)
-    same = np.flatnonzero(ks[1:] == ks[:-1])
-    if same.size and np.any(same[1:] == same[:-1] + 1):
-        j = same[np.flatnonzero(same[1:] == same[:-1] + 1)[0]]
-        e = order[j]
-        raise ValueError(
-            f"edge ({lo[e]}, {hi[e]}) is shared by more than two triangles")
-    i1 = order[same]
-    i2 = order[same + 1]
-    nb[i1] = i2 % nt
-    nb[i2] = i1 % nt
-    # slot s = k * nt + t  ->  neighbours[t, k]
-    return np.ascontiguousarray(nb.reshape(3, nt).T)
 
 
 # ---------------------------------------------------------------------------
@@ -693,13 +104,13 @@ class Triangulation:
                 t = int(np.flatnonzero((T < 0).any(1) | (T >= p.shape[0]).any(1))[0])
                 raise ValueError(f"triangle {t} has a vertex index out of range: {T[t].tolist()}")
             orient = np.empty(T.shape[0])
-            _orientations(p, T, orient)
+            orientations(p, T, orient)
             zero = np.flatnonzero(orient == 0.0)
             if zero.size:
                 raise ValueError(f"triangle {zero[0]} ({T[zero[0]].tolist()}) has zero area")
             neg = orient < 0
             T[neg] = T[neg][:, [0, 2, 1]]
-            N = _adjacency(T, p.shape[0])
+            N = adjacency(T, p.shape[0])
         self.triangles = T
         self.neighbours = N
         self._changed()
@@ -732,7 +143,7 @@ class Triangulation:
             j = int(np.argmax(((q - q[i]) ** 2).sum(1)))
             coll = True
             for k in range(p.shape[0]):
-                _orientations(p, np.array([[i, j, k]], dtype=np.int64), o)
+                orientations(p, np.array([[i, j, k]], dtype=np.int64), o)
                 if o[0] != 0.0:
                     coll = False
                     break
@@ -758,7 +169,7 @@ class Triangulation:
         T = np.ascontiguousarray(simplices, dtype=np.int64)
         N = np.ascontiguousarray(neighbors, dtype=np.int64)
         orient = np.empty(T.shape[0])
-        _orientations(p, T, orient)
+        orientations(p, T, orient)
         keep = orient != 0.0
         neg = orient < 0
         T[neg] = T[neg][:, [0, 2, 1]]
@@ -768,10 +179,10 @@ class Triangulation:
             # and rebuild the adjacency
             T = np.ascontiguousarray(T[keep])
             try:
-                N = _adjacency(T, p.shape[0])
+                N = adjacency(T, p.shape[0])
             except ValueError:
                 return None, None
-        if _first_fold(T, N) >= 0:
+        if first_fold(T, N) >= 0:
             return None, None
         return T, N
 
@@ -780,7 +191,7 @@ class Triangulation:
         from scipy.spatial import cKDTree
         n = p.shape[0]
         on_hull = np.zeros(n, dtype=bool)
-        on_hull[_exact_hull(p, np.lexsort((p[:, 1], p[:, 0])))] = True
+        on_hull[exact_hull(p, np.lexsort((p[:, 1], p[:, 0])))] = True
         delta = 1e-6 * np.hypot(*np.ptp(p, axis=0))
         drop = np.zeros(n, dtype=bool)
         for i, j in cKDTree(p).query_pairs(delta, output_type="ndarray"):
@@ -832,7 +243,7 @@ class Triangulation:
     def orientation(self) -> np.ndarray:
         """(nt,) exact-sign orientation determinants (twice the signed areas)."""
         out = np.empty(self.ntriangles)
-        _orientations(self.nodes, self.triangles, out)
+        orientations(self.nodes, self.triangles, out)
         return out
 
     def incircle(self, t: int, x) -> float:
@@ -852,7 +263,7 @@ class Triangulation:
         filter), and the first vertex; see :attr:`circumcentre_offsets`."""
         if self._circumcentres is None:
             out = np.empty((self.ntriangles, 5))
-            _circumcircles(self.nodes, self.triangles, out)
+            circumcircle_table(self.nodes, self.triangles, out)
             self._circumcentres = out
         return self._circumcentres
 
@@ -869,7 +280,7 @@ class Triangulation:
         return self.circumcircles[:, :2]
 
     # -- queries -------------------------------------------------------------
-    def _seeds(self):
+    def seed_grid(self):
         """A bucket grid of triangles used to start walks near a query."""
         if self._seed_grid is None:
             P, T = self.nodes, self.triangles
@@ -889,7 +300,7 @@ class Triangulation:
 
     def start_triangles(self, x: np.ndarray) -> np.ndarray:
         """(m,) triangles near the points x (m, 2), to start walks from."""
-        lo, span, nc, grid = self._seeds()
+        lo, span, nc, grid = self.seed_grid()
         ij = np.clip(((x - lo) / span * nc).astype(np.int64), 0, nc - 1)
         return grid[ij[:, 0] * nc + ij[:, 1]]
 
@@ -902,7 +313,7 @@ class Triangulation:
         q = np.atleast_2d(np.asarray(x, dtype=np.float64))
         start = self.start_triangles(q)
         out = np.empty(q.shape[0], dtype=np.int64)
-        _locate_many(self.nodes, self.triangles, self.neighbours, q, start, out)
+        locate_many(self.nodes, self.triangles, self.neighbours, q, start, out)
         return out
 
     def cavity(self, x) -> np.ndarray:
@@ -921,7 +332,7 @@ class Triangulation:
         cap = 64
         while True:
             cav = np.empty(cap, dtype=np.int64)
-            cnt = _grow_cavity(self.nodes, self.triangles, self.neighbours,
+            cnt = grow_cavity(self.nodes, self.triangles, self.neighbours,
                                q[0], q[1], t, cav, np.empty((cap, 3), np.int64),
                                np.empty(cap + 4, np.int64))
             if cnt >= 0:
@@ -972,7 +383,7 @@ class Triangulation:
                 cnb = np.empty((cap, 3), np.int64)
                 rej = np.empty(cap + 4, np.int64)
                 be = [np.empty(cap + 2, np.int64) for _ in range(5)]
-                r = _insert(P, T, N, nt, i, int(start), cav, cnb, rej, *be,
+                r = insert_vertex(P, T, N, nt, i, int(start), cav, cnb, rej, *be,
                             np.array([nt, nt + 1], dtype=np.int64))
                 if r != -3:
                     break
@@ -986,6 +397,196 @@ class Triangulation:
         self.triangles = np.ascontiguousarray(T[:nt])
         self.neighbours = np.ascontiguousarray(N[:nt])
         self._changed()
+
+    # -- mutation: the evolving mesh changes a triangulation only through these -----
+    def move_nodes(self, x) -> None:
+        """Give the nodes the positions x (n, 2), keeping the triangles (a Lagrangian
+        step). The triangles may then fail the in-circle test (repair with
+        :meth:`make_delaunay`) or invert (see :meth:`orientation`). Copied; read-only."""
+        x = np.array(x, dtype=np.float64, copy=True)
+        if x.shape != self.nodes.shape:
+            raise ValueError(f"moved nodes must have shape {self.nodes.shape}, got {x.shape}")
+        x.flags.writeable = False
+        self.nodes = x
+        self._changed()
+
+    def snapshot(self) -> dict:
+        """The whole state (nodes, triangles, neighbours), for :meth:`restore`."""
+        return {"nodes": self.nodes, "triangles": self.triangles.copy(),
+                "neighbours": self.neighbours.copy()}
+
+    def restore(self, snap: dict) -> None:
+        """Return exactly to a :meth:`snapshot` (the nodes are read-only, so shared)."""
+        self.nodes = snap["nodes"]
+        self.triangles = snap["triangles"].copy()
+        self.neighbours = snap["neighbours"].copy()
+        self._changed()
+
+    @classmethod
+    def from_arrays(cls, nodes, triangles, neighbours) -> "Triangulation":
+        """A triangulation from stored arrays (a checkpoint), trusted as they are: only
+        their shapes and index ranges are checked, nothing is flipped."""
+        p = np.array(nodes, dtype=np.float64, copy=True)
+        T = np.ascontiguousarray(triangles, dtype=np.int64).copy()
+        N = np.ascontiguousarray(neighbours, dtype=np.int64).copy()
+        if p.ndim != 2 or p.shape[1] != 2 or T.ndim != 2 or T.shape[1] != 3 or N.shape != T.shape:
+            raise ValueError(f"stored triangulation has inconsistent shapes: nodes {p.shape}, "
+                             f"triangles {T.shape}, neighbours {N.shape}")
+        if T.size and (T.min() < 0 or T.max() >= p.shape[0] or N.max() >= T.shape[0]):
+            raise ValueError("stored triangulation has indices out of range")
+        self = cls.__new__(cls)
+        p.flags.writeable = False
+        self.nodes, self.triangles, self.neighbours = p, T, N
+        self.last_flips = 0
+        self._changed()
+        return self
+
+    def star(self, v: int) -> np.ndarray:
+        """The triangles around the interior node v, counter-clockwise (``ValueError``
+        if v is on the hull: its star is not closed)."""
+        T, N = self.triangles, self.neighbours
+        t0 = int(np.flatnonzero((T == v).any(axis=1))[0])
+        star, t = [], t0
+        while True:
+            star.append(t)
+            j = int(np.flatnonzero(T[t] == v)[0])
+            t = int(N[t, (j + 1) % 3])
+            if t < 0:
+                raise ValueError(f"node {v} is on the hull: its star is not closed")
+            if t == t0:
+                return np.array(star, dtype=np.int64)
+
+    def remove_vertex(self, v: int):
+        """Take the interior node v out of the triangulation (it stays in
+        :attr:`nodes`, in no triangle) and fill its star with Delaunay triangles
+        (ear clipping with the exact in-circle test).
+
+        Returns ``(slots, moves)``: the triangles that now cover the old star, and the
+        row moves ``(src, dst)`` made, in order, to close the gaps of the two triangles
+        that disappear; apply the same moves to data stored per triangle, then cut it
+        to :attr:`ntriangles` rows.
+        """
+        star = self.star(v)
+        link = [int(self.triangles[t, (int(np.flatnonzero(self.triangles[t] == v)[0]) + 1) % 3])
+                for t in star]
+        outer = [int(self.neighbours[t, int(np.flatnonzero(self.triangles[t] == v)[0])])
+                 for t in star]
+        m = len(link)
+        slots = star[:m - 2]
+        for s_, tri_v in zip(slots, self._ears(v, link)):
+            self.triangles[s_] = tri_v
+        self._link_star(slots, link, outer)
+        moves = self._delete(sorted(star[m - 2:].tolist(), reverse=True))
+        final = slots.copy()
+        for src, dst in moves:
+            final[final == src] = dst
+        self._changed()
+        return final, moves
+
+    def _ears(self, v, link):
+        """Delaunay triangles filling the polygon ``link`` (counter-clockwise)."""
+        P = self.nodes
+        poly, new = list(range(len(link))), []
+        while len(poly) > 3:
+            for idx in range(len(poly)):
+                i0, i1, i2 = poly[idx - 1], poly[idx], poly[(idx + 1) % len(poly)]
+                p, q, r = link[i0], link[i1], link[i2]
+                if orient2d(*P[p], *P[q], *P[r]) <= 0:
+                    continue
+                if any(incircle_sign(*P[p], *P[q], *P[r], *P[link[s]]) > 0
+                       for s in poly if s not in (i0, i1, i2)):
+                    continue
+                new.append((p, q, r))
+                poly.pop(idx)
+                break
+            else:
+                raise RuntimeError(f"no Delaunay ear in the star of node {v}")
+        new.append(tuple(link[i] for i in poly))
+        return new
+
+    def _link_star(self, slots, link, outer):
+        """Neighbours of the triangles ``slots`` that refill a star with boundary
+        ``link`` whose outer neighbours are ``outer``."""
+        T, N, m = self.triangles, self.neighbours, len(link)
+        polyedge = {(link[i], link[(i + 1) % m]): outer[i] for i in range(m)}
+        diag = {}
+        for s_ in slots:
+            for k in range(3):
+                e1, e2 = int(T[s_, (k + 1) % 3]), int(T[s_, (k + 2) % 3])
+                if (e1, e2) in polyedge:
+                    nb = polyedge[(e1, e2)]
+                    N[s_, k] = nb
+                    if nb >= 0:
+                        N[nb, (T[nb] != e1) & (T[nb] != e2)] = s_
+                elif (min(e1, e2), max(e1, e2)) in diag:
+                    o, ko = diag[(min(e1, e2), max(e1, e2))]
+                    N[s_, k], N[o, ko] = o, s_
+                else:
+                    diag[(min(e1, e2), max(e1, e2))] = (s_, k)
+
+    def _delete(self, dead):
+        """Remove the triangle rows ``dead`` (descending), moving the last rows in;
+        returns the moves ``(src, dst)``."""
+        T, N = self.triangles, self.neighbours
+        nt, moves = T.shape[0], []
+        for d in dead:
+            last = nt - 1
+            if d != last:
+                T[d], N[d] = T[last], N[last]
+                for nb in N[d]:
+                    if nb >= 0:
+                        N[nb][N[nb] == last] = d
+                moves.append((last, d))
+            nt -= 1
+        self.triangles = np.ascontiguousarray(T[:nt])
+        self.neighbours = np.ascontiguousarray(N[:nt])
+        return moves
+
+    def reinsert_vertex(self, v: int):
+        """Put node v (in :attr:`nodes` but in no triangle, see :meth:`remove_vertex`)
+        back by Bowyer--Watson insertion at its present position. Returns ``(cavity,
+        new)``: the old triangles it replaced (their rows are reused) and the rows
+        appended."""
+        x = self.nodes[v]
+        cav = self.cavity(x)
+        nt = self.ntriangles
+        T = np.vstack([self.triangles, np.zeros((2, 3), np.int64)])
+        N = np.vstack([self.neighbours, np.zeros((2, 3), np.int64)])
+        cap = max(64, 4 * cav.size)
+        be = [np.empty(cap + 2, np.int64) for _ in range(5)]
+        r = insert_vertex(self.nodes, T, N, nt, v, int(cav[0]), np.empty(cap, np.int64),
+                          np.empty((cap, 3), np.int64), np.empty(cap + 4, np.int64), *be,
+                          np.array([nt, nt + 1], dtype=np.int64))
+        if r < 0:
+            raise ValueError(f"node {v} could not be re-inserted at {x.tolist()} (code {r})")
+        self.triangles = np.ascontiguousarray(T[:nt + r])
+        self.neighbours = np.ascontiguousarray(N[:nt + r])
+        self._changed()
+        return cav, np.arange(nt, nt + r)
+
+    def split_triangle(self, t: int, x) -> int:
+        """Append the node x (strictly inside triangle t) and split t in three:
+        t becomes ``(i, b, c)``, and rows ``nt`` and ``nt + 1`` are appended as
+        ``(i, c, a)`` and ``(i, a, b)`` for t = (a, b, c). Returns the new node i.
+        Not Delaunay-repaired: call :meth:`make_delaunay` after a batch."""
+        P = np.vstack([self.nodes, np.asarray(x, dtype=np.float64)[None]])
+        i = P.shape[0] - 1
+        T, N = self.triangles, self.neighbours
+        a, b, c = T[t]
+        na, nb, nc = N[t]
+        nt = T.shape[0]
+        t1, t2 = nt, nt + 1
+        T = np.vstack([T, [[i, c, a], [i, a, b]]])
+        N = np.vstack([N, [[nb, t2, t], [nc, t, t1]]])
+        T[t] = (i, b, c)
+        N[t] = (na, t1, t2)
+        for nbr, new in ((nb, t1), (nc, t2)):
+            if nbr >= 0:
+                N[nbr][N[nbr] == t] = new
+        P.flags.writeable = False
+        self.nodes, self.triangles, self.neighbours = P, T, N
+        self._changed()
+        return i
 
     # -- Delaunay maintenance -------------------------------------------------
     def make_delaunay(self, triangles=None, max_flips: int | None = None,
@@ -1019,7 +620,7 @@ class Triangulation:
             stack = np.empty(start.size + 2 * min(max_flips, nt // 4 + 1024), dtype=np.int64)
             stack[:start.size] = start
             log = np.empty((min(max_flips, nt // 4 + 1024) if on_flips else 0, 8), np.int64)
-            flips, done = _lawson(self.nodes, self.triangles, self.neighbours, stack,
+            flips, done = lawson(self.nodes, self.triangles, self.neighbours, stack,
                                   start.size, max_flips - total, log)
             total += flips
             if flips:
@@ -1041,14 +642,7 @@ class Triangulation:
 
     def non_delaunay_edges(self) -> int:
         """Number of interior edges that fail the exact in-circle test."""
-        return int(_count_non_delaunay(self.nodes, self.triangles, self.neighbours))
+        return int(count_non_delaunay(self.nodes, self.triangles, self.neighbours))
 
     def __repr__(self) -> str:
         return f"Triangulation({self.npoints} nodes, {self.ntriangles} triangles)"
-
-
-@njit(cache=True)
-def _locate_many(P, T, N, Q, start, out):
-    for i in range(Q.shape[0]):
-        t, k = _locate(P, T, N, Q[i, 0], Q[i, 1], start[i])
-        out[i] = t if k < 0 else -1

@@ -1,0 +1,103 @@
+"""One Lagrangian time step's checks and node update, shared by the 2D and 3D meshes.
+
+:class:`~skfem_nem.evolution.lagrangian.LagrangianMesh` (flips and remap) and
+:class:`~skfem_nem.evolution.lagrangian3d.LagrangianMesh3D` (retriangulation) differ in how they
+repair the triangulation after a move, not in how they validate a step, evaluate the velocity
+or move the nodes: that part lives here once.
+"""
+from __future__ import annotations
+
+from typing import Dict
+
+import numpy as np
+
+__all__ = ["check_node_fields", "evaluate_velocity", "check_step_arguments",
+           "predictor_corrector", "keep_in_box"]
+
+
+def check_node_fields(node_fields, n) -> Dict[str, np.ndarray]:
+    """Float copies of named per-node arrays (n, ...), checked finite."""
+    out = {}
+    for name, a in (node_fields or {}).items():
+        a = np.array(a, dtype=float, copy=True)
+        if a.shape[:1] != (n,):
+            raise ValueError(f"node field {name!r} has shape {a.shape}, expected ({n}, ...)")
+        if not np.isfinite(a).all():
+            raise ValueError(f"node field {name!r} has non-finite values "
+                             f"(first at node {np.argwhere(~np.isfinite(a))[0][0]})")
+        out[name] = a
+    return out
+
+
+def evaluate_velocity(velocity, x, on_wall=None):
+    """``velocity(x)`` checked: shape of x, finite (naming the node); the
+    components normal to a wall (``on_wall`` (n, d) bool) set to zero."""
+    v = np.asarray(velocity(x.copy()), dtype=float)
+    if v.shape != x.shape:
+        raise ValueError(f"velocity returned shape {v.shape}, expected {x.shape}")
+    bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
+    if bad.size:
+        raise ValueError(f"velocity returned non-finite values at {bad.size} node(s), "
+                         f"first node {bad[0]} at {x[bad[0]].tolist()}")
+    if on_wall is not None:
+        v = np.where(on_wall, 0.0, v)
+    return v
+
+
+def check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject):
+    """``ValueError`` (``TypeError`` for velocity) naming the first bad
+    argument of :meth:`LagrangianMesh.advance`, before anything moves."""
+    if not callable(velocity):
+        raise TypeError(f"velocity must be a callable x (n, d) -> (n, d), got "
+                        f"{type(velocity).__name__}")
+
+    def number(v):
+        return isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool)
+
+    for name, v in (("dt", dt), ("tol", tol)):
+        if not (number(v) and np.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be positive and finite, got {v!r}")
+    for name, v in (("maxiter", maxiter), ("max_substeps", max_substeps)):
+        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1):
+            raise ValueError(f"{name} must be a positive integer, got {v!r}")
+    if inject is not None and not (number(inject) and np.isfinite(inject) and inject > 1):
+        raise ValueError(f"inject must be None or a factor above 1, got {inject!r}")
+
+
+def predictor_corrector(velocity, x0, dt, tol, maxiter, step):
+    """Trapezoidal update x = x0 + dt/2 (v(x0) + v(x)), iterated from the Euler
+    predictor until the largest change is below ``tol`` times the size of the
+    node set (at most ``maxiter`` corrections; a RuntimeWarning if not).
+    Returns ``(x, iterations, converged)``."""
+    if not np.isfinite(dt) or dt <= 0:
+        raise ValueError(f"dt must be positive and finite, got {dt}")
+    size = float(np.ptp(x0, axis=0).max())
+    v0 = velocity(x0)
+    x = x0 + dt * v0
+    it = 0
+    converged = False
+    for it in range(1, maxiter + 1):
+        xn = x0 + 0.5 * dt * (v0 + velocity(x))
+        change = np.abs(xn - x).max()
+        x = xn
+        if change <= tol * size:
+            converged = True
+            break
+    if not converged:
+        import warnings
+        warnings.warn(f"step {step}: the predictor-corrector did not converge in "
+                      f"{maxiter} iterations (last change {change:.3e}, tolerance "
+                      f"{tol * size:.3e}); reduce dt", RuntimeWarning, stacklevel=3)
+    return x, it, converged
+
+
+def keep_in_box(x, x0, on_wall, box):
+    """Wall coordinates kept exactly; ``ValueError`` naming the first node that
+    would leave the box."""
+    x = np.where(on_wall, x0, x)
+    lo, hi = box
+    out = np.flatnonzero(((x < lo) | (x > hi)).any(axis=1))
+    if out.size:
+        raise ValueError(f"{out.size} node(s) would leave the box, first node {out[0]} "
+                         f"to {x[out[0]].tolist()}: reduce dt")
+    return x

@@ -12,6 +12,17 @@ import numpy as np
 
 __all__ = ["box_nodes", "polyline_nodes", "remove_close"]
 
+# random nodes closer than this fraction of the local spacing to a side or a
+# line node are dropped (near-duplicates make slivers)
+CLEARANCE = 0.25
+# side and line nodes are merged when equal to this many decimals
+MERGE_DECIMALS = 12
+# density values up to 1 + this are accepted as 1 (round-off of the caller)
+DENSITY_SLACK = 1e-12
+# relative widening of a segment's diametral disc, so that points on its
+# circle count as inside (round-off)
+DISC_SLACK = 1e-9
+
 
 def polyline_nodes(vertices, spacing: float, closed: bool = False) -> np.ndarray:
     """Nodes along a polyline, about ``spacing`` apart, vertices included.
@@ -97,56 +108,87 @@ def box_nodes(n: int, width: float = 1.0, height: float = 1.0,
     -------
     (m, 2) array of nodes, no duplicates.
     """
+    _check_box(n, width, height)
+    x0, y0 = map(float, origin)
+    rng = np.random.default_rng(seed)
+    h = np.sqrt(width * height / n)
+    hb = h if boundary_spacing is None else float(boundary_spacing)
+    fixed = _fixed_nodes(x0, y0, width, height, hb, lines)
+    inner = _draw_interior(rng, n, x0, y0, width, height, density)
+    # local spacing ~ h / sqrt(density)
+    loc = h if density is None else h / np.sqrt(np.asarray(density(inner)))
+    margin = np.minimum.reduce([inner[:, 0] - x0, x0 + width - inner[:, 0],
+                                inner[:, 1] - y0, y0 + height - inner[:, 1]])
+    inner = inner[margin > CLEARANCE * np.minimum(loc, hb)]
+    if len(lines):
+        inner = _clear_lines(inner, lines, h, density)
+    return np.concatenate([fixed, inner])
+
+
+def _check_box(n, width, height) -> None:
+    """Raise ``ValueError`` naming the first bad size of :func:`box_nodes`."""
     if int(n) != n or n < 1:
         raise ValueError(f"n must be a positive integer, got {n}")
     for name, val in (("width", width), ("height", height)):
         if not (np.isfinite(val) and val > 0):
             raise ValueError(f"{name} must be a positive number, got {val}")
-    x0, y0 = map(float, origin)
-    rng = np.random.default_rng(seed)
-    h = np.sqrt(width * height / n)
-    hb = h if boundary_spacing is None else float(boundary_spacing)
+
+
+def _fixed_nodes(x0: float, y0: float, width: float, height: float, hb: float,
+                 lines: Sequence[np.ndarray]) -> np.ndarray:
+    """Corners, side nodes ``hb`` apart and the nodes of ``lines`` (duplicates
+    merged when there are lines)."""
     corners = np.array([[x0, y0], [x0 + width, y0], [x0 + width, y0 + height],
                         [x0, y0 + height]])
     walls = polyline_nodes(corners, hb, closed=True)
     fixed = [walls] + [np.asarray(l, dtype=float).reshape(-1, 2) for l in lines]
     fixed = np.concatenate(fixed)
-    fixed = np.unique(np.round(fixed, 12), axis=0) if len(lines) else fixed
+    return np.unique(np.round(fixed, MERGE_DECIMALS), axis=0) if len(lines) else fixed
+
+
+def _draw_interior(rng: np.random.Generator, n: int, x0: float, y0: float, width: float,
+                   height: float, density: Optional[Callable]) -> np.ndarray:
+    """``n`` random points in the box, accepted with probability ``density``."""
     pts = []
     count = 0
     while count < n:
         c = rng.random((2 * n, 2)) * [width, height] + [x0, y0]
         if density is not None:
             d = np.asarray(density(c), dtype=float)
-            if d.shape != (c.shape[0],) or not np.all((d > 0) & (d <= 1 + 1e-12)):
+            if d.shape != (c.shape[0],) or not np.all((d > 0) & (d <= 1 + DENSITY_SLACK)):
                 raise ValueError("density must return one value in (0, 1] per point")
             c = c[rng.random(c.shape[0]) < d]
         c = c[: n - count]
         pts.append(c)
         count += c.shape[0]
-    inner = np.concatenate(pts)
-    # local spacing ~ h / sqrt(density)
+    return np.concatenate(pts)
+
+
+def _clear_lines(inner: np.ndarray, lines: Sequence[np.ndarray], h: float,
+                 density: Optional[Callable]) -> np.ndarray:
+    """``inner`` without the points close to a line node or inside the
+    diametral disc of a line segment."""
+    from scipy.spatial import cKDTree
+    extra = np.concatenate([np.asarray(l, dtype=float).reshape(-1, 2) for l in lines])
+    d, _ = cKDTree(extra).query(inner)
     loc = h if density is None else h / np.sqrt(np.asarray(density(inner)))
-    margin = np.minimum.reduce([inner[:, 0] - x0, x0 + width - inner[:, 0],
-                                inner[:, 1] - y0, y0 + height - inner[:, 1]])
-    inner = inner[margin > 0.25 * np.minimum(loc, hb)]
-    if len(lines):
-        from scipy.spatial import cKDTree
-        extra = np.concatenate([np.asarray(l, dtype=float).reshape(-1, 2) for l in lines])
-        d, _ = cKDTree(extra).query(inner)
-        loc = h if density is None else h / np.sqrt(np.asarray(density(inner)))
-        inner = inner[d > 0.25 * loc]
-        # keep the diametral disc of every line segment empty (Gabriel
-        # property), so each segment is an edge of the Delaunay triangulation
-        # and material interfaces along the lines are not cut by triangles
-        for l in lines:
-            l = np.asarray(l, dtype=float).reshape(-1, 2)
-            if l.shape[0] < 2:
-                continue
-            mid = 0.5 * (l[1:] + l[:-1])
-            rad = 0.5 * np.linalg.norm(l[1:] - l[:-1], axis=1)
-            near = cKDTree(mid).query_ball_point(inner, r=rad.max() * (1 + 1e-9))
-            bad = np.array([any(np.linalg.norm(inner[i] - mid[j]) <= rad[j] * (1 + 1e-9)
-                                for j in js) for i, js in enumerate(near)], dtype=bool)
-            inner = inner[~bad] if bad.size else inner
-    return np.concatenate([fixed, inner])
+    inner = inner[d > CLEARANCE * loc]
+    for l in lines:
+        inner = _clear_diametral_discs(inner, np.asarray(l, dtype=float).reshape(-1, 2))
+    return inner
+
+
+def _clear_diametral_discs(inner: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """``inner`` without the points in the diametral disc of a segment of the
+    polyline ``line``: keeping the discs empty (Gabriel property) makes each
+    segment an edge of the Delaunay triangulation, so material interfaces
+    along the lines are not cut by triangles."""
+    from scipy.spatial import cKDTree
+    if line.shape[0] < 2:
+        return inner
+    mid = 0.5 * (line[1:] + line[:-1])
+    rad = 0.5 * np.linalg.norm(line[1:] - line[:-1], axis=1)
+    near = cKDTree(mid).query_ball_point(inner, r=rad.max() * (1 + DISC_SLACK))
+    bad = np.array([any(np.linalg.norm(inner[i] - mid[j]) <= rad[j] * (1 + DISC_SLACK)
+                        for j in js) for i, js in enumerate(near)], dtype=bool)
+    return inner[~bad] if bad.size else inner

@@ -59,6 +59,13 @@ __all__ = ["Material", "combine_materials", "maxwell_coefficients", "strain_rate
 
 ArrayLike = Union[float, np.ndarray]
 
+# Picard iterations stop once the effective viscosity changes by less than
+# this (max |log ratio|) in the first iteration, or after the second
+VISCOSITY_SETTLED = 1e-12
+# default lower bound of the effective viscosity, relative to the smallest
+# visco-elastic viscosity (keeps the Stokes system solvable where yielding)
+MIN_VISCOSITY_FACTOR = 1e-8
+
 
 # ---------------------------------------------------------------------------
 # material
@@ -499,6 +506,68 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         If the Picard iterations do not converge in ``maxiter`` iterations
         (naming the count and the last residual).
     """
+    st = _step_setup(spaces, material, tau_old, dt, f, gravity, plastic_strain, rotation,
+                     min_viscosity)
+    u = None if u_guess is None else np.asarray(u_guess, dtype=float)
+    G = None if u is None else np.asarray(spaces.ubasis.interpolate(u).grad)
+    eta_eff = st.start_viscosity(eta_guess)
+    walls = (prescribed, free_slip, no_slip, pressure_mean)
+    pic = _picard(spaces, st, u, G, eta_eff, walls, constraints, tol, maxiter)
+    return _vep_result(st, pic)
+
+
+@dataclass
+class _StepSetup:
+    """The checked input of one :func:`vep_step` at the quadrature points."""
+
+    tau_old: np.ndarray          # (2, 2, ne, nq) stress at the start
+    dt: float
+    rotation: str
+    eta_ve: np.ndarray           # (ne, nq) visco-elastic viscosity
+    chi: np.ndarray              # (ne, nq) 1 / (mu dt), zero for mu = inf
+    yield_stress: np.ndarray     # (ne, nq)
+    eta_min: float               # lower bound of the effective viscosity
+    load: np.ndarray             # (2, ne, nq) body force
+    plastic_strain: np.ndarray   # (ne, nq) at the start
+
+    @property
+    def iterate(self) -> bool:
+        """True if the viscosity or the stress depends on the velocity."""
+        return bool(np.isfinite(self.yield_stress).any()) or self.rotation != "none"
+
+    def rotated(self, G: Optional[np.ndarray]) -> np.ndarray:
+        """The old stress rotated with the spin of the velocity gradient ``G``."""
+        if self.rotation == "none" or G is None:
+            return self.tau_old
+        return rotate_stress(self.tau_old, spin(G), self.dt, self.rotation)
+
+    def start_viscosity(self, eta_guess: Optional[np.ndarray]) -> np.ndarray:
+        """The effective viscosity of the first Picard iteration."""
+        if eta_guess is None:
+            return self.eta_ve.copy()
+        ne, nq = self.eta_ve.shape
+        eg = np.asarray(eta_guess, dtype=float)
+        if eg.shape != (ne, nq) or not np.isfinite(eg).all():
+            raise ValueError(f"eta_guess must be finite with shape ({ne}, {nq}), got "
+                             f"{eg.shape}")
+        return np.clip(eg, self.eta_min, self.eta_ve)
+
+
+@dataclass
+class _PicardResult:
+    """The last Picard iterate of :func:`vep_step`."""
+
+    solution: StokesSolution
+    grad: np.ndarray             # (2, 2, ne, nq) velocity gradient
+    strain_rate: np.ndarray      # (2, 2, ne, nq)
+    eta_eff: np.ndarray          # (ne, nq) viscosity of the last solve
+    iterations: int
+    residual: float
+    history: list
+
+
+def _checked_stress(spaces: StokesSpaces, tau_old, dt, rotation: str) -> np.ndarray:
+    """``tau_old`` as a float array, after checking ``dt``, ``rotation`` and it."""
     if not (np.isscalar(dt) and np.isfinite(dt) and dt > 0):
         raise ValueError(f"time step dt must be a positive finite number, got {dt!r}")
     if rotation not in ("jaumann", "exact", "none"):
@@ -510,12 +579,22 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     bad = ~np.isfinite(tau_old).all(axis=(0, 1))
     if bad.any():
         raise ValueError("tau_old is not finite" + _where(bad))
+    return tau_old
+
+
+def _step_setup(spaces: StokesSpaces, material: Material, tau_old, dt, f, gravity,
+                plastic_strain, rotation: str, min_viscosity) -> _StepSetup:
+    """Material coefficients, load and start state of one step at the
+    quadrature points (raising ``ValueError`` for bad input)."""
+    tau_old = _checked_stress(spaces, tau_old, dt, rotation)
+    ne, nq = tau_old.shape[2:]
     eta = material.at_points("viscosity", ne, nq)
     mu = material.at_points("shear_modulus", ne, nq)
     Y = material.at_points("yield_stress", ne, nq)
     eta_ve, keep = maxwell_coefficients(eta, mu, dt)
     chi = keep / eta_ve           # 1 / (mu dt), zero for mu = inf
-    eta_min = 1e-8 * float(eta_ve.min()) if min_viscosity is None else float(min_viscosity)
+    eta_min = (MIN_VISCOSITY_FACTOR * float(eta_ve.min()) if min_viscosity is None
+               else float(min_viscosity))
     load = quadrature_values(spaces, f, "body force f", shape=(2,))
     if gravity is not None:
         if material.density is None:
@@ -525,62 +604,66 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     ps = np.zeros((ne, nq)) if plastic_strain is None else np.asarray(plastic_strain, dtype=float)
     if ps.shape != (ne, nq):
         raise ValueError(f"plastic_strain has shape {ps.shape}, expected ({ne}, {nq})")
-    u = None if u_guess is None else np.asarray(u_guess, dtype=float)
-    G = None if u is None else np.asarray(spaces.ubasis.interpolate(u).grad)
+    return _StepSetup(tau_old, dt, rotation, eta_ve, chi, Y, eta_min, load, ps)
 
-    def rotated(Gv):
-        if rotation == "none" or Gv is None:
-            return tau_old
-        return rotate_stress(tau_old, spin(Gv), dt, rotation)
 
-    eta_eff = eta_ve.copy()
-    if eta_guess is not None:
-        eg = np.asarray(eta_guess, dtype=float)
-        if eg.shape != (ne, nq) or not np.isfinite(eg).all():
-            raise ValueError(f"eta_guess must be finite with shape ({ne}, {nq}), got "
-                             f"{eg.shape}")
-        eta_eff = np.clip(eg, eta_min, eta_ve)
-    plastic = bool(np.isfinite(Y).any())
+def _plastic_viscosity(st: _StepSetup, eps: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """Effective viscosity: ``eta_ve``, or ``Y / (2 edot_eff_II)`` where the
+    trial stress exceeds the yield stress; at least ``eta_min``."""
+    edot = eps + 0.5 * st.chi[None, None] * st.rotated(G)
+    IIe = second_invariant(edot)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eta_vp = np.where(2.0 * st.eta_ve * IIe > st.yield_stress,
+                          st.yield_stress / (2.0 * IIe), st.eta_ve)
+    return np.maximum(eta_vp, st.eta_min)
+
+
+def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
+            G: Optional[np.ndarray], eta_eff: np.ndarray, walls: tuple, constraints,
+            tol: float, maxiter: int) -> _PicardResult:
+    """Stokes solves with the viscosity and rotated stress of the previous
+    iterate until the relative velocity change is below ``tol``."""
     history = []
     res = np.inf
     for it in range(1, maxiter + 1):
-        tau_rot = rotated(G)
-        sol = solve_stokes_bc(spaces, eta_eff, load, (eta_eff * chi)[None, None] * tau_rot,
-                              prescribed, free_slip, no_slip, pressure_mean,
-                              constraints=constraints)
+        tau0 = (eta_eff * st.chi)[None, None] * st.rotated(G)
+        sol = solve_stokes_bc(spaces, eta_eff, st.load, tau0, *walls, constraints=constraints)
         G = velocity_gradient(spaces, sol)
         eps = strain_rate(G)
-        edot = eps + 0.5 * chi[None, None] * rotated(G)
-        IIe = second_invariant(edot)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            eta_vp = np.where(2.0 * eta_ve * IIe > Y, Y / (2.0 * IIe), eta_ve)
-        eta_new = np.maximum(eta_vp, eta_min)
+        eta_new = _plastic_viscosity(st, eps, G)
         if u is None:
-            res = np.inf if (plastic or rotation != "none") else 0.0
+            res = np.inf if st.iterate else 0.0
         else:
             res = float(np.abs(sol.u - u).max() / max(np.abs(sol.u).max(), 1e-300))
         history.append(res)
         u = sol.u
         d_eta = float(np.abs(np.log(eta_new / eta_eff)).max())
         eta_eff = eta_new
-        if res <= tol and (d_eta <= 1e-12 or it > 1):
+        if res <= tol and (d_eta <= VISCOSITY_SETTLED or it > 1):
             break
-        if not plastic and rotation == "none":
+        if not st.iterate:
             break
     else:
         raise RuntimeError(f"visco-elasto-plastic Picard iterations did not converge: "
                            f"{maxiter} iterations, relative velocity change {res:.3e} > tol "
                            f"{tol:.1e} (raise maxiter or min_viscosity, or shorten dt)")
-    tau_rot = rotated(G)
-    edot = eps + 0.5 * chi[None, None] * tau_rot
-    tau_trial = 2.0 * eta_ve[None, None] * edot
-    tau_new, factor = return_map(tau_trial, Y)
+    return _PicardResult(sol, G, eps, eta_eff, it, res, history)
+
+
+def _vep_result(st: _StepSetup, pic: _PicardResult) -> VEPStep:
+    """New stress by the radial return from the last iterate, and the plastic
+    strain rate and strain."""
+    edot = pic.strain_rate + 0.5 * st.chi[None, None] * st.rotated(pic.grad)
+    tau_trial = 2.0 * st.eta_ve[None, None] * edot
+    tau_new, factor = return_map(tau_trial, st.yield_stress)
     bad = ~np.isfinite(tau_new).all(axis=(0, 1))
     if bad.any():
         raise ValueError("the updated stress is not finite" + _where(bad)
                          + f" ({int(bad.any(axis=1).sum())} element(s))")
-    pl = edot - tau_new / (2.0 * eta_ve[None, None])
+    pl = edot - tau_new / (2.0 * st.eta_ve[None, None])
     plII = second_invariant(pl)
-    return VEPStep(tau=tau_new, solution=sol, strain_rate=eps, plastic_strain_rate=pl,
-                   plastic_rate_II=plII, plastic_strain=ps + dt * plII, eta_eff=eta_eff,
-                   yielded=factor < 1.0, iterations=it, residual=res, history=history)
+    return VEPStep(tau=tau_new, solution=pic.solution, strain_rate=pic.strain_rate,
+                   plastic_strain_rate=pl, plastic_rate_II=plII,
+                   plastic_strain=st.plastic_strain + st.dt * plII, eta_eff=pic.eta_eff,
+                   yielded=factor < 1.0, iterations=pic.iterations, residual=pic.residual,
+                   history=pic.history)

@@ -64,21 +64,24 @@ pressure is fixed by its mean (zero) through a Lagrange multiplier.
 
 Solvers
 -------
-``solver="schur"`` (default) factorises the viscous block (sparse LU in a
-symmetric ordering) and solves the pressure Schur complement by
-preconditioned conjugate gradients (preconditioner: the lumped
-1/eta-weighted pressure mass). ``solver="direct"`` factorises the whole
-saddle-point system (slower: natural-neighbour stencils are wide).
-``solver="minres"`` uses MINRES with a block-diagonal preconditioner: one
-smoothed-aggregation AMG V-cycle (pyamg, rigid-body modes as near null
-space) for the viscous block and the diagonal of the viscosity-scaled
-pressure mass matrix for the pressure; the mean pressure is fixed by a
-rank-one term. Iteration counts are reported in :class:`StokesSolution`.
+``solver="schur"`` (default), ``"schur-amg"``, ``"direct"`` and
+``"minres"``: see :mod:`skfem_nem.models.stokes_solvers`. Iteration counts
+are reported in :class:`StokesSolution`.
+
+Module layout
+-------------
+This module holds what knows about the discretisation: the spaces, the
+forms, the assembly (with the static condensation of the bubbles) and the
+wall conditions. The solvers are plain linear algebra on the assembled
+blocks and live in :mod:`skfem_nem.models.stokes_solvers`, which never
+imports this module; :func:`solve_stokes` here imposes the walls,
+prescribed velocities and extra constraints, hands the reduced saddle-point
+problem to the chosen solver and maps its solution back.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Optional, Sequence, Union
+from typing import Callable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import scipy.sparse as sp
@@ -89,6 +92,7 @@ from skfem.refdom import RefTri
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from ..basis.natural_neighbour import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
+from .stokes_solvers import SOLVERS, SaddlePointProblem, SaddlePointSolution, block_inverse
 
 __all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes", "outline_flux",
            "boundary_flux",
@@ -492,7 +496,7 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         Abn = viscous.assemble(ub, bb, eta=e).tocsr()       # (nb, nu)
         Bb = cache["Bb"]                                     # (np, nb)
         fb = loads(bb)
-        Ainv = _block_inverse(Abb, bb.element_dofs)
+        Ainv = block_inverse(Abb, bb.element_dofs)
         AiAbn = (Ainv @ Abn).tocsr()
         A = (A - Abn.T @ AiAbn).tocsr()
         B = (B - Bb @ AiAbn).tocsr()
@@ -501,36 +505,6 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         g = -(Bb @ (Ainv @ fb))
         bubble = (Ainv, Abn, Bb, fb)
     return StokesSystem(0.5 * (A + A.T), B, 0.5 * (S + S.T), Mp, m, b, e, g, bubble)
-
-
-def _block_inverse(A: sp.csr_matrix, element_dofs: np.ndarray) -> sp.csr_matrix:
-    """Inverse of a matrix that is block diagonal with one block per element
-    (the dofs ``element_dofs[:, e]`` of element e)."""
-    k, ne = element_dofs.shape
-    rows = np.repeat(element_dofs.T, k, axis=1).ravel()          # (ne*k*k)
-    cols = np.tile(element_dofs.T, (1, k)).ravel()
-    blocks = np.asarray(A[rows, cols]).reshape(ne, k, k)
-    det = np.linalg.det(blocks)
-    bad = ~(np.abs(det) > 0)
-    if bad.any():
-        raise ValueError(f"degenerate triangle {int(np.flatnonzero(bad)[0])}: its bubble "
-                         f"block is singular ({int(bad.sum())} triangle(s))")
-    inv = np.linalg.inv(blocks)
-    return sp.csr_matrix((inv.ravel(), (rows, cols)), shape=A.shape)
-
-
-def _rigid_modes(spaces: StokesSpaces, free: np.ndarray) -> np.ndarray:
-    ub = spaces.ubasis
-    loc = ub.doflocs  # (2, nu)
-    comp = np.zeros(ub.N, dtype=int)
-    for dofs_ in (ub.dofs.nodal_dofs, ub.dofs.facet_dofs):  # rows: u^1, u^2
-        comp[dofs_[1::2].ravel()] = 1
-    Bm = np.zeros((ub.N, 3))
-    Bm[comp == 0, 0] = 1.0
-    Bm[comp == 1, 1] = 1.0
-    Bm[comp == 0, 2] = -loc[1, comp == 0]
-    Bm[comp == 1, 2] = loc[0, comp == 1]
-    return Bm[free]
 
 
 def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
@@ -596,13 +570,37 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         If an iterative solver does not reach ``tol`` in ``maxiter``
         iterations (naming both), or the system is singular.
     """
-    if solver not in ("schur", "schur-amg", "direct", "minres"):
+    if solver not in SOLVERS:
         raise ValueError(f"solver must be 'schur', 'schur-amg', 'direct' or 'minres', got "
                          f"{solver!r}")
     if not (np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive number, got {tol}")
     sys_ = assemble_stokes(spaces, eta, f, tau0) if system is None else system
-    nu, npr = spaces.n_velocity, spaces.n_pressure
+    D, uD = _fixed_velocity(spaces, free_slip, no_slip, prescribed)
+    if pressure_mean is None:
+        pressure_mean = _walls_fix_pressure(spaces, D)
+    red = _reduce(spaces, sys_, D, uD, pressure_mean, constraints)
+    info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean}
+    x = SOLVERS[solver](red.problem, tol, maxiter, info)
+    return _stokes_solution(spaces, sys_, red, x, solver, info)
+
+
+@dataclass
+class _Reduced:
+    """The Stokes system with its fixed velocity dofs taken out."""
+
+    problem: SaddlePointProblem     # on the free dofs, constraint rows appended
+    A: sp.csr_matrix                # (nu, nu) whole viscous block
+    B: sp.csr_matrix                # (np + k, nu) whole divergence and constraint rows
+    fixed: np.ndarray               # fixed velocity dofs
+    u0: np.ndarray                  # (nu,) their values (zero elsewhere)
+    n_pressure: int                 # pressure dofs (without the k multipliers)
+
+
+def _fixed_velocity(spaces: StokesSpaces, free_slip, no_slip,
+                    prescribed: Optional[tuple]) -> Tuple[np.ndarray, np.ndarray]:
+    """Velocity dofs fixed by the walls and ``prescribed``, and their values."""
+    nu = spaces.n_velocity
     D = wall_dofs(spaces, free_slip, no_slip)
     uD = np.zeros(nu)
     if prescribed is not None:
@@ -617,176 +615,74 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
                              f"not finite")
         D = np.union1d(D, pd_)
         uD[pd_] = pv
-    if pressure_mean is None:
-        nd = spaces.ubasis.dofs.nodal_dofs
-        bn = np.unique(spaces.mesh.facets[:, spaces.mesh.boundary_facets()])
-        fixed_ = np.zeros(nu, dtype=bool)
-        fixed_[D] = True
-        pressure_mean = bool(np.all(fixed_[nd[0, bn]] | fixed_[nd[1, bn]]))
-    free = np.setdiff1d(np.arange(nu), D)
-    Afull, Bfull = sys_.A.tocsr(), sys_.B.tocsr()
-    g0 = np.zeros(npr) if sys_.g is None else sys_.g
-    mvec = sys_.m
-    Sb = sys_.S
+    return D, uD
+
+
+def _walls_fix_pressure(spaces: StokesSpaces, D: np.ndarray) -> bool:
+    """True if every boundary node has a fixed velocity component (no open
+    boundary: the pressure is then determined only up to a constant)."""
+    nd = spaces.ubasis.dofs.nodal_dofs
+    bn = np.unique(spaces.mesh.facets[:, spaces.mesh.boundary_facets()])
+    fixed_ = np.zeros(spaces.n_velocity, dtype=bool)
+    fixed_[D] = True
+    return bool(np.all(fixed_[nd[0, bn]] | fixed_[nd[1, bn]]))
+
+
+def _with_constraints(sys_: StokesSystem, A: sp.csr_matrix, constraints, nu: int):
+    """``B``, ``g``, ``m``, ``S`` and the pressure preconditioner diagonal, with
+    the rows of the extra constraints ``C u = 0`` appended as multipliers."""
+    B = sys_.B.tocsr()
+    g = np.zeros(sys_.B.shape[0]) if sys_.g is None else sys_.g
+    m, S = sys_.m, sys_.S
     dp = np.asarray(sys_.Mp.sum(axis=1)).ravel()  # lumped 1/eta-weighted mass
-    npr0 = npr
-    if constraints is not None:
-        C = sp.csr_matrix(constraints)
-        if C.shape[1] != nu:
-            raise ValueError(f"constraints have {C.shape[1]} columns, the velocity {nu} dofs")
-        k = C.shape[0]
-        Bfull = sp.vstack([Bfull, C]).tocsr()
-        g0 = np.concatenate([g0, np.zeros(k)])
-        mvec = np.concatenate([mvec, np.zeros(k)])
-        Sb = sp.block_diag([Sb, sp.csr_matrix((k, k))]).tocsr()
-        # Jacobi estimate of C A^-1 C^T for the multipliers' preconditioner
-        dA = Afull.diagonal()
-        dp = np.concatenate([dp, np.asarray(C.multiply(C) @ (1.0 / dA)).ravel()])
-        npr = npr + k
-    A = Afull[free][:, free].tocsc()
-    B = Bfull[:, free].tocsr()
-    fu = sys_.f[free] - Afull[free][:, D] @ uD[D]
-    gp = g0 - Bfull[:, D] @ uD[D]
-    u = uD.copy()
-    info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean}
+    if constraints is None:
+        return B, g, m, S, dp
+    C = sp.csr_matrix(constraints)
+    if C.shape[1] != nu:
+        raise ValueError(f"constraints have {C.shape[1]} columns, the velocity {nu} dofs")
+    k = C.shape[0]
+    # Jacobi estimate of C A^-1 C^T for the multipliers' preconditioner
+    dcc = np.asarray(C.multiply(C) @ (1.0 / A.diagonal())).ravel()
+    return (sp.vstack([B, C]).tocsr(), np.concatenate([g, np.zeros(k)]),
+            np.concatenate([m, np.zeros(k)]), sp.block_diag([S, sp.csr_matrix((k, k))]).tocsr(),
+            np.concatenate([dp, dcc]))
+
+
+def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndarray,
+            pressure_mean: bool, constraints) -> _Reduced:
+    """The saddle-point problem on the free velocity dofs (fixed values moved
+    to the right side)."""
+    nu = spaces.n_velocity
+    free = np.setdiff1d(np.arange(nu), D)
+    Afull = sys_.A.tocsr()
+    Bfull, g0, mvec, Sb, dp = _with_constraints(sys_, Afull, constraints, nu)
     area = float(mvec.sum())
-    n1 = free.size
-
-    def finish(xu, p, name, its, res):
-        u[free] = xu
-        r = Afull @ u + Bfull.T @ p - sys_.f
-        reaction = np.zeros(nu)
-        reaction[D] = r[D]
-        info["reaction"] = reaction
-        info["multipliers"] = p[npr0:]
-        p = p[:npr0]
-        if sys_.bubble is not None:
-            Ainv, Abn, Bb, fb = sys_.bubble
-            info["bubble"] = Ainv @ (fb - Abn @ u - Bb.T @ p)
-        return StokesSolution(spaces, u, p, name, its, res, info)
-
-    def full_residual(xu, xp):
-        r1 = A @ xu + B.T @ xp - fu
-        r2 = B @ xu - Sb @ xp - gp
-        if pressure_mean:
-            r2 = r2 - mvec * ((mvec @ r2) / (mvec @ mvec))  # the multiplier's share
-        return float(np.sqrt(r1 @ r1 + r2 @ r2) / max(np.linalg.norm(fu), np.linalg.norm(gp),
-                                                      1e-300))
-
-    if solver == "direct":
-        if pressure_mean:
-            K = sp.bmat([[A, B.T, None],
-                         [B, -Sb, sp.csr_matrix(mvec[:, None])],
-                         [None, sp.csr_matrix(mvec[None, :]), None]], format="csc")
-            rhs = np.concatenate([fu, gp, [0.0]])
-        else:
-            K = sp.bmat([[A, B.T], [B, -Sb]], format="csc")
-            rhs = np.concatenate([fu, gp])
-        x = spla.spsolve(K, rhs)
-        if not np.isfinite(x).all():
-            raise RuntimeError("the Stokes system is singular: check the wall conditions "
-                               "(a rigid-body motion left free?) and the viscosity")
-        p = x[n1:n1 + npr]
-        return finish(x[:n1], p, "direct", 1, full_residual(x[:n1], p))
     # the mean pressure is fixed by a rank-one term c m m^T of the size of 1/eta
     c = float(sys_.Mp.diagonal().sum()) / area ** 2 if pressure_mean else 0.0
-    count = [0]
+    problem = SaddlePointProblem(
+        A=Afull[free][:, free].tocsc(), B=Bfull[:, free].tocsr(), S=Sb,
+        f=sys_.f[free] - Afull[free][:, D] @ uD[D], g=g0 - Bfull[:, D] @ uD[D], m=mvec,
+        dp=dp, mean_weight=c, pressure_mean=pressure_mean, ubasis=spaces.ubasis, free=free)
+    return _Reduced(problem, Afull, Bfull, D, uD, spaces.n_pressure)
 
-    def cb(*args):
-        count[0] += 1
 
-    if solver in ("schur", "schur-amg"):
-        if solver == "schur":
-            try:
-                lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True))
-            except RuntimeError as err:
-                raise RuntimeError(f"the viscous block is singular ({err}): check the wall "
-                                   f"conditions (a rigid-body motion left free?)") from None
-        else:
-            # no factorisation: the viscous block is solved by CG with an AMG
-            # V-cycle, to a tolerance well below the outer one
-            import pyamg
-            ml = pyamg.smoothed_aggregation_solver(
-                A.tocsr(), B=_rigid_modes(spaces, free), symmetry="symmetric",
-                strength="symmetric", max_coarse=500)
-            Pa = ml.aspreconditioner(cycle="V")
-            inner = {"its": 0}
-
-            class _AMGSolve:
-                def solve(self, rhs_):
-                    its = [0]
-                    y, fl = spla.cg(A, rhs_, M=Pa, rtol=min(1e-3, tol * 1e-2),
-                                    maxiter=1000, callback=lambda *_: its.__setitem__(0, its[0] + 1))
-                    inner["its"] += its[0]
-                    if fl != 0:
-                        raise RuntimeError("inner AMG-CG solve of the viscous block did not "
-                                           "converge in 1000 iterations")
-                    return y
-
-            lu = _AMGSolve()
-            info["inner_iterations"] = inner
-
-        def schur(q):
-            return B @ lu.solve(B.T @ q) + Sb @ q + c * mvec * (mvec @ q)
-
-        Sop = spla.LinearOperator((npr, npr), matvec=schur, dtype=float)
-        Pp = spla.LinearOperator((npr, npr), matvec=lambda q: q / dp, dtype=float)
-        g = B @ lu.solve(fu) - gp
-        p, flag = spla.cg(Sop, g, M=Pp, rtol=tol, maxiter=maxiter, callback=cb)
-        if flag != 0:
-            r = np.linalg.norm(schur(p) - g) / max(np.linalg.norm(g), 1e-300)
-            raise RuntimeError(f"pressure CG did not converge: {count[0]} iterations, "
-                               f"relative residual {r:.3e} > tol {tol:.1e} (raise maxiter)")
-        xu = lu.solve(fu - B.T @ p)
-        if pressure_mean:
-            p = p - (mvec @ p) / area
-        return finish(xu, p, solver, count[0], full_residual(xu, p))
-    # MINRES with block-diagonal preconditioner
-    import pyamg
-    Bm = _rigid_modes(spaces, free)
-    ml = pyamg.smoothed_aggregation_solver(A.tocsr(), B=Bm, symmetry="symmetric",
-                                           strength="symmetric", max_coarse=500)
-    Pu = ml.aspreconditioner(cycle="V")
-
-    def matvec(x):
-        xu, xp = x[:n1], x[n1:]
-        return np.concatenate([A @ xu + B.T @ xp,
-                               B @ xu - Sb @ xp - c * mvec * (mvec @ xp)])
-
-    K = spla.LinearOperator((n1 + npr, n1 + npr), matvec=matvec, dtype=float)
-    M = spla.LinearOperator(K.shape, matvec=lambda x: np.concatenate([Pu @ x[:n1], x[n1:] / dp]),
-                            dtype=float)
-    rhs = np.concatenate([fu, gp])
-    # MINRES's own residual estimate drifts from the true one on these badly
-    # conditioned systems: restart it on the true residual until the
-    # preconditioned residual norm (the norm MINRES minimises) meets tol
-    bnorm = float(np.sqrt(abs(rhs @ M.matvec(rhs)))) or 1.0
-    x = np.zeros_like(rhs)
-    r = rhs.copy()
-    res_m = 1.0
-    flag = 0
-    restarts = 0
-    while count[0] < maxiter:
-        res_m = float(np.sqrt(abs(r @ M.matvec(r)))) / bnorm
-        if res_m <= 10 * tol:
-            break
-        dx, flag = spla.minres(K, r, M=M, rtol=min(0.5, 0.5 * tol / res_m),
-                               maxiter=maxiter - count[0], callback=cb)
-        x = x + dx
-        r = rhs - matvec(x)
-        restarts += 1
-    res = full_residual(x[:n1], x[n1:])
-    info["preconditioned_residual"] = res_m
-    info["restarts"] = restarts
-    if not res_m <= 10 * tol:
-        raise RuntimeError(f"MINRES did not converge: {count[0]} iterations, relative "
-                           f"preconditioned residual {res_m:.3e} > {10 * tol:.1e} (raise "
-                           f"maxiter, or use solver='schur' for strong viscosity contrasts)")
-    p = x[n1:]
-    if pressure_mean:
-        p = p - (mvec @ p) / area
-    info["amg_levels"] = len(ml.levels)
-    return finish(x[:n1], p, "minres", count[0], res)
+def _stokes_solution(spaces: StokesSpaces, sys_: StokesSystem, red: _Reduced,
+                     x: SaddlePointSolution, solver: str, info: dict) -> StokesSolution:
+    """Whole velocity, reactions of the fixed dofs, multipliers and condensed
+    bubbles from the solution of the reduced problem."""
+    u = red.u0.copy()
+    u[red.problem.free] = x.u
+    p = x.p
+    r = red.A @ u + red.B.T @ p - sys_.f
+    reaction = np.zeros(spaces.n_velocity)
+    reaction[red.fixed] = r[red.fixed]
+    info["reaction"] = reaction
+    info["multipliers"] = p[red.n_pressure:]
+    p = p[:red.n_pressure]
+    if sys_.bubble is not None:
+        Ainv, Abn, Bb, fb = sys_.bubble
+        info["bubble"] = Ainv @ (fb - Abn @ u - Bb.T @ p)
+    return StokesSolution(spaces, u, p, solver, x.iterations, x.residual, info)
 
 
 def inf_sup_constant(spaces: StokesSpaces, stabilised: Optional[bool] = None,

@@ -502,7 +502,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         smoothed over cells, the boundary integral of each function times the
         normal over the cell's area (:mod:`skfem_nem.basis.smoothing`). Three cells
         per triangle (one at each vertex, one integration point each: the
-        3-point rule's points, weights |T|/3) or one per tetrahedron (4
+        3-point rule's points, weights ``|T|/3``) or one per tetrahedron (4
         points). Consistent: the linear patch test passes to round-off and
         the rates are optimal. ``"gauss"``: values and exact gradients at the
         points of a Gauss rule (``intorder``, ``npoints``, ``quadrature``;
@@ -529,6 +529,28 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     ``get_dofs``, ``interpolate``, ``project``, ``probes``, ``plot``. Trial
     and test bases may be mixed with scikit-fem ``CellBasis`` objects on the
     same mesh and quadrature.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skfem import BilinearForm, Functional
+    >>> from skfem.helpers import dot, grad
+    >>> from skfem_nem import NaturalNeighbourBasis, delaunay_mesh
+    >>> nodes = np.array([[0., 0.], [1., 0.], [1., 1.], [0., 1.], [0.5, 0.4]])
+    >>> basis = NaturalNeighbourBasis(delaunay_mesh(nodes))
+    >>> basis.integration, int(basis.N)                # one function per node
+    ('smoothed', 5)
+    >>> @BilinearForm
+    ... def laplace(u, v, w):
+    ...     return dot(grad(u), grad(v))
+    >>> A = laplace.assemble(basis)
+    >>> A.shape, bool(np.allclose(A @ np.ones(5), 0))   # constants in the kernel
+    ((5, 5), True)
+    >>> @Functional
+    ... def area(w):
+    ...     return 1.0 + 0.0 * w.x[0]
+    >>> round(float(area.assemble(basis)), 12)
+    1.0
     """
 
     def __init__(self, mesh: MeshTri | MeshTet, elem: Optional[Element] = None,

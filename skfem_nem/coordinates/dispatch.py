@@ -143,6 +143,25 @@ def sibson_coordinates(nodes_or_triangulation, x, gradient: bool = False, **kwar
     the area method is the default (``method="lasserre"`` selects the paper's
     Box 1); 3D and 4D nodes use the Lasserre method. See
     :func:`natural_neighbour_coordinates` for all options and errors.
+
+    Examples
+    --------
+    The coordinates sum to one and reproduce linear functions, here the
+    points' own coordinates and a linear field with its gradient:
+
+    >>> import numpy as np
+    >>> from skfem_nem import sibson_coordinates
+    >>> nodes = np.array([[0., 0.], [1., 0.], [1., 1.], [0., 1.], [0.5, 0.4]])
+    >>> x = np.array([[0.5, 0.5], [0.25, 0.75]])
+    >>> Phi = sibson_coordinates(nodes, x)
+    >>> Phi.shape, Phi.toarray().sum(axis=1).round(12).tolist()
+    ((2, 5), [1.0, 1.0])
+    >>> (Phi @ nodes).round(12).tolist()
+    [[0.5, 0.5], [0.25, 0.75]]
+    >>> f = 3 + 2 * nodes[:, 0] - nodes[:, 1]
+    >>> Phi, (Dx, Dy) = sibson_coordinates(nodes, x, gradient=True)
+    >>> (Dx @ f).round(12).tolist(), (Dy @ f).round(12).tolist()
+    ([2.0, 2.0], [-1.0, -1.0])
     """
     return natural_neighbour_coordinates(nodes_or_triangulation, x, gradient=gradient,
                                          kind="sibson", **kwargs)

@@ -243,6 +243,25 @@ class LagrangianMesh:
     per-step dicts: step, time, dt, iterations (predictor-corrector),
     substeps, flips, relocated, injected, min_angle (degrees),
     triangles_changed, stencils_affected).
+
+    Examples
+    --------
+    A shear flow moves the interior node; the wall nodes keep their wall
+    coordinate, node fields travel with the nodes:
+
+    >>> import numpy as np
+    >>> from skfem_nem import LagrangianMesh
+    >>> nodes = np.array([[0., 0.], [1., 0.], [1., 1.], [0., 1.], [0.5, 0.4]])
+    >>> lm = LagrangianMesh(nodes, node_fields={"height": nodes[:, 1]})
+    >>> def shear(x):
+    ...     return np.c_[0.2 * x[:, 1] * (1 - x[:, 1]), np.zeros(len(x))]
+    >>> report = lm.advance(shear, dt=0.5)
+    >>> lm.time, lm.step, lm.triangulation.is_delaunay()
+    (0.5, 1, True)
+    >>> lm.nodes[4].round(6).tolist(), lm.nodes[2].tolist()
+    ([0.524, 0.4], [1.0, 1.0])
+    >>> lm.node_fields["height"][4].item()
+    0.4
     """
 
     def __init__(self, nodes, node_fields: Optional[Dict[str, np.ndarray]] = None,
@@ -354,7 +373,7 @@ class LagrangianMesh:
         self._invalidate()
 
     def ip_integral(self, name: str) -> np.ndarray:
-        """Integral over the domain of an integration-point field (weights |T|/3:
+        """Integral over the domain of an integration-point field (weights ``|T|/3``:
         the 3-point rule, and the areas of the smoothing cells)."""
         P, T = self.nodes, self.triangles
         a = 0.5 * np.abs(_cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))

@@ -36,6 +36,21 @@ def delaunay_mesh(points) -> MeshTri | MeshTet:
     the co-spherical cells with flat (zero-volume) tetrahedra; they are kept
     (the natural-neighbour basis gives their quadrature points zero weight),
     but scikit-fem's Lagrange elements cannot be used on such a mesh.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skfem_nem import delaunay_mesh
+    >>> points = np.array([[0., 0.], [1., 0.], [1., 1.], [0., 1.], [0.5, 0.4]])
+    >>> mesh = delaunay_mesh(points)
+    >>> type(mesh).__name__, mesh.t.shape
+    ('MeshTri1', (3, 4))
+    >>> bool((mesh.p.T == points).all())   # node i is points[i]
+    True
+    >>> cube = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]]
+    >>> tets = delaunay_mesh(np.array(cube, dtype=float))
+    >>> type(tets).__name__, tets.t.shape
+    ('MeshTet1', (4, 3))
     """
     shape = np.shape(points)
     if len(shape) == 2 and shape[1] == 3:

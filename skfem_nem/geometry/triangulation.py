@@ -88,6 +88,21 @@ class Triangulation:
     ValueError
         For non-finite coordinates, fewer than 3 nodes, duplicate nodes, all
         nodes collinear, or nodes that Qhull would drop (naming the node).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skfem_nem import Triangulation
+    >>> nodes = np.array([[0., 0.], [1., 0.], [1., 1.], [0., 1.], [0.5, 0.4]])
+    >>> tri = Triangulation(nodes)
+    >>> tri.npoints, tri.ntriangles, tri.is_delaunay()
+    (5, 4, True)
+    >>> (tri.locate([[0.5, 0.1], [2.0, 2.0]]) >= 0).tolist()   # inside, outside the hull
+    [True, False]
+    >>> tri.insert([[0.8, 0.7]]).tolist()                       # index of the new node
+    [5]
+    >>> tri.ntriangles, tri.is_delaunay()
+    (6, True)
     """
 
     def __init__(self, nodes, triangles=None, make_delaunay: bool = True):

@@ -33,115 +33,15 @@ from numpy import ndarray
 from skfem import MeshTet, MeshTri
 from skfem.assembly.basis import AbstractBasis, FacetBasis
 from skfem.element import DiscreteField, Element, ElementTetP1, ElementTriP1, ElementVector
-from skfem.quadrature import get_quadrature
-from skfem.refdom import RefTet, RefTri
 
 from . import assembly
 from .assembly import stencil_position
 from ..coordinates import natural_neighbour_coordinates
-from ..geometry.meshes import adopt, delaunay_mesh
+from ..geometry.meshes import adopt
+from .elements import element_for, gauss_rule, integration_scheme
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
-__all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeighbourBasis",
-           "NaturalNeighbourFacetBasis", "delaunay_mesh", "gauss_rule", "QUADRATURE_POINTS",
-           "INTEGRATIONS"]
-
-
-#: number of quadrature points -> scikit-fem integration order on triangles
-QUADRATURE_POINTS = {3: 2, 4: 3, 6: 4, 7: 5, 12: 6, 13: 7}
-#: integration schemes: gradients smoothed over cells (consistent, the
-#: default; :mod:`skfem_nem.basis.smoothing`) or Gauss quadrature of the gradients
-INTEGRATIONS = ("smoothed", "gauss")
-
-
-class ElementNaturalNeighbour(Element):
-    """Degrees of freedom of natural-neighbour trial functions: one per node.
-
-    Only a numbering: the functions themselves are evaluated by
-    :class:`NaturalNeighbourBasis` (they are not polynomials on the
-    triangles). Wrap it in ``ElementVector`` for vector fields.
-    """
-
-    nodal_dofs = 1
-    maxdeg = 1  # default integration order 2: the 3-point rule (the paper's)
-    dofnames = ["u"]
-    doflocs = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
-    refdom = RefTri
-
-    def gbasis(self, mapping, X, i, tind=None):
-        raise NotImplementedError(
-            "natural-neighbour functions are not defined triangle by triangle: "
-            "use skfem_nem.NaturalNeighbourBasis(mesh, ...) instead of Basis/CellBasis")
-
-    def lbasis(self, X, i):
-        raise NotImplementedError(
-            "natural-neighbour functions have no reference-element basis: "
-            "use skfem_nem.NaturalNeighbourBasis")
-
-
-class ElementTetNaturalNeighbour(ElementNaturalNeighbour):
-    """The natural-neighbour numbering on tetrahedra (one dof per node).
-
-    :class:`NaturalNeighbourBasis` on a ``MeshTet`` uses it in place of
-    :class:`ElementNaturalNeighbour` (either may be passed);
-    ``ElementVector(ElementTetNaturalNeighbour())`` has three components.
-    """
-
-    doflocs = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    refdom = RefTet
-
-
-def _element_for(mesh, elem, who):
-    """``elem`` (natural-neighbour, scalar or vector) on the reference cell of
-    ``mesh``: the triangle and tetrahedron variants are the same numbering."""
-    elem = ElementNaturalNeighbour() if elem is None else elem
-    vec = isinstance(elem, ElementVector)
-    base = elem.elem if vec else elem
-    if not isinstance(base, ElementNaturalNeighbour):
-        raise TypeError(f"{who} needs ElementNaturalNeighbour() or "
-                        f"ElementVector(ElementNaturalNeighbour()), got {type(elem).__name__}")
-    want = ElementTetNaturalNeighbour if isinstance(mesh, MeshTet) else ElementNaturalNeighbour
-    if type(base) is not want:
-        base = want()
-        elem = ElementVector(base) if vec else base
-    return elem
-
-
-def _integration(integration, npoints=None, intorder=None, quadrature=None):
-    """The integration scheme: ``integration`` if given (checked against the
-    rule options), else Gauss when a rule is asked for, smoothed otherwise."""
-    rule = [k for k, v in (("npoints", npoints), ("intorder", intorder),
-                           ("quadrature", quadrature)) if v is not None]
-    if integration is None:
-        return "gauss" if rule else "smoothed"
-    if integration not in INTEGRATIONS:
-        raise ValueError(f"integration must be one of {', '.join(map(repr, INTEGRATIONS))}, "
-                         f"got {integration!r}")
-    if integration == "smoothed" and rule:
-        raise ValueError(f"{rule[0]} chooses a Gauss rule, but integration='smoothed' has "
-                         f"its own points (one per smoothing cell); pass "
-                         f"integration='gauss' with it")
-    return integration
-
-
-def gauss_rule(npoints=None, intorder=None, quadrature=None, refdom=RefTri):
-    """The Gauss rule (X, W) on ``refdom`` asked for by ``npoints`` (triangles:
-    1, 3, 4, 6, 7, 12, 13), ``intorder`` (scikit-fem's orders) or an explicit
-    ``quadrature``; default order 2 (the 3-point rule on triangles)."""
-    if quadrature is not None:
-        X, W = quadrature
-        return np.asarray(X, dtype=float), np.asarray(W, dtype=float)
-    if npoints is not None:
-        if refdom is not RefTri:
-            raise ValueError("npoints chooses a triangle rule; on tetrahedra pass intorder "
-                             "or quadrature")
-        if npoints == 1:
-            return np.array([[1.0 / 3.0], [1.0 / 3.0]]), np.array([0.5])
-        if npoints not in QUADRATURE_POINTS:
-            raise ValueError(f"npoints must be one of 1, {', '.join(map(str, QUADRATURE_POINTS))}; "
-                             f"got {npoints}")
-        return get_quadrature(RefTri, QUADRATURE_POINTS[npoints])
-    return get_quadrature(refdom, 2 if intorder is None else intorder)
+__all__ = ["NaturalNeighbourBasis", "NaturalNeighbourFacetBasis"]
 
 
 # ---------------------------------------------------------------------------
@@ -557,9 +457,9 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
                  intorder: Optional[int] = None, quadrature: Optional[Tuple[ndarray, ndarray]] = None,
                  npoints: Optional[int] = None, coordinates: str = "sibson",
                  method: Optional[str] = None, integration: Optional[str] = None):
-        elem = _element_for(mesh, elem, "NaturalNeighbourBasis")
+        elem = element_for(mesh, elem, "NaturalNeighbourBasis")
         self.method = _check_method(mesh, coordinates, method)
-        self.integration = _integration(integration, npoints, intorder, quadrature)
+        self.integration = integration_scheme(integration, npoints, intorder, quadrature)
         self.triangulation = adopt(mesh, self.method)
         self.coordinates = coordinates
         if self.integration == "smoothed":
@@ -706,10 +606,10 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
                  intorder: Optional[int] = None, quadrature=None, coordinates: str = "sibson",
                  side: int = 0, method: Optional[str] = None,
                  integration: str = "smoothed"):
-        elem = _element_for(mesh, elem, "NaturalNeighbourFacetBasis")
+        elem = element_for(mesh, elem, "NaturalNeighbourFacetBasis")
         self.method = _check_method(mesh, coordinates, method)
         # (the facet rule serves both schemes: values and smoothed gradients)
-        self.integration = integration = _integration(integration)
+        self.integration = integration = integration_scheme(integration)
         self.triangulation = adopt(mesh, self.method)
         self.coordinates = coordinates
         p1 = ElementTetP1() if isinstance(mesh, MeshTet) else ElementTriP1()

@@ -324,7 +324,7 @@ class LagrangianMesh:
         integration-point fields' slots: point k of triangle t near its
         vertex k. ``integration="smoothed"`` (default): gradients smoothed
         over the vertex cells of the triangles; ``"gauss"``: the 3-point rule."""
-        from ..basis.natural_neighbour import NaturalNeighbourBasis
+        from ..basis import NaturalNeighbourBasis
         key = ("basis", None if elem is None else repr(elem), integration)
         if key not in self._cache:
             rule = {"quadrature": (_X3, _W3)} if integration == "gauss" else {}

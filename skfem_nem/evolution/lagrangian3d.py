@@ -25,7 +25,7 @@ from typing import Callable, Dict, Optional
 
 import numpy as np
 
-from ..basis.natural_neighbour import NaturalNeighbourBasis
+from ..basis import NaturalNeighbourBasis
 from .stepping import (check_node_fields, check_step_arguments, evaluate_velocity, keep_in_box,
                        predictor_corrector)
 from ..geometry.meshes import delaunay_mesh

@@ -91,7 +91,7 @@ from skfem.element import ElementH1, ElementTriP0, ElementTriP1, ElementTriP2, E
 from skfem.refdom import RefTri
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
-from ..basis.natural_neighbour import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
+from ..basis import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
 from .stokes_solvers import SOLVERS, SaddlePointProblem, SaddlePointSolution, block_inverse
 
 __all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes", "outline_flux",

@@ -66,7 +66,8 @@ def write_vtu(path, points: np.ndarray, triangles: np.ndarray,
     cd = {k: [pad(v)] for k, v in (cell_data or {}).items()}
     for k, v in pd.items():
         if v.shape[0] != pts.shape[0]:
-            raise ValueError(f"point data {k!r} has {v.shape[0]} rows, the mesh {pts.shape[0]} nodes")
+            raise ValueError(f"point data {k!r} has {v.shape[0]} rows, the mesh "
+                             f"{pts.shape[0]} nodes")
     for k, v in cd.items():
         if v[0].shape[0] != len(triangles):
             raise ValueError(f"cell data {k!r} has {v[0].shape[0]} rows, the mesh "

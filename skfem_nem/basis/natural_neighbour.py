@@ -454,7 +454,8 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     """
 
     def __init__(self, mesh: MeshTri | MeshTet, elem: Optional[Element] = None,
-                 intorder: Optional[int] = None, quadrature: Optional[Tuple[ndarray, ndarray]] = None,
+                 intorder: Optional[int] = None,
+                 quadrature: Optional[Tuple[ndarray, ndarray]] = None,
                  npoints: Optional[int] = None, coordinates: str = "sibson",
                  method: Optional[str] = None, integration: Optional[str] = None):
         elem = element_for(mesh, elem, "NaturalNeighbourBasis")

@@ -418,7 +418,7 @@ def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, g
                                                   be_b, be_c, be_u, cpar, cchd, cpa, cpb)
             else:
                 ncav, nb = conflict_cycle(P, T, N, CC, qx, qy, t, cav, cpar, cpa, cpb,
-                                           cedge, cstep, stk, nn, be_u, be_c)
+                                          cedge, cstep, stk, nn, be_u, be_c)
                 nedge = ncav - 1
                 for e in range(1, ncav):
                     cchd[e] = e

@@ -35,7 +35,8 @@ Accuracy (measured, see tests/test_lasserre.py)
     relative; in 3D the second-order volumes sum to the Voronoi cell volume
     (scipy/Qhull) to ~1e-15 relative; partition of unity and linear
     precision hold to ~5e-16 in 3D and 4D, also on lattices and within
-    1e-12 of a node (to ~1e-14 down to 1e-15 from one). Gradients lose digits near a node like ``1e-17 / r``
+    1e-12 of a node (to ~1e-14 down to 1e-15 from one). Gradients lose digits
+    near a node like ``1e-17 / r``
     (r the distance to it), as the area method does. Node sets that are
     nearly but not exactly co-spherical (lattices jittered by 1e-9) get
     errors of that size: Qhull's triangulation is then not Delaunay to that

@@ -85,9 +85,9 @@ __all__ = ["lasserre_cell", "vertex_simplices"]
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def lasserre_cell(d, m0, A, B, I, AX, BX, M, W, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
-          gq, rep, gmark, stamp, sc, full, strict, want_grad, want_mom, G, ztol, btol,
-          flag, cell, tab):
+def lasserre_cell(d, m0, A, B, I, AX, BX, M, W, Tc, nT, act, nact, mrows, cur, tpiv, acc, wm,
+                  gs, gc, gp, gq, rep, gmark, stamp, sc, full, strict, want_grad, want_mom, G,
+                  ztol, btol, flag, cell, tab):
     """Volume of the polytope {u in R^d : A[0, j] . u <= B[0, j], j < m0} by
     Lasserre's recursion, run iteratively with one buffer level per dimension
     (level l holds a system in d - l variables).

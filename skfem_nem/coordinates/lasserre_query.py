@@ -77,9 +77,9 @@ def finish_row(K, d, nn, vol, gv, want_grad, raw, gc, out_i, out_v, out_g):
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC, SH, smark, mark,
-           cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf, pt, zf,
-           a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
-           gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
+          cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf, pt, zf,
+          a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
+          gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, out_i, out_v, out_g):
     """Sibson coordinates of one point x, searched for from simplex ``hint``.
 
     Writes up to ``nn.shape[0]`` entries into ``out_*`` (sorted by node
@@ -133,8 +133,8 @@ def query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC,
         # accepted if linear precision (and its derivative, sum_i q_i (x)
         # grad V_i = V I) hold tightly; otherwise the general recursion below
         if cells_3d(S, NB, cav, ncav, smark, stamp_q * (cav.shape[0] + 1), Tc, zc, zq, K, q, qq,
-                   want_grad,
-                   shape, pid, pu, pv, pS, pf, pt, zf, a0, vol, gv):
+                    want_grad,
+                    shape, pid, pu, pv, pS, pf, pt, zf, a0, vol, gv):
             # every neighbour has a cell of positive volume here (a vertex
             # of a simplex strictly in conflict); one that rounds to zero
             # or below is left to the recursion
@@ -269,13 +269,13 @@ def query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC,
                 # the filter needs every listed simplex to be one: keep those
                 # whose d planes meet in a point that satisfies all the rows.
                 nT = vertex_simplices(d, m, A, B, Tc[base:], nT, rowof, E, rhs, lam, ztol,
-                                       vtol * L)
+                                      vtol * L)
             cell = i
             if hullw:
                 cell = -1
-            v = lasserre_cell(d, m, A, B, I, AX, BX, M, W, Tc[base:], nT, act, nact, mrows, cur, tpiv, acc,
-                      wm, gs, gc, gp, gq, rep, gmark, stamp, sc, full, strict, want_grad,
-                      hullw, G, ztol, btol * L, flag, cell, tab)
+            v = lasserre_cell(d, m, A, B, I, AX, BX, M, W, Tc[base:], nT, act, nact, mrows, cur,
+                              tpiv, acc, wm, gs, gc, gp, gq, rep, gmark, stamp, sc, full, strict,
+                              want_grad, hullw, G, ztol, btol * L, flag, cell, tab)
             if hullw:
                 # limit weight on a hull facet: integral over the cell of
                 # |y - p_i|^2 - |y - x|^2 = -2 q_i . (y - o)
@@ -310,21 +310,21 @@ def query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC,
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def query_block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC, SH, smark,
-           mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf, pt,
+                mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf, pt,
            zf, a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp,
-           gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov, og, out_i,
-           out_v, out_g, count, status, info):
+                gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov, og, out_i,
+                out_v, out_g, count, status, info):
     """Queries lo..hi-1 of ``Q`` with one set of buffers (see :func:`query`)
     into rows of the padded outputs; a query with more entries than a row
     holds gets status OVERFLOW (redone with larger buffers)."""
     width = out_i.shape[1]
     for r in range(lo, hi):
         cnt, st, inf = query(P, S, NB, ctr, Q[r], start[r], d, r + 1, want_grad, kind, tols,
-                              cached, CC, SH, smark, mark, cav, cst, live, rowof, bf, nn, q, Tc,
-                              zc, zq, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab, A, B, I,
-                              AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq,
-                              rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov,
-                              og)
+                             cached, CC, SH, smark, mark, cav, cst, live, rowof, bf, nn, q, Tc,
+                             zc, zq, qq, pid, pu, pv, pS, pf, pt, zf, a0, tab, A, B, I,
+                             AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs, gc, gp, gq,
+                             rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov,
+                             og)
         if cnt > width:
             cnt, st, inf = 0, OVERFLOW, 0
         count[r] = cnt
@@ -340,7 +340,7 @@ def query_block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cache
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols, cached, CC, SH,
-                 out_i, out_v, out_g, count, status, info):
+                out_i, out_v, out_g, count, status, info):
     """Coordinates of m points into padded (m, ncap) arrays, parallel over blocks."""
     m = Q.shape[0]
     n = P.shape[0]
@@ -410,11 +410,12 @@ def query_batch(P, S, NB, Q, start, want_grad, kind, ncap, ccap, nblocks, tols, 
         oi = np.empty(ncap, np.int64)
         ov = np.empty(ncap)
         og = np.empty((ncap, d))
-        query_block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC, SH, smark,
-               mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf,
+        query_block(lo, hi, P, S, NB, ctr, Q, start, d, want_grad, kind, tols, cached, CC, SH,
+                    smark,
+                    mark, cav, cst, live, rowof, bf, nn, q, Tc, zc, zq, qq, pid, pu, pv, pS, pf,
                pt, zf, a0, tab, A, B, I, AX, BX, M, W, act, nact, mrows, cur, tpiv, acc, wm, gs,
                gc, gp, gq, rep, gmark, stamp, sc, flag, G, E, Mn, rhs, lam, vol, gv, oi, ov, og,
-               out_i, out_v, out_g, count, status, info)
+                    out_i, out_v, out_g, count, status, info)
 
 
 query_batch_serial = serial_twin(query_batch, error_model="numpy")

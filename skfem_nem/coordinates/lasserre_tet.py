@@ -41,7 +41,7 @@ __all__ = ["cells_3d"]
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def cells_3d(S, NB, cav, ncav, smark, IN, Tc, zc, zq, K, q, qq, want_grad, ftol, pid,
-            pu, pv, pS, pf, pt, zf, a0, vol, gv):
+             pu, pv, pS, pf, pt, zf, a0, vol, gv):
     """Second-order volumes ``vol[:K]`` (and their gradients ``gv[:K]``) of a
     3D query in general position, from the known combinatorics of its
     conflict region. Returns False (and leaves the work to :func:`lasserre_cell`)

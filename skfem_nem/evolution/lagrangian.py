@@ -440,7 +440,7 @@ class LagrangianMesh:
     def _advance(self, velocity, dt, tol, maxiter, max_substeps, inject):
         x0 = self.nodes.copy()
         x, it, converged = predictor_corrector(lambda y: self._velocity(velocity, y), x0, dt,
-                                                tol, maxiter, self.step + 1)
+                                               tol, maxiter, self.step + 1)
         if self.walls == "box":
             x = keep_in_box(x, x0, self._on_wall, self._box)
         self._touched = []
@@ -570,7 +570,8 @@ class LagrangianMesh:
         try:
             star = tri.star(v)
         except ValueError:
-            raise ValueError(f"node {v} is on the hull and cannot be relocated: reduce dt") from None
+            raise ValueError(f"node {v} is on the hull and cannot be relocated: "
+                             f"reduce dt") from None
         snap = self._snapshot(star)
         slots, moves = tri.remove_vertex(v)
         for k, F in self.ip_fields.items():

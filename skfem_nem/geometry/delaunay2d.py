@@ -13,7 +13,10 @@ from numba import njit
 
 from .predicates import incircle_sign, orient2d, orient2d_sign
 
-__all__ = ["adjacency", "cavity_boundary", "circumcircle_table", "conflict_cycle", "count_non_delaunay", "edge_violates", "exact_hull", "first_fold", "flip_edge", "grow_cavity", "in_cavity", "in_circumcircle", "insert_vertex", "lawson", "locate_many", "locate_walk", "orientations"]
+__all__ = ["adjacency", "cavity_boundary", "circumcircle_table", "conflict_cycle",
+           "count_non_delaunay", "edge_violates", "exact_hull", "first_fold",
+           "flip_edge", "grow_cavity", "in_cavity", "in_circumcircle", "insert_vertex",
+           "lawson", "locate_many", "locate_walk", "orientations"]
 
 
 # ---------------------------------------------------------------------------
@@ -170,12 +173,13 @@ def cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_c, be_u):
 
 @njit(cache=True, inline="always")
 def conflict_cycle(P, T, N, CC, qx, qy, t0, cav, cpar, cpa, cpb, cedge, cstep, stk, nn, be_u,
-                    be_c):
+                   be_c):
     """The Bowyer--Watson cavity of (qx, qy) and its boundary, in one traversal.
 
     ``t0`` must contain the point and the point must not be a node; ``CC``:
-    :attr:`Triangulation.circumcircles`. In a Delaunay triangulation the cavity is a triangulated disc without interior
-    vertices, so its triangles form a tree under edge adjacency: a
+    :attr:`Triangulation.circumcircles`. In a Delaunay triangulation the
+    cavity is a triangulated disc without interior vertices, so its
+    triangles form a tree under edge adjacency: a
     depth-first traversal from ``t0`` that visits the edges of each triangle
     counter-clockwise, starting after the edge it came in by, meets the
     boundary edges in counter-clockwise order, and no triangle is reached

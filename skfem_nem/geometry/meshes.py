@@ -83,8 +83,9 @@ def _tet_delaunay(mesh: MeshTet) -> Delaunay:
     p, t = mesh.p.T, mesh.t.T
     _check_used(p, t, "tetrahedron")
     tri = delaunay_of(np.ascontiguousarray(p))
-    if tri.simplices.shape[0] == t.shape[0] and np.array_equal(
-            np.unique(np.sort(tri.simplices, axis=1), axis=0), np.unique(np.sort(t, axis=1), axis=0)):
+    same = np.array_equal(np.unique(np.sort(tri.simplices, axis=1), axis=0),
+                          np.unique(np.sort(t, axis=1), axis=0))
+    if tri.simplices.shape[0] == t.shape[0] and same:
         return tri
     # another triangulation: local empty-sphere test across every interior face
     f2t = mesh.f2t

@@ -41,7 +41,9 @@ from numba import njit, prange
 
 from .status import AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW
 
-__all__ = ["det_small", "circumcentre", "circumcentres", "in_conflict", "hull_distance", "barycentric", "locate_simplex", "locate_brute", "conflict_region", "circumcentre_cache", "facet_planes", "FLAT", "CACHE_QUERIES"]
+__all__ = ["det_small", "circumcentre", "circumcentres", "in_conflict", "hull_distance",
+           "barycentric", "locate_simplex", "locate_brute", "conflict_region",
+           "circumcentre_cache", "facet_planes", "FLAT", "CACHE_QUERIES"]
 
 # A simplex counts as flat when its volume determinant is below this times the
 # product of its edge lengths from the first vertex.
@@ -368,8 +370,9 @@ def locate_brute(P, S, x, d, E, rhs, lam, tol, flat_tol):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def conflict_region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, CC, SH, smark,
-            mark, cav, cst, live, bf, nn, Tc, zc, zq, E, Mn, rhs, lam, out_i, out_v, out_g):
+def conflict_region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, cached, CC, SH,
+                    smark, mark, cav, cst, live, bf, nn, Tc, zc, zq, E, Mn, rhs, lam, out_i, out_v,
+                    out_g):
     """Locate x, grow its conflict region and collect the natural neighbours
     ``nn[:K]`` (``live`` marks those with cells of positive volume), the
     boundary faces ``bf[:nbf]`` and the conflict simplices ``cav[:ncav]``

@@ -348,8 +348,8 @@ class Triangulation:
         while True:
             cav = np.empty(cap, dtype=np.int64)
             cnt = grow_cavity(self.nodes, self.triangles, self.neighbours,
-                               q[0], q[1], t, cav, np.empty((cap, 3), np.int64),
-                               np.empty(cap + 4, np.int64))
+                              q[0], q[1], t, cav, np.empty((cap, 3), np.int64),
+                              np.empty(cap + 4, np.int64))
             if cnt >= 0:
                 return np.sort(cav[:cnt])
             cap *= 4
@@ -399,7 +399,7 @@ class Triangulation:
                 rej = np.empty(cap + 4, np.int64)
                 be = [np.empty(cap + 2, np.int64) for _ in range(5)]
                 r = insert_vertex(P, T, N, nt, i, int(start), cav, cnb, rej, *be,
-                            np.array([nt, nt + 1], dtype=np.int64))
+                                  np.array([nt, nt + 1], dtype=np.int64))
                 if r != -3:
                     break
                 cap *= 4
@@ -636,7 +636,7 @@ class Triangulation:
             stack[:start.size] = start
             log = np.empty((min(max_flips, nt // 4 + 1024) if on_flips else 0, 8), np.int64)
             flips, done = lawson(self.nodes, self.triangles, self.neighbours, stack,
-                                  start.size, max_flips - total, log)
+                                 start.size, max_flips - total, log)
             total += flips
             if flips:
                 self._changed()

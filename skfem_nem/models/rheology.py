@@ -349,7 +349,8 @@ def prescribed_velocity(spaces: StokesSpaces, facets, value: Union[Callable, Seq
         vals.append(np.broadcast_to(v, d.shape))
     dofs, vals = np.concatenate(dofs), np.concatenate(vals)
     if not np.isfinite(vals).all():
-        raise ValueError(f"prescribed velocity is not finite at dof {int(dofs[~np.isfinite(vals)][0])}")
+        first = int(dofs[~np.isfinite(vals)][0])
+        raise ValueError(f"prescribed velocity is not finite at dof {first}")
     return dofs, vals
 
 

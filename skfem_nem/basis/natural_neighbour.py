@@ -487,15 +487,16 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
                 self._build(x, elems)
 
     def global_coordinates(self) -> DiscreteField:
-        if self._global_coordinates is None:
-            self._global_coordinates = DiscreteField(self.mapping.F(self.X))
-        return self._global_coordinates
+        # cached here: scikit-fem's own cache attributes differ between versions
+        if self.__dict__.get("_x_field") is None:
+            self._x_field = DiscreteField(self.mapping.F(self.X))
+        return self._x_field
 
     def mesh_parameters(self) -> DiscreteField:
-        if self._mesh_parameters is None:
-            self._mesh_parameters = DiscreteField(
+        if self.__dict__.get("_h_field") is None:
+            self._h_field = DiscreteField(
                 np.abs(self.mapping.detDF(self.X)) ** (1.0 / self.mesh.dim()))
-        return self._mesh_parameters
+        return self._h_field
 
     def with_element(self, elem: Element) -> "NaturalNeighbourBasis":
         """The same mesh and integration with another (natural-neighbour) element."""

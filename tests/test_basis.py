@@ -11,12 +11,7 @@ from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis, NaturalNe
                        delaunay_mesh, sibson_coordinates)
 from skfem_nem.geometry.nodesets import box_nodes
 
-
-def square_nodes(n=300, nb=12, seed=0):
-    rng = np.random.default_rng(seed)
-    s = np.linspace(0, 1, nb + 1)[1:-1]
-    return np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], np.c_[s, 0 * s], np.c_[s, 1 + 0 * s],
-                 np.c_[0 * s, s], np.c_[1 + 0 * s, s], rng.random((n, 2))]
+from helpers import laplace, mass, square_nodes
 
 
 @pytest.fixture(scope="module")
@@ -32,16 +27,6 @@ def basis(mesh):
 @pytest.fixture(scope="module")
 def vbasis(mesh):
     return NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()))
-
-
-@BilinearForm
-def laplace(u, v, w):
-    return dot(grad(u), grad(v))
-
-
-@BilinearForm
-def mass(u, v, w):
-    return u * v
 
 
 def test_stencils_and_groups(mesh, basis):

@@ -41,7 +41,8 @@ from skfem.helpers import ddot, div, dot, sym_grad
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from ex04_nem_vs_fem import error_basis, errors, laplace, load, make_basis, node_set  # noqa: E402
-from test_consistency import (_stokes_l2p as _l2p, _stokes_l2u as _l2u, cube_nodes,  # noqa: E402
+from helpers import cube_nodes  # noqa: E402
+from test_consistency import (_stokes_l2p as _l2p, _stokes_l2u as _l2u,  # noqa: E402
                               elasticity_patch_error, graded, laplace_patch_error, thin)
 
 from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis,  # noqa: E402
@@ -151,7 +152,7 @@ def patch_table():
                for _, kw in rules2]
         out.append(f"| 2D | {name} | Laplace | " + " | ".join(f"{e:.1e}" for e in lap) + " |")
         out.append(f"| 2D | {name} | elasticity | " + " | ".join(f"{e:.1e}" for e in ela) + " |")
-    p = cube_nodes(300)
+    p = cube_nodes(300, per_face=25)
     mesh = delaunay_mesh(p)
     rules3 = (("smoothed", {}), ("Gauss 4 (intorder 2)", {"intorder": 2}),
               ("Gauss 11 (intorder 4)", {"intorder": 4}))

@@ -62,7 +62,11 @@ ex, ey = grad_f(*grid[inner].T)
 grad_error = np.hypot((Dx @ values)[inner] - ex, (Dy @ values)[inner] - ey).max()
 
 
-def visualize(path="out/ex01_interpolation.png"):
+FIGURE = "out/ex01_interpolation.png"
+
+
+def visualize(path=FIGURE):
+    """Draw the triangulation and the three interpolants' errors; returns the Figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -84,11 +88,12 @@ def visualize(path="out/ex01_interpolation.png"):
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return path
+    return fig
 
 
 if __name__ == "__main__":
     for name in errors:
         print(f"{name:8s} max error {errors[name]:.3e}   rms error {rms[name]:.3e}")
     print(f"Sibson gradient max error (interior grid points) {grad_error:.3e}")
-    print("figure written to", visualize())
+    visualize()
+    print("figure written to", FIGURE)

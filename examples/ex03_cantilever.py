@@ -1,38 +1,21 @@
 """Timoshenko's cantilever beam with natural-neighbour trial functions.
 
-A beam of length L and depth D (plane stress, Young's modulus E, Poisson's
-ratio nu) occupies 0 <= x <= L, -D/2 <= y <= D/2. It carries a parabolic shear
-traction of resultant P on its end x = L and is held at x = 0. The exact
-solution (Timoshenko & Goodier, Theory of Elasticity, 3rd ed., 1970; the
-standard meshfree benchmark, used for NEM by Sukumar, Moran & Belytschko 1998)
-with I = D^3 / 12 is
+A beam 0 <= x <= L, -D/2 <= y <= D/2 (plane stress, E, nu) is held at x = 0
+and carries a parabolic shear traction of resultant P on its end x = L. The
+exact solution (Timoshenko & Goodier 1970; the meshfree benchmark used for
+NEM by Sukumar, Moran & Belytschko 1998), I = D^3 / 12:
 
     u_x = -P y / (6 E I) [(6 L - 3 x) x + (2 + nu) (y^2 - D^2 / 4)]
     u_y =  P / (6 E I) [3 nu y^2 (L - x) + (4 + 5 nu) D^2 x / 4 + (3 L - x) x^2]
-    s_xx = -P (L - x) y / I,   s_yy = 0,   s_xy = P / (2 I) (D^2 / 4 - y^2)
 
-so the tip deflection is u_y(L, 0) = P L^3 / (3 E I) + (4 + 5 nu) P L D^2 / (24 E I)
-(upwards, as the load). The exact displacements are imposed at all nodes of
-the end x = 0 (the "clamp" is the exact solution there), the exact traction
-(0, s_xy) on the end x = L through ``NaturalNeighbourFacetBasis``; the long
-sides are traction-free. :func:`equilibrium_residual` checks by finite
-differences that this field is in equilibrium, traction-free on the long
-sides and carries the load P.
-
-The vector NEM basis ``ElementVector(ElementNaturalNeighbour())`` is assembled
-with scikit-fem's ``linear_elasticity`` and compared with vector P1 and P2 on
-the same Delaunay mesh, on random and on graded nodes (density inversely
-proportional to the distance from the clamped end, plus a minimum): tip
-deflection, relative L2 displacement error and relative energy error.
-
-The patch test of the paper's integration question: a linear displacement
-field imposed at all boundary nodes must be reproduced at the interior nodes.
-With Gauss quadrature on the Delaunay triangles it is reproduced only up to
-the quadrature error (natural-neighbour functions are not polynomials
-there); with the default gradient smoothing to round-off. :data:`patch` holds
-the largest interior nodal error for smoothing and the 1, 3, 4, 6, 7, 12 and
-13-point rules. ``NEM`` is the default basis (smoothed), ``NEM-3`` and
-``NEM-13`` the Gauss rules.
+The exact displacements are imposed at the nodes of x = 0, the exact
+traction on x = L through ``NaturalNeighbourFacetBasis``. The vector NEM basis
+``ElementVector(ElementNaturalNeighbour())`` (smoothed gradients, the
+default) is assembled with scikit-fem's ``linear_elasticity`` on 800 random
+nodes and compared with vector P1 on the same Delaunay mesh: tip deflection,
+relative L2 and energy errors. Convergence on random and graded nodes, Gauss
+rules, the patch test and a check of the exact solution:
+``benchmarks/cantilever.py``.
 """
 import time
 from pathlib import Path
@@ -52,16 +35,10 @@ I = D ** 3 / 12.0
 # plane stress Lame parameters
 LAM = E * NU / (1.0 - NU ** 2)
 MU = E / (2.0 * (1.0 + NU))
-
-SIZES = (200, 800, 3200)
-METHODS = ("NEM", "NEM-3", "NEM-13", "P1", "P2")
-PATCH_RULES = ("smoothed", 1, 3, 4, 6, 7, 12, 13)
+N_NODES = 800
 SEED = 0
+FIGURE = "out/ex03_cantilever.png"
 
-
-# --------------------------------------------------------------------------
-# the exact solution
-# --------------------------------------------------------------------------
 
 def exact_u(x, y):
     ux = -P * y / (6 * E * I) * ((6 * L - 3 * x) * x + (2 + NU) * (y ** 2 - D ** 2 / 4))
@@ -78,12 +55,6 @@ def exact_strain(x, y):
     return np.array([[exx, exy], [exy, eyy]])
 
 
-def exact_stress(x, y):
-    sxx = -P * (L - x) * y / I
-    sxy = P / (2 * I) * (D ** 2 / 4 - y ** 2)
-    return np.array([[sxx, sxy], [sxy, 0 * sxx]])
-
-
 TIP = exact_u(L, 0.0)[1]
 
 
@@ -91,42 +62,6 @@ def stress_of_strain(e):
     tr = e[0, 0] + e[1, 1]
     return 2 * MU * e + LAM * tr * np.eye(2).reshape((2, 2) + (1,) * (e.ndim - 2))
 
-
-def equilibrium_residual(h=1e-3):
-    """Checks of exact_u by central finite differences only (no closed-form
-    stresses): max |div sigma| inside relative to max |sigma| / L, max
-    traction on the long sides relative to max |sigma|, the resultant of the
-    end traction relative to P, and max |sigma(u) - exact_stress|."""
-    rng = np.random.default_rng(1)
-    x = rng.uniform(0.1 * L, 0.9 * L, 200)
-    y = rng.uniform(-0.4 * D, 0.4 * D, 200)
-
-    def strain(x, y):
-        dx = (exact_u(x + h, y) - exact_u(x - h, y)) / (2 * h)
-        dy = (exact_u(x, y + h) - exact_u(x, y - h)) / (2 * h)
-        g = np.array([[dx[0], dy[0]], [dx[1], dy[1]]])
-        return 0.5 * (g + g.transpose(1, 0, *range(2, g.ndim)))
-
-    def stress(x, y):
-        return stress_of_strain(strain(x, y))
-
-    smax = P * L * D / 2 / I
-    div = np.array([(stress(x + h, y)[i, 0] - stress(x - h, y)[i, 0]) / (2 * h)
-                    + (stress(x, y + h)[i, 1] - stress(x, y - h)[i, 1]) / (2 * h)
-                    for i in range(2)])
-    xs = np.linspace(0.05 * L, 0.95 * L, 50)
-    side = max(np.abs(stress(xs, s * D / 2 + 0 * xs)[:, 1]).max() for s in (-1, 1))
-    ys = np.linspace(-D / 2, D / 2, 2001)
-    t = stress(L + 0 * ys, ys)[:, 0]  # traction on x = L, normal (1, 0)
-    resultant = np.trapezoid(t, ys)
-    mismatch = np.abs(stress(x, y) - exact_stress(x, y)).max()
-    return {"div": np.abs(div).max() / (smax / L), "sides": side / smax,
-            "resultant": np.abs(resultant - [0, P]).max() / P, "stress": mismatch / smax}
-
-
-# --------------------------------------------------------------------------
-# node sets
-# --------------------------------------------------------------------------
 
 def _quantiles(density, a, b, m):
     s = np.linspace(a, b, 2001)
@@ -159,10 +94,6 @@ def beam_nodes(n, kind="random", seed=SEED):
     return np.r_[boundary, inner]
 
 
-# --------------------------------------------------------------------------
-# solving
-# --------------------------------------------------------------------------
-
 @LinearForm
 def end_traction(v, w):
     x, y = w.x
@@ -175,12 +106,6 @@ def l2_error(w):
     return e[0] ** 2 + e[1] ** 2
 
 
-@Functional
-def l2_norm(w):
-    u = exact_u(*w.x)
-    return u[0] ** 2 + u[1] ** 2
-
-
 def _energy_density(e):
     return 2 * MU * (e[0, 0] ** 2 + e[1, 1] ** 2 + 2 * e[0, 1] ** 2) \
         + LAM * (e[0, 0] + e[1, 1]) ** 2
@@ -189,11 +114,6 @@ def _energy_density(e):
 @Functional
 def energy_error(w):
     return _energy_density(sym_grad(w["uh"]) - exact_strain(*w.x))
-
-
-@Functional
-def energy_norm(w):
-    return _energy_density(exact_strain(*w.x))
 
 
 def vector_element(method):
@@ -242,78 +162,15 @@ def error_basis(mesh, method):
 
 
 def beam_errors(mesh, method, u, ebasis=None):
+    """Relative L2 and energy errors of the dof vector u."""
     eb = error_basis(mesh, method) if ebasis is None else ebasis
-    uh = eb.interpolate(u)
-    l2 = np.sqrt(l2_error.assemble(eb, uh=uh) / l2_norm.assemble(eb))
-    en = np.sqrt(energy_error.assemble(eb, uh=uh) / energy_norm.assemble(eb))
-    return l2, en
+    uh, zero = eb.interpolate(u), eb.interpolate(0 * u)
+    return tuple(np.sqrt(f.assemble(eb, uh=uh) / f.assemble(eb, uh=zero))
+                 for f in (l2_error, energy_error))
 
 
 def tip_deflection(basis, u):
     return float((basis.probes(np.array([[L], [0.0]])) @ u)[1])
-
-
-#: (nodes, mesh, basis, dof vector) of the NEM-3 solutions on the second
-#: node set of each kind, for the figure
-fields = {}
-
-
-def cantilever(kind, sizes=SIZES, methods=METHODS):
-    out = {m: {k: [] for k in ("nodes", "dofs", "tip", "l2", "energy", "seconds")}
-           for m in methods}
-    for n in sizes:
-        p = beam_nodes(n, kind)
-        mesh = delaunay_mesh(p)
-        nem7 = None
-        for m in methods:
-            u, basis, sec = solve_beam(mesh, m)
-            if m == "NEM" and n == sizes[min(1, len(sizes) - 1)]:
-                fields[kind] = (p, mesh, basis, u)
-            if m.startswith("NEM") and nem7 is None:
-                nem7 = error_basis(mesh, m)
-            l2, en = beam_errors(mesh, m, u, nem7 if m.startswith("NEM") else None)
-            for k, v in zip(("nodes", "dofs", "tip", "l2", "energy", "seconds"),
-                            (len(p), basis.N, tip_deflection(basis, u), l2, en, sec)):
-                out[m][k].append(v)
-    for m in out:
-        for k in out[m]:
-            out[m][k] = np.array(out[m][k])
-        out[m]["tip_error"] = out[m]["tip"] / TIP - 1.0
-        nodes = out[m]["nodes"].astype(float)
-        for norm in ("l2", "energy"):
-            out[m]["rate_" + norm] = -2 * np.diff(np.log(out[m][norm])) / np.diff(np.log(nodes))
-    return out
-
-
-def patch_test(n=800, kind="random", rules=PATCH_RULES):
-    """Largest interior nodal error / largest displacement, per quadrature rule,
-    for a linear displacement imposed at all boundary nodes (no loads)."""
-    p = beam_nodes(n, kind)
-    mesh = delaunay_mesh(p)
-
-    def linear(x, y):
-        return 1e-3 * np.array([1.0 + x / L + 2.0 * y / D, 2.0 - 0.5 * x / L + y / D])
-
-    out = {}
-    for q in rules:
-        rule = {} if q == "smoothed" else {"npoints": q}
-        basis = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()), **rule)
-        K = linear_elasticity(LAM, MU).assemble(basis)
-        D_ = basis.get_dofs()
-        exact = interpolant(basis, linear)
-        u = solve(*condense(K, 0 * exact, x=exact, D=D_))
-        interior = basis.complement_dofs(D_)
-        out[q] = np.abs(u - exact)[interior].max() / np.abs(exact).max()
-    return out
-
-
-# --------------------------------------------------------------------------
-# module-level computation (checked by tests/test_examples_nem.py)
-# --------------------------------------------------------------------------
-
-exact_checks = equilibrium_residual()
-results = {kind: cantilever(kind) for kind in ("random", "graded")}
-patch = patch_test()
 
 
 def von_mises(basis, u):
@@ -324,67 +181,49 @@ def von_mises(basis, u):
     return (vm * basis.dx).sum(axis=1) / basis.dx.sum(axis=1)
 
 
-def visualize(path="out/ex03_cantilever.png", scale=200.0):
+p = beam_nodes(N_NODES)
+mesh = delaunay_mesh(p)
+
+
+def solve_and_check(method):
+    """The solution on ``mesh`` and its errors against the exact solution."""
+    u, basis, _ = solve_beam(mesh, method)
+    l2, energy = beam_errors(mesh, method, u)
+    return {"u": u, "basis": basis, "l2": l2, "energy": energy,
+            "tip_error": tip_deflection(basis, u) / TIP - 1.0}
+
+
+#: method -> {"u", "basis", "tip_error", "l2", "energy"}
+results = {m: solve_and_check(m) for m in ("NEM", "P1")}
+
+
+def visualize(path=FIGURE, scale=200.0):
+    """The NEM solution: deformed mesh coloured by the von Mises stress;
+    returns the Figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig = plt.figure(figsize=(13, 9), constrained_layout=True)
-    gs = fig.add_gridspec(3, 2)
-    for row, kind in enumerate(results):
-        p, mesh, basis, u = fields[kind]
-        vm = von_mises(basis, u)
-        nodal = u[basis.nodal_dofs].T  # (nnodes, 2)
-        q = p + scale * nodal
-        a = fig.add_subplot(gs[row, :])
-        a.triplot(p[:, 0], p[:, 1], mesh.t.T, lw=0.2, color="0.7")
-        tp = a.tripcolor(q[:, 0], q[:, 1], mesh.t.T, facecolors=vm, cmap="viridis",
-                         edgecolors="k", linewidth=0.1)
-        fig.colorbar(tp, ax=a, label="von Mises stress")
-        a.set_aspect("equal")
-        a.set_title(f"NEM (smoothed gradients), {kind} nodes ({len(p)}): deformed x{scale:g}, "
-                    f"tip deflection {tip_deflection(basis, u):.5f} (exact {TIP:.5f})")
-    a = fig.add_subplot(gs[2, 0])
-    r = results["random"]
-    for m, s in zip(METHODS, ("D-", "o--", "o-", "s-", "^-")):
-        a.loglog(r[m]["dofs"], r[m]["energy"], s, label=m)
-    a.set_xlabel("number of dofs")
-    a.set_ylabel("relative energy error")
-    a.set_title("random nodes: energy error")
-    a.grid(True, which="both", lw=0.3)
-    a.legend()
-    a = fig.add_subplot(gs[2, 1])
-    a.semilogy([str(k) for k in patch], list(patch.values()), "o-")
-    a.set_xlabel("integration (smoothed, or Gauss points per triangle)")
-    a.set_ylabel("max interior nodal error / max |u|")
-    a.set_title("patch test (linear displacement)")
-    a.grid(True, which="both", lw=0.3)
+    basis, u = results["NEM"]["basis"], results["NEM"]["u"]
+    q = p + scale * u[basis.nodal_dofs].T
+    fig, a = plt.subplots(figsize=(13, 3.6), constrained_layout=True)
+    a.triplot(p[:, 0], p[:, 1], mesh.t.T, lw=0.2, color="0.7")
+    tp = a.tripcolor(q[:, 0], q[:, 1], mesh.t.T, facecolors=von_mises(basis, u),
+                     cmap="viridis", edgecolors="k", linewidth=0.1)
+    fig.colorbar(tp, ax=a, label="von Mises stress")
+    a.set_aspect("equal")
+    a.set_title(f"NEM (smoothed gradients), {len(p)} random nodes: deformed x{scale:g}, "
+                f"tip deflection {tip_deflection(basis, u):.5f} (exact {TIP:.5f})")
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
     plt.close(fig)
-    return path
+    return fig
 
 
 if __name__ == "__main__":
-    print("exact solution checks:", {k: f"{v:.1e}" for k, v in exact_checks.items()})
     print(f"exact tip deflection {TIP:.6e}\n")
-    for kind, r in results.items():
-        print(f"**{kind} nodes**\n")
-        print("| method | nodes | dofs | tip deflection | tip error | L2 error | rate | "
-              "energy error | rate | seconds |")
-        print("|---|---|---|---|---|---|---|---|---|---|")
-        for m in METHODS:
-            d = r[m]
-            for i in range(len(d["nodes"])):
-                rl = f"{d['rate_l2'][i - 1]:.2f}" if i else ""
-                re = f"{d['rate_energy'][i - 1]:.2f}" if i else ""
-                print(f"| {m} | {d['nodes'][i]} | {d['dofs'][i]} | {d['tip'][i]:.6e} | "
-                      f"{100 * d['tip_error'][i]:+.2f}% | {d['l2'][i]:.3e} | {rl} | "
-                      f"{d['energy'][i]:.3e} | {re} | {d['seconds'][i]:.3f} |")
-        print()
-    print("**patch test, 800 random nodes**\n")
-    print("| points | max interior nodal error / max abs(u) |")
-    print("|---|---|")
-    for q, v in patch.items():
-        print(f"| {q} | {v:.2e} |")
-    print("\nfigure written to", visualize())
+    print("| method | tip error | L2 error | energy error |\n|---|---|---|---|")
+    for m, r in results.items():
+        print(f"| {m} | {100 * r['tip_error']:+.2f}% | {r['l2']:.3e} | {r['energy']:.3e} |")
+    visualize()
+    print("figure written to", FIGURE)

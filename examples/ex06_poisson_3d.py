@@ -1,32 +1,19 @@
 """Poisson's equation in 3D: natural-neighbour trial functions on Delaunay tetrahedra.
 
--Δu = f in the unit cube, u = 0 on its boundary, with the manufactured
-solution u = sin(pi x) sin(pi y) sin(pi z). Nodes: the 8 corners, random
-nodes on the 12 edges and the 6 faces, uniformly random interior nodes (the
-boundary nodes spaced like the interior ones), seed 0. For each node set the
-Delaunay tetrahedra come from Qhull (:func:`skfem_nem.delaunay_mesh`) and the
-problem is solved on them with
-
-* ``NEM``: Sibson natural-neighbour functions from the paper's Box 1 (the
-  Lasserre method), scikit-fem's 4-point rule per tetrahedron;
-* ``P1`` and ``P2``: scikit-fem's ``ElementTetP1`` / ``ElementTetP2`` on the
-  same tetrahedra (``intorder=4``).
-
-Errors are integrated with the 11-point rule (``intorder=4``): the L2 error
-and the H1-seminorm (energy) error; observed rates use h ~ n^(-1/3) (n the
-number of nodes), between consecutive sets and fitted over all of them.
+-Δu = f in the unit cube, u = 0 on its boundary, u = sin(pi x) sin(pi y) sin(pi z).
+Nodes: the corners, random nodes on the edges and faces (spaced like the
+interior ones) and 700 random interior nodes. On their Delaunay tetrahedra
+(Qhull, :func:`skfem_nem.delaunay_mesh`) the problem is solved with ``NEM``
+(Sibson functions from the paper's Box 1, the Lasserre method; 4-point rule)
+and with scikit-fem's ``P1`` / ``P2``; L2 and H1-seminorm errors with the
+11-point rule. NEM is more accurate than P1 on the same tetrahedra, less than P2.
 
 ``visualize()`` draws one interior node's natural-neighbour function -- the
-paper's Figs 3-4 -- on a regular grid through the cube: written as VTU for
-ParaView (``out/ex06_natural_neighbour_function.vtu``, with the gradient) and
-as PNG slices through the node, next to the convergence plot
-(``out/ex06_poisson_3d.png``); the solution on the finest tetrahedra goes to
-``out/ex06_poisson_3d.vtu``.
-
-``python examples/ex06_poisson_3d.py [--more]`` prints the error tables (``--more``
-adds a fourth, larger node set); these are the tables of ``docs/ndim.md``.
+paper's Figs 3-4 -- as VTU for ParaView (``out/ex06_natural_neighbour_function.vtu``,
+with the gradient) and as PNG slices through the node beside the errors
+(``out/ex06_poisson_3d.png``); the NEM solution goes to ``out/ex06_poisson_3d.vtu``.
+The convergence study is ``benchmarks/poisson_3d.py`` (the tables of ``docs/ndim.md``).
 """
-import sys
 import time
 from pathlib import Path
 
@@ -37,9 +24,11 @@ from skfem.helpers import dot, grad
 
 from skfem_nem import NaturalNeighbourBasis, delaunay_mesh, sibson_coordinates
 
-SIZES = (250, 700, 2000)          # interior nodes; --more adds 6000
+N_NODES = 700                     # interior nodes
+FIG_NODES = 250                   # of the mesh whose node function is drawn
 METHODS = ("NEM", "P1", "P2")
 SEED = 0
+FIGURE = "out/ex06_poisson_3d.png"
 
 
 def cube_nodes(n, seed=SEED):
@@ -110,64 +99,18 @@ def solve_on(mesh, method):
     return basis, u, err
 
 
-def rates(nodes, err):
-    """Observed orders between consecutive sets and fitted over all (h ~ n^(-1/3))."""
-    h = np.asarray(nodes, float) ** (-1 / 3)
-    e = np.asarray(err)
-    step = np.log(e[1:] / e[:-1]) / np.log(h[1:] / h[:-1])
-    return step, np.polyfit(np.log(h), np.log(e), 1)[0]
-
-
-def study(sizes=SIZES):
-    out = {m: {"nodes": [], "tets": [], "l2": [], "h1": [], "dofs": [], "seconds": []}
-           for m in METHODS}
-    last = None
-    for n in sizes:
-        mesh = delaunay_mesh(cube_nodes(n))
-        for m in METHODS:
-            basis, u, e = solve_on(mesh, m)
-            r = out[m]
-            r["nodes"].append(mesh.nvertices)
-            r["tets"].append(mesh.nelements)
-            for key in ("l2", "h1", "dofs", "seconds"):
-                r[key].append(e[key])
-            if m == "NEM":
-                last = (mesh, basis, u)
-    for r in out.values():
-        for key in list(r):
-            r[key] = np.array(r[key])
-        r["rate_l2"], r["fit_l2"] = rates(r["nodes"], r["l2"])
-        r["rate_h1"], r["fit_h1"] = rates(r["nodes"], r["h1"])
-    return out, last
-
-
-def table(results):
-    lines = ["| nodes | tetrahedra | method | dofs | L2 error | rate | H1 error | rate | s |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    for k in range(len(results["NEM"]["nodes"])):
-        for m in METHODS:
-            r = results[m]
-            rl = f"{r['rate_l2'][k - 1]:.2f}" if k else "-"
-            rh = f"{r['rate_h1'][k - 1]:.2f}" if k else "-"
-            lines.append(f"| {r['nodes'][k]:,} | {r['tets'][k]:,} | {m} | {r['dofs'][k]:,} "
-                         f"| {r['l2'][k]:.3e} | {rl} | {r['h1'][k]:.3e} | {rh} "
-                         f"| {r['seconds'][k]:.2f} |")
-    lines.append("")
-    lines.append("| method | fitted L2 order | fitted H1 order |")
-    lines.append("|---|---|---|")
-    for m in METHODS:
-        lines.append(f"| {m} | {results[m]['fit_l2']:.2f} | {results[m]['fit_h1']:.2f} |")
-    return "\n".join(lines)
-
-
-results, (mesh, basis, u) = study(SIZES + ((6000,) if "--more" in sys.argv else ()))
+mesh = delaunay_mesh(cube_nodes(N_NODES))
+solutions = {m: solve_on(mesh, m) for m in METHODS}
+#: method -> {"l2", "h1", "dofs", "seconds"}
+results = {m: s[2] for m, s in solutions.items()}
+basis, u, _ = solutions["NEM"]
 
 
 # --------------------------------------------------------------------------
 # the paper's Figs 3-4: one node's natural-neighbour function in 3D
 # --------------------------------------------------------------------------
 
-fig_mesh = delaunay_mesh(cube_nodes(SIZES[0]))
+fig_mesh = delaunay_mesh(cube_nodes(FIG_NODES))
 
 
 def node_function(node=None, k=33, mesh=fig_mesh):
@@ -219,7 +162,9 @@ def write_vtu(path, X, phi, g):
                                    point_data={"phi": phi.ravel(), "grad_phi": g}))
 
 
-def visualize(path="out/ex06_poisson_3d.png", k=33):
+def visualize(path=FIGURE, k=33):
+    """Write the node function (VTU, two PNG slices) and the solution (VTU)
+    beside the three methods' errors; returns the Figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -248,20 +193,21 @@ def visualize(path="out/ex06_poisson_3d.png", k=33):
         a.set_title(f"natural-neighbour function of node {node} ({fig_mesh.nvertices} nodes),\n"
                     f"plane {names[axis]} = {p0[axis]:.3f} through the node")
         fig.colorbar(im, ax=a)
-    a = ax[2]
-    for m, mk in zip(METHODS, "osd"):
-        r = results[m]
-        a.loglog(r["nodes"], r["l2"], mk + "-", label=f"{m} L2 ({r['fit_l2']:.2f})")
-        a.loglog(r["nodes"], r["h1"], mk + "--", label=f"{m} H1 ({r['fit_h1']:.2f})")
-    a.set_xlabel("nodes")
-    a.set_ylabel("error")
-    a.set_title("unit cube: errors (fitted order in h)")
-    a.legend(fontsize=8)
+    x = np.arange(len(METHODS))
+    for j, (norm, lab) in enumerate((("l2", "L2"), ("h1", "H1 seminorm"))):
+        ax[2].bar(x + 0.4 * j - 0.2, [results[m][norm] for m in METHODS], 0.4, label=lab)
+    ax[2].set_xticks(x, [f"{m}\n{results[m]['dofs']} dofs" for m in METHODS])
+    ax[2].set_yscale("log")
+    ax[2].set_title(f"unit cube, {mesh.nvertices} nodes: errors")
+    ax[2].legend(fontsize=8)
     fig.savefig(path, dpi=100)
     plt.close(fig)
-    return path
+    return fig
 
 
 if __name__ == "__main__":
-    print(table(results))
-    print("figure written to", visualize())
+    print("| method | dofs | L2 error | H1 error | seconds |\n|---|---|---|---|---|")
+    for m, r in results.items():
+        print(f"| {m} | {r['dofs']} | {r['l2']:.3e} | {r['h1']:.3e} | {r['seconds']:.2f} |")
+    visualize()
+    print("figure written to", FIGURE)

@@ -66,8 +66,12 @@ final = {Y: float(curves[Y][1][-1]) for Y in curves}
 capped_plateau = float(np.abs(curves[YIELD][1][curves[YIELD][0] > 50 * KYR] - YIELD).max())
 
 
-def visualize(path="out/ex09_viscoelastic_buildup.png"):
-    """Numerical vs analytic stress over time, with and without the yield cap."""
+FIGURE = "out/ex09_viscoelastic_buildup.png"
+
+
+def visualize(path=FIGURE):
+    """Numerical vs analytic stress over time, with and without the yield cap,
+    and the error against dt; returns the Figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -92,7 +96,7 @@ def visualize(path="out/ex09_viscoelastic_buildup.png"):
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
-    return path
+    return fig
 
 
 if __name__ == "__main__":
@@ -101,4 +105,5 @@ if __name__ == "__main__":
               f"{s / 1e6:7.3f} MPa, rms spread <= {sp / 1e6:5.2f} MPa")
     print(f"capped: final {final[YIELD] / 1e6:.4f} MPa, max deviation from the cap after "
           f"50 kyr {capped_plateau / 1e6:.4f} MPa")
-    print("wrote", visualize())
+    visualize()
+    print("wrote", FIGURE)

@@ -87,7 +87,12 @@ def nem_min_angle(nem_out, times):
     return np.interp(times, d["time"], d["min_angle"]), d["time"][-1], d["min_angle"][-1]
 
 
-def visualize(fem, nem_out=None, path="out/ex10_lagrangian_fem_fails.png"):
+FIGURE = "out/ex10_lagrangian_fem_fails.png"
+
+
+def visualize(fem, nem_out=None, path=FIGURE):
+    """Minimum angle over time (FEM, and NEM from its diagnostics in nem_out)
+    and the last FEM mesh; returns the Figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -109,7 +114,7 @@ def visualize(fem, nem_out=None, path="out/ex10_lagrangian_fem_fails.png"):
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
-    return path
+    return fig
 
 
 if __name__ == "__main__":
@@ -122,4 +127,5 @@ if __name__ == "__main__":
     if nem_out:
         at, tend, aend = nem_min_angle(nem_out, [fem["time"][-1]])
         print(f"NEM minimum angle at that time: {at[0]:.4f} deg; at t = {tend:.4g}: {aend:.4f} deg")
-    print("wrote", visualize(fem, nem_out))
+    visualize(fem, nem_out)
+    print("wrote", FIGURE)

@@ -79,7 +79,11 @@ def load_curve(n=2500, mu=100.0, steps=24, du=0.004, seed=0, verbose=True):
     return rows
 
 
-def visualize(rows, path="out/ex11_prandtl_punch.png"):
+FIGURE = "out/ex11_prandtl_punch.png"
+
+
+def visualize(rows, path=FIGURE):
+    """The load curve against Prandtl's limit load; returns the Figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -95,9 +99,10 @@ def visualize(rows, path="out/ex11_prandtl_punch.png"):
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
-    return path
+    return fig
 
 
 if __name__ == "__main__":
     rows = load_curve()
-    print("wrote", visualize(rows))
+    visualize(rows)
+    print("wrote", FIGURE)

@@ -51,7 +51,11 @@ def cell_polygons(elems):
     return np.stack(out, axis=1).reshape(-1, 4, 2)
 
 
-def visualize(path="out/ex12_smoothing.png"):
+FIGURE = "out/ex12_smoothing.png"
+
+
+def visualize(path=FIGURE):
+    """Draw the smoothing cells and both rules' nodal errors; returns the Figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -85,10 +89,12 @@ def visualize(path="out/ex12_smoothing.png"):
     fig.colorbar(tp, ax=ax[1:], label="log10 |u - (1 + 2x + 3y)| at the nodes")
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
-    return fig, path
+    plt.close(fig)
+    return fig
 
 
 if __name__ == "__main__":
     for name, err in errors.items():
         print(f"{name}: largest nodal error {err.max():.2e}")
-    print("figure written to", visualize()[1])
+    visualize()
+    print("figure written to", FIGURE)

@@ -1,5 +1,6 @@
-"""Shared test helpers."""
+"""Test configuration: the hypothesis profile, loading examples and benchmarks."""
 import importlib
+import importlib.util
 import os
 import sys
 from pathlib import Path
@@ -23,3 +24,16 @@ def load_example(name):
         return importlib.import_module(name)
     finally:
         sys.path.pop(0)
+
+
+BENCHMARKS = EXAMPLES.parent / "benchmarks"
+
+
+def load_benchmark(name):
+    """Import benchmarks/<name>.py under the name bench_<name> (its studies
+    run only when called)."""
+    spec = importlib.util.spec_from_file_location("bench_" + name, BENCHMARKS / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod

@@ -11,12 +11,7 @@ from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis, NaturalNe
                        delaunay_mesh, sibson_coordinates)
 from skfem_nem.geometry.nodesets import box_nodes
 
-
-def square_nodes(n=300, nb=12, seed=0):
-    rng = np.random.default_rng(seed)
-    s = np.linspace(0, 1, nb + 1)[1:-1]
-    return np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], np.c_[s, 0 * s], np.c_[s, 1 + 0 * s],
-                 np.c_[0 * s, s], np.c_[1 + 0 * s, s], rng.random((n, 2))]
+from helpers import laplace, mass, square_nodes
 
 
 @pytest.fixture(scope="module")
@@ -32,16 +27,6 @@ def basis(mesh):
 @pytest.fixture(scope="module")
 def vbasis(mesh):
     return NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()))
-
-
-@BilinearForm
-def laplace(u, v, w):
-    return dot(grad(u), grad(v))
-
-
-@BilinearForm
-def mass(u, v, w):
-    return u * v
 
 
 def test_stencils_and_groups(mesh, basis):
@@ -286,7 +271,15 @@ def test_save_and_plot(mesh, basis, tmp_path):
     matplotlib.use("Agg")
     ax = basis.plot(u, nrefs=1)
     ax.figure.savefig(tmp_path / "u.png")
-    assert (tmp_path / "u.png").stat().st_size > 5000
+    # the natural-neighbour field on the refined triangles: within the nodal
+    # values' range (a convex combination) and spanning it, over the whole square
+    (tp,) = [c for c in ax.collections if c.get_array() is not None]
+    v = np.asarray(tp.get_array())
+    assert v.size > mesh.nvertices
+    assert u.min() - 1e-12 <= v.min() and v.max() <= u.max() + 1e-12
+    assert v.max() - v.min() > 0.95 * (u.max() - u.min())
+    lim = ax.dataLim
+    np.testing.assert_allclose([lim.x0, lim.y0, lim.x1, lim.y1], [0, 0, 1, 1], atol=1e-12)
 
 
 def test_p2_on_same_mesh_for_comparison(mesh):

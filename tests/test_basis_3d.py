@@ -4,24 +4,13 @@ import numpy as np
 import pytest
 from skfem import (Basis, BilinearForm, ElementTetP1, ElementVector, FacetBasis, Functional,
                    LinearForm, MeshTet, asm, condense, solve)
-from skfem.helpers import dot, grad
+from skfem.helpers import dot
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from skfem_nem import (ElementNaturalNeighbour, ElementTetNaturalNeighbour, NaturalNeighbourBasis,
                        NaturalNeighbourFacetBasis, delaunay_mesh, sibson_coordinates)
 
-
-def cube_nodes(n=250, seed=0):
-    """Corners, random nodes on the six faces, random interior nodes of the unit cube."""
-    rng = np.random.default_rng(seed)
-    corners = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
-    faces = []
-    for ax in range(3):
-        for v in (0.0, 1.0):
-            f = rng.random((int(n ** (2 / 3)), 3))
-            f[:, ax] = v
-            faces.append(f)
-    return np.concatenate([corners, *faces, rng.random((n, 3))])
+from helpers import cube_nodes, laplace, mass
 
 
 @pytest.fixture(scope="module")
@@ -32,16 +21,6 @@ def mesh():
 @pytest.fixture(scope="module")
 def basis(mesh):
     return NaturalNeighbourBasis(mesh)
-
-
-@BilinearForm
-def laplace(u, v, w):
-    return dot(grad(u), grad(v))
-
-
-@BilinearForm
-def mass(u, v, w):
-    return u * v
 
 
 def test_delaunay_mesh_keeps_every_node(mesh):

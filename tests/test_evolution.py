@@ -3,27 +3,20 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
+from helpers import edge_set, square_nodes, vortex
 from skfem_nem import LagrangianMesh
 
 A3 = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
 
-def box_nodes(n=600, seed=0, k=16):
-    rng = np.random.default_rng(seed)
-    s = (np.arange(1, k) + 0.3 * rng.random(k - 1)) / k
-    return np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], np.c_[s, 0 * s], np.c_[s, 1 + 0 * s],
-                 np.c_[0 * s, s], np.c_[1 + 0 * s, s], 0.01 + 0.98 * rng.random((n, 2))]
+def jittered_square(n=600, seed=0, k=16):
+    """Unit-square nodes, the sides' nodes jittered, the interior ones off the walls."""
+    return square_nodes(n, k, seed, jitter=0.3, margin=0.01)
 
 
 def ip_points(lm):
     X = lm.nodes[lm.triangles]  # (nt, 3, 2)
     return np.einsum("kj,tjd->tkd", A3, X)
-
-
-def edge_set(T):
-    e = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
-    e.sort(axis=1)
-    return {tuple(r) for r in e}
 
 
 def check_mesh(lm, n):
@@ -38,15 +31,9 @@ def check_mesh(lm, n):
     assert edge_set(tri.triangles) == edge_set(Delaunay(tri.nodes).simplices)
 
 
-def vortex(x):
-    X, Y = x[:, 0], x[:, 1]
-    return np.c_[np.sin(np.pi * X) ** 2 * np.sin(2 * np.pi * Y),
-                 -np.sin(np.pi * Y) ** 2 * np.sin(2 * np.pi * X)]
-
-
 @pytest.mark.parametrize("jitter", [0.01, 0.05, 0.1, 0.3])
 def test_random_jitter(jitter):
-    p = box_nodes()
+    p = jittered_square()
     lm = LagrangianMesh(p)
     h = 1 / np.sqrt(p.shape[0])
     rng = np.random.default_rng(1)
@@ -64,7 +51,7 @@ def test_random_jitter(jitter):
 
 
 def test_shear_and_vortex_many_steps():
-    p = box_nodes(400)
+    p = jittered_square(400)
     lm = LagrangianMesh(p, node_fields={"x0": p})
     for _ in range(5):
         lm.advance(lambda x: np.c_[0.6 * np.sin(np.pi * x[:, 0]) * (x[:, 1] - 0.5), 0 * x[:, 1]], 0.05)
@@ -78,7 +65,7 @@ def test_shear_and_vortex_many_steps():
 
 
 def test_rigid_motion_causes_no_flip():
-    p = box_nodes(300)
+    p = jittered_square(300)
     lm = LagrangianMesh(p, walls=None)
     T0 = lm.triangles.copy()
     r = lm.advance(lambda x: np.ones_like(x) * [0.25, -0.5], 1.0)
@@ -92,7 +79,7 @@ def test_rigid_motion_causes_no_flip():
 
 @pytest.mark.parametrize("remap", ["conservative", "average"])
 def test_remap_on_flips(remap):
-    p = box_nodes(500)
+    p = jittered_square(500)
     lm = LagrangianMesh(p, remap=remap)
     rng = np.random.default_rng(2)
     # move the nodes without repairing, then repair at fixed positions
@@ -123,7 +110,7 @@ def test_remap_on_flips(remap):
 
 
 def test_injection_keeps_delaunay():
-    p = box_nodes(300)
+    p = jittered_square(300)
     lm = LagrangianMesh(p, node_fields={"rho": 1 + p[:, 0]}, ip_fields={"s": np.ones(3)})
     I0 = lm.ip_integral("s")
     # strong divergent flow from the centre thins the middle
@@ -147,7 +134,7 @@ def test_injection_keeps_delaunay():
 
 
 def test_restart_is_bit_identical(tmp_path):
-    p = box_nodes(300)
+    p = jittered_square(300)
     a = LagrangianMesh(p, node_fields={"x0": p}, ip_fields={"s": np.arange(3.0)})
     for _ in range(3):
         a.advance(vortex, 0.03)
@@ -170,7 +157,7 @@ def test_restart_is_bit_identical(tmp_path):
     (lambda x: 100 * np.ones_like(x), "leave the box"),
 ])
 def test_bad_velocity_leaves_mesh_unchanged(bad, match):
-    p = box_nodes(200)
+    p = jittered_square(200)
     lm = LagrangianMesh(p, ip_fields={"s": np.arange(3.0)})
     lm.advance(vortex, 0.02)
     state = (lm.nodes.copy(), lm.triangles.copy(), lm.ip_fields["s"].copy(), lm.time, lm.step)
@@ -185,7 +172,7 @@ def test_bad_velocity_leaves_mesh_unchanged(bad, match):
 
 
 def test_max_dt_and_basis():
-    p = box_nodes(200)
+    p = jittered_square(200)
     lm = LagrangianMesh(p)
     v = vortex(p)
     dt = lm.max_dt(v, 0.1)
@@ -200,7 +187,7 @@ def test_max_dt_and_basis():
 
 
 def test_predictor_corrector_warns_when_not_converged():
-    p = box_nodes(200)
+    p = jittered_square(200)
     lm = LagrangianMesh(p)
     with pytest.warns(RuntimeWarning, match="did not converge"):
         r = lm.advance(vortex, 0.02, maxiter=1, tol=1e-16)
@@ -243,7 +230,7 @@ def jitter(seed):
 def test_failed_step_leaves_the_whole_state_unchanged(stage, tmp_path, monkeypatch):
     """Each stage of a step fails in turn, after doing its work: nodes,
     triangles, fields, reference areas, clock and history come back exactly."""
-    p = box_nodes(300)
+    p = jittered_square(300)
     lm = LagrangianMesh(p, node_fields={"rho": 1 + p[:, 0]}, ip_fields={"s": np.arange(3.0)})
     lm.advance(spread, 0.1, inject=1.5)
     before = saved_state(lm, tmp_path / "before.npz")
@@ -281,7 +268,7 @@ def test_failed_step_leaves_the_whole_state_unchanged(stage, tmp_path, monkeypat
     ({"inject": 1.0}, "inject"), ({"tol": -1.0}, "tol"), ({"dt": float("nan")}, "dt"),
     ({"velocity": 3.0}, "velocity")])
 def test_step_arguments_checked_before_anything_moves(kw, match, tmp_path):
-    p = box_nodes(150)
+    p = jittered_square(150)
     lm = LagrangianMesh(p, ip_fields={"s": np.arange(3.0)})
     calls = []
     args = {"velocity": lambda x: calls.append(1) or vortex(x), "dt": 0.02, **kw}
@@ -293,7 +280,7 @@ def test_step_arguments_checked_before_anything_moves(kw, match, tmp_path):
 
 
 def test_more_than_eight_substeps():
-    lm = LagrangianMesh(box_nodes(300))
+    lm = LagrangianMesh(jittered_square(300))
     r = lm.advance(jitter(2), 1.0, max_substeps=12)
     assert r["substeps"] == 12
     check_mesh(lm, lm.triangulation.npoints)

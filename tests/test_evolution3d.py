@@ -4,32 +4,17 @@ import numpy as np
 import pytest
 from skfem import MeshTet
 
+from helpers import cube_nodes, vortex
 from skfem_nem import LagrangianMesh3D
 
 
-def box_nodes(n=300, seed=0):
-    rng = np.random.default_rng(seed)
-    corners = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
-    faces = []
-    for ax in range(3):
-        for v in (0.0, 1.0):
-            f = 0.05 + 0.9 * rng.random((25, 3))
-            f[:, ax] = v
-            faces.append(f)
-    return np.concatenate([corners, *faces, 0.02 + 0.96 * rng.random((n, 3))])
-
-
-def vortex(x):
-    """A divergence-free rotation about the vertical axis through the box centre,
-    vanishing on the walls' normal directions (free slip)."""
-    X, Y, Z = x.T
-    u = -np.sin(np.pi * X) ** 2 * np.sin(2 * np.pi * Y) * np.sin(np.pi * Z)
-    v = np.sin(np.pi * Y) ** 2 * np.sin(2 * np.pi * X) * np.sin(np.pi * Z)
-    return np.c_[u, v, 0 * Z]
+def inner_cube(n=300, seed=0):
+    """Unit-cube nodes, 25 a face, all off the edges and walls."""
+    return cube_nodes(n, seed, per_face=25, margin=(0.05, 0.02))
 
 
 def test_fields_follow_their_nodes_and_nothing_is_lost():
-    p = box_nodes()
+    p = inner_cube()
     n = p.shape[0]
     rng = np.random.default_rng(1)
     density = rng.random(n)
@@ -82,7 +67,7 @@ def test_fields_follow_their_nodes_and_nothing_is_lost():
 
 
 def test_bad_input_leaves_the_mesh_unchanged():
-    p = box_nodes(100)
+    p = inner_cube(100)
     m = LagrangianMesh3D(p, {"c": np.ones(p.shape[0])})
     t0 = m.mesh.t.copy()
     with pytest.raises(ValueError, match="shape"):

@@ -7,15 +7,12 @@ from hypothesis import given, settings, strategies as st
 from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, Delaunay, HalfspaceIntersection, Voronoi
 
+from helpers import check_properties, compare_2d, dense
 from skfem_nem import Triangulation, sibson_coordinates
 from skfem_nem.coordinates.lasserre import sibson_coordinates_nd
 
 
-def dense(A):
-    return np.asarray(A.todense())
-
-
-def cube_nodes(n, d, seed):
+def hypercube_nodes(n, d, seed):
     """Random nodes in the unit cube with its 2^d corners (the hull is the cube)."""
     rng = np.random.default_rng(seed)
     corners = np.array(list(itertools.product([0.0, 1.0], repeat=d)))
@@ -42,27 +39,6 @@ def on_faces(p, tri, m, seed, dim):
     return np.array(out)
 
 
-def check_properties(p, q, tol=1e-12, grad_tol=1e-10, tri=None):
-    """Partition of unity, linear precision, non-negativity; sum of gradients
-    zero and sum_i p_i (x) grad phi_i = identity."""
-    d = p.shape[1]
-    Phi, dPhi = sibson_coordinates_nd(p, q, gradient=True, delaunay=tri)
-    F = dense(Phi)
-    assert Phi.shape == (q.shape[0], p.shape[0])
-    assert F.min() >= 0.0
-    np.testing.assert_allclose(F.sum(1), 1.0, rtol=0, atol=tol)
-    np.testing.assert_allclose(F @ p, q, rtol=0, atol=tol)
-    G = [dense(D) for D in dPhi]
-    assert all(np.array_equal(D.indices, Phi.indices) for D in dPhi)
-    scale = max(np.abs(g).max() for g in G)
-    for k in range(d):
-        np.testing.assert_allclose(G[k].sum(1), 0.0, rtol=0, atol=grad_tol * scale)
-        for j in range(d):
-            np.testing.assert_allclose(G[k] @ p[:, j], float(k == j), rtol=0,
-                                       atol=grad_tol * scale)
-    return F, G
-
-
 def fd_error(p, q, tri, h=1e-6, raw=False):
     """Largest difference between the gradients and central finite
     differences of the values, relative to the largest gradient entry."""
@@ -84,23 +60,14 @@ def fd_error(p, q, tri, h=1e-6, raw=False):
 # 2D: agreement with the area method
 # ---------------------------------------------------------------------------
 
-def compare_2d(p, q):
-    F, G = sibson_coordinates_nd(p, q, gradient=True)
-    F2, G2 = sibson_coordinates(p, q, gradient=True)
-    np.testing.assert_allclose(dense(F), dense(F2), rtol=0, atol=1e-12)
-    scale = max(1.0, max(np.abs(dense(g)).max() for g in G2))
-    for a, b in zip(G, G2):
-        np.testing.assert_allclose(dense(a), dense(b), rtol=0, atol=1e-10 * scale)
-
-
 def test_2d_matches_area_method_at_random_points():
-    p = cube_nodes(300, 2, seed=0)
+    p = hypercube_nodes(300, 2, seed=0)
     q = 0.01 + 0.98 * np.random.default_rng(1).random((2000, 2))
-    compare_2d(p, q)
+    compare_2d(p, q, lasserre=sibson_coordinates_nd)
 
 
 def test_2d_matches_area_method_on_delaunay_edges():
-    p = cube_nodes(200, 2, seed=2)
+    p = hypercube_nodes(200, 2, seed=2)
     tri = Triangulation(p)
     T, N = tri.triangles, tri.neighbours
     rng = np.random.default_rng(3)
@@ -109,7 +76,7 @@ def test_2d_matches_area_method_on_delaunay_edges():
     a = p[T[t[pick], (k[pick] + 1) % 3]]
     b = p[T[t[pick], (k[pick] + 2) % 3]]
     s = rng.random((400, 1))
-    compare_2d(p, a + s * (b - a))
+    compare_2d(p, a + s * (b - a), lasserre=sibson_coordinates_nd)
 
 
 def test_2d_lattice_matches_area_method():
@@ -118,7 +85,7 @@ def test_2d_lattice_matches_area_method():
     q = 0.01 + 0.98 * np.random.default_rng(4).random((500, 2))
     q[:100, 0] = 0.5                      # on grid lines
     q[100:150] = np.floor(q[100:150] * 8) / 8 + 1 / 16  # square centres
-    compare_2d(p, q)
+    compare_2d(p, q, lasserre=sibson_coordinates_nd)
 
 
 @settings(max_examples=20, deadline=None)
@@ -136,7 +103,7 @@ def test_2d_matches_area_method_hypothesis(seed, n):
 
 
 def test_2d_hull_edges_are_linear():
-    p = cube_nodes(80, 2, seed=5)
+    p = hypercube_nodes(80, 2, seed=5)
     s = np.linspace(0.05, 0.95, 19)
     q = np.c_[s, np.zeros_like(s)]                    # on the side y = 0
     F = dense(sibson_coordinates_nd(p, q))
@@ -168,9 +135,9 @@ def test_3d_second_order_volumes_sum_to_voronoi_cell():
 
 @pytest.mark.parametrize("d, n, m", [(3, 220, 400), (4, 120, 40)])
 def test_properties_random(d, n, m):
-    p = cube_nodes(n, d, seed=7 + d)
+    p = hypercube_nodes(n, d, seed=7 + d)
     q = 0.02 + 0.96 * np.random.default_rng(d).random((m, d))
-    F, _ = check_properties(p, q)
+    F, _ = check_properties(p, q, sibson_coordinates_nd)
     assert np.all((F > 0).sum(1) >= d + 1)
 
 
@@ -178,10 +145,10 @@ def test_properties_random(d, n, m):
 def test_properties_on_delaunay_faces(d, dim):
     """Points exactly on interior Delaunay faces and edges (the paper: the
     method does not break down there)."""
-    p = cube_nodes(150 if d == 3 else 80, d, seed=11)
+    p = hypercube_nodes(150 if d == 3 else 80, d, seed=11)
     tri = Delaunay(p)
     q = on_faces(p, tri, 100 if d == 3 else 20, seed=dim, dim=dim)
-    check_properties(p, q, tri=tri)
+    check_properties(p, q, sibson_coordinates_nd, delaunay=tri)
 
 
 @pytest.mark.parametrize("d, k", [(3, 5), (4, 4)])
@@ -192,12 +159,12 @@ def test_properties_lattice(d, k):
     rng = np.random.default_rng(12)
     q = 0.05 + 0.9 * rng.random((60 if d == 3 else 8, d))
     q[: q.shape[0] // 3, 0] = 0.5          # on lattice planes
-    check_properties(p, q)
+    check_properties(p, q, sibson_coordinates_nd)
 
 
 @pytest.mark.parametrize("d", [3, 4])
 def test_kronecker_delta(d):
-    p = cube_nodes(60 if d == 3 else 40, d, seed=13)
+    p = hypercube_nodes(60 if d == 3 else 40, d, seed=13)
     np.testing.assert_array_equal(dense(sibson_coordinates_nd(p, p)), np.eye(p.shape[0]))
     # and continuously so: close to an interior node
     i = int(np.argmin(np.abs(p - 0.5).sum(1)))
@@ -213,7 +180,7 @@ def test_kronecker_delta(d):
 
 @pytest.mark.parametrize("d, n, m", [(2, 100, 200), (3, 150, 60), (4, 80, 10)])
 def test_gradients_finite_differences(d, n, m):
-    p = cube_nodes(n, d, seed=14)
+    p = hypercube_nodes(n, d, seed=14)
     tri = Delaunay(p)
     q = 0.05 + 0.9 * np.random.default_rng(15).random((m, d))
     assert fd_error(p, q, tri) < 1e-6
@@ -224,7 +191,7 @@ def test_gradients_finite_differences(d, n, m):
 
 @pytest.mark.parametrize("d, n, m", [(2, 100, 100), (3, 150, 40), (4, 80, 8)])
 def test_gradients_finite_differences_on_faces(d, n, m):
-    p = cube_nodes(n, d, seed=16)
+    p = hypercube_nodes(n, d, seed=16)
     tri = Delaunay(p)
     q = np.r_[on_faces(p, tri, m, seed=17, dim=d - 1), on_faces(p, tri, m, seed=18, dim=1)]
     assert fd_error(p, q, tri) < 1e-6
@@ -285,7 +252,7 @@ def test_3d_hull_facet_limit():
     be the areas of C_i)."""
     rng = np.random.default_rng(19)
     face = np.c_[rng.random((30, 2)), np.zeros(30)]
-    p = np.r_[cube_nodes(120, 3, seed=20), face]
+    p = np.r_[hypercube_nodes(120, 3, seed=20), face]
     on = np.flatnonzero(p[:, 2] == 0.0)
     q2 = 0.02 + 0.96 * rng.random((60, 2))
     q = np.c_[q2, np.zeros(60)]
@@ -311,7 +278,7 @@ def test_3d_hull_facet_limit():
 
 def test_4d_hull():
     """Facets (exact limit weights), 2-faces (extrapolated) and edges of a 4D hull."""
-    p = cube_nodes(60, 4, seed=21)
+    p = hypercube_nodes(60, 4, seed=21)
     rng = np.random.default_rng(22)
     for ones in (1, 2, 3):
         q = 0.1 + 0.8 * rng.random((6, 4))
@@ -329,7 +296,7 @@ def test_4d_hull():
 # ---------------------------------------------------------------------------
 
 def test_gradients_undefined_at_nodes_and_on_the_hull():
-    p = cube_nodes(50, 3, seed=23)
+    p = hypercube_nodes(50, 3, seed=23)
     with pytest.raises(ValueError, match=r"coincide with a node; first is x\[1\] .* \(node 17\)"):
         sibson_coordinates_nd(p, np.r_[[[0.5, 0.5, 0.5]], p[17:18]], gradient=True)
     with pytest.raises(ValueError, match=r"convex hull; first is x\[0\]"):
@@ -357,13 +324,13 @@ def test_bad_nodes():
         sibson_coordinates_nd(flat, q)
     with pytest.raises(ValueError, match="d = 2, 3 or 4"):
         sibson_coordinates_nd(np.random.default_rng(0).random((40, 5)), np.zeros((1, 5)))
-    p = cube_nodes(30, 3, seed=24)
+    p = hypercube_nodes(30, 3, seed=24)
     with pytest.raises(ValueError, match="other points"):
         sibson_coordinates_nd(p, q, delaunay=Delaunay(p[::-1]))
 
 
 def test_bad_queries():
-    p = cube_nodes(40, 3, seed=25)
+    p = hypercube_nodes(40, 3, seed=25)
     q = np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5], [0.2, 0.2, 0.2], [0.5, -1e-6, 0.5]])
     before = q.copy()
     with pytest.raises(ValueError, match=r"2 query point\(s\) lie outside .* x\[1\]"):
@@ -382,7 +349,7 @@ def test_bad_queries():
 
 
 def test_delaunay_reuse():
-    p = cube_nodes(80, 3, seed=26)
+    p = hypercube_nodes(80, 3, seed=26)
     tri = Delaunay(p)
     q = 0.1 + 0.8 * np.random.default_rng(27).random((50, 3))
     A = sibson_coordinates_nd(p, q, gradient=True)
@@ -404,7 +371,7 @@ def test_3d_faces_from_combinatorics_match_the_recursion(monkeypatch):
     and edges, near nodes and near the hull."""
     from skfem_nem.coordinates import lasserre as L
 
-    p = cube_nodes(400, 3, seed=28)
+    p = hypercube_nodes(400, 3, seed=28)
     tri = Delaunay(p)
     rng = np.random.default_rng(29)
     s = rng.integers(0, tri.nsimplex, 300)
@@ -434,7 +401,7 @@ def test_3d_within_round_off_of_a_node():
     """Within 1e-13 of a node the walk's tolerance can end in a simplex that
     does not hold x and whose circumsphere x is outside of; the region must
     still be found (this raised "came out unbounded" before)."""
-    p = cube_nodes(1000, 3, seed=32)
+    p = hypercube_nodes(1000, 3, seed=32)
     rng = np.random.default_rng(33)
     i = np.flatnonzero((np.abs(p - 0.5) < 0.45).all(1))[:150]
     v = rng.standard_normal((150, 3))

@@ -1,5 +1,6 @@
 """The sinking-plate application: a short coarse run, outputs, restart, bad configuration."""
 import json
+from pathlib import Path
 
 import meshio
 import numpy as np
@@ -57,12 +58,51 @@ def test_outputs(coarse_run):
     for k in ("stress_invariant", "plastic_strain"):
         assert k in m.cell_data, k
     assert m.points.shape[0] == sim.lm.nodes.shape[0]
-    assert (out / "fig6.png").stat().st_size > 10000
-    assert (out / "diagnostics.png").stat().st_size > 10000
     cols = read_csv_columns(out / "diagnostics.csv")
     for k in ("plate_depth", "plate_area", "fluid_area", "max_plastic_strain", "flips",
               "injected", "min_angle", "solver_iterations", "picard_iterations"):
         assert k in cols, k
+
+
+def drawn_figures(sim, monkeypatch):
+    """sim.figures() again, keeping each Figure it saves (by file name)."""
+    from matplotlib.figure import Figure
+    saved, savefig = {}, Figure.savefig
+
+    def keep(fig, fname, *args, **kwargs):
+        saved[Path(fname).name] = fig
+        return savefig(fig, fname, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    paths = sim.figures()
+    assert sorted(p.name for p in paths) == sorted(saved)
+    return saved
+
+
+def test_figures_draw_the_run(coarse_run, monkeypatch):
+    sim, out, _ = coarse_run
+    figs = drawn_figures(sim, monkeypatch)
+    assert {"fig6.png", "plate_strain.png", "diagnostics.png"} <= set(figs)
+    # Fig. 6: the mesh coloured by initial depth at t = 1 and at the end, the
+    # whole box in view, the plate outline drawn on the last panel
+    early, end = [a for a in figs["fig6.png"].axes if a.get_title().startswith("t =")]
+    assert early.get_title().startswith("t = 1:")
+    assert end.get_title().startswith(f"t = {sim.lm.time:.4g}:")
+    (tp,) = [c for c in end.collections if c.get_array() is not None]
+    np.testing.assert_allclose(tp.get_array(), sim.cfg.height - sim.lm.node_fields["z0"])
+    for a in (early, end):
+        assert a.get_xlim() == (0, sim.cfg.width) and a.get_ylim() == (0, sim.cfg.height)
+    outline = end.lines[-1].get_xydata()
+    np.testing.assert_allclose(outline[:-1], sim.plate_polygon)
+    np.testing.assert_allclose(outline[-1], outline[0])
+    # the diagnostics: the columns of diagnostics.csv against time
+    d = read_csv_columns(out / "diagnostics.csv")
+    axes = figs["diagnostics.png"].axes
+    assert [a.get_title() for a in axes][:2] == ["plate centroid depth", "plate area"]
+    for a, k in zip(axes, ("plate_depth", "plate_area", "max_plastic_strain", "flips", "nodes",
+                           "min_angle")):
+        np.testing.assert_allclose(a.lines[0].get_xdata(), d["time"])
+        np.testing.assert_allclose(a.lines[0].get_ydata(), d[k])
 
 
 def test_restart_continues_identically(tmp_path):
@@ -160,7 +200,6 @@ def test_command_line_short_run(tmp_path):
 
 def test_lagrangian_fem_inverts_where_nem_does_not(tmp_path):
     import sys
-    from pathlib import Path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
     import ex10_lagrangian_fem_fails as ex10
 
@@ -173,8 +212,20 @@ def test_lagrangian_fem_inverts_where_nem_does_not(tmp_path):
     assert sim.lm.time == pytest.approx(fem["inverted_at"])
     assert sim.lm.triangulation.is_delaunay() and sim.lm.min_angle() > 0
     assert (sim.lm.triangulation.orientation() > 0).all()
-    png = ex10.visualize(fem, tmp_path / "nem", path=tmp_path / "ex10.png")
-    assert Path(png).stat().st_size > 10000
+    fig = ex10.visualize(fem, tmp_path / "nem", path=tmp_path / "ex10.png")
+    assert (tmp_path / "ex10.png").exists()
+    angles, mesh = fig.axes
+    # FEM and NEM minimum angles over time, the FEM inversion marked
+    fem_line, nem_line, inversion = angles.lines
+    np.testing.assert_allclose(fem_line.get_ydata(), fem["min_angle"])
+    assert nem_line.get_xdata()[-1] == pytest.approx(fem["inverted_at"])
+    assert min(nem_line.get_ydata()) > 0 and min(fem_line.get_ydata()) < min(nem_line.get_ydata())
+    np.testing.assert_allclose(inversion.get_xdata(), fem["inverted_at"])
+    # the last FEM mesh: its nodes, inside the box
+    P, T = fem["mesh"]
+    lim = mesh.dataLim
+    assert (lim.x0, lim.x1) == pytest.approx((P[:, 0].min(), P[:, 0].max()))
+    assert f"t = {fem['time'][-1]:.4g}" in mesh.get_title()
 
 
 def test_step_retried_with_half_dt_and_fields_restored(tmp_path):

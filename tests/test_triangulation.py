@@ -3,13 +3,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.spatial import Delaunay
 
+from helpers import edge_set
 from skfem_nem import Triangulation
-
-
-def edge_set(T):
-    e = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
-    e.sort(axis=1)
-    return {tuple(r) for r in e}
 
 
 def check_valid(tri):

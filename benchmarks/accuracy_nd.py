@@ -6,7 +6,8 @@ Delaunay faces), prints the worst violation of the defining identities --
 partition of unity, linear precision ``sum_i phi_i x_i = x``, ``sum_i grad
 phi_i = 0``, ``sum_i x_i grad phi_i^T = I`` (the gradient identities relative
 to the largest gradient) -- the worst gap between the gradients and central
-finite differences (relative to the largest gradient of the query; step 1e-4 times the distance to the nearest node, at most
+finite differences (relative to the largest gradient of the query; step 1e-4 times the distance
+to the nearest node, at most
 1e-6), and in 2D the worst difference from the area method. In 3D the
 sum of the second-order volumes is compared with the Voronoi cell volume of
 the inserted point (scipy/Qhull), the paper's own check.
@@ -84,9 +85,11 @@ def main():
             area = "-"
             if d == 2:
                 A = sibson_coordinates(p, q).toarray()
-                area = f"{np.abs(A - sibson_coordinates(p, q, method='lasserre').toarray()).max():.1e}"
+                B = sibson_coordinates(p, q, method='lasserre').toarray()
+                area = f"{np.abs(A - B).max():.1e}"
             print(f"| {d} | {n:,} | {q.shape[0]} | {where} | {r['pu']:.1e} | {r['lin']:.1e} "
-                  f"| {r['gsum']:.1e} | {r['glin']:.1e} | {r['fd']:.1e} | {area} |".replace("nan", "-"))
+                  f"| {r['gsum']:.1e} | {r['glin']:.1e} | {r['fd']:.1e} | {area} |"
+                  .replace("nan", "-"))
     p = rng.random((220, 3))
     q = 0.35 + 0.3 * rng.random((40, 3))
     print(f"\n3D, 220 nodes (the paper's check), 40 queries: max relative |sum_i V_i - "

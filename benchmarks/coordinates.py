@@ -226,7 +226,8 @@ def main(argv=None):
           "| coords 1t / CGAL | peak MB |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['n']:,} | {r['m']:,} | {r['triangulation_s']:.2f} | {r['mean_neighbours']:.2f} "
+        print(f"| {r['n']:,} | {r['m']:,} | {r['triangulation_s']:.2f} "
+              f"| {r['mean_neighbours']:.2f} "
               f"| {r['us_vals_1t']:.3f} | {r['us_grad_1t']:.3f} | {r['us_vals_2t']:.3f} "
               f"| {r['us_grad_2t']:.3f} | {2 * r['us_grad_2t']:.3f} "
               f"| {r['us_vals_1t'] / CGAL_US:.2f} | {r['peak_mb']:.0f} |")

@@ -158,7 +158,8 @@ def run_child(meshfile: str, problem: str, method: str, min_time: float, budget:
 
     tb, ta, tc = [], [], []
     out = {"triangles": int(mesh.nelements), "nodes": int(mesh.nvertices),
-           "adopt_s": t_adopt, "threading_layer": layer, "baseline_mb": base_peak, "baseline_gap_mb": base_peak - base_rss}
+           "adopt_s": t_adopt, "threading_layer": layer, "baseline_mb": base_peak,
+           "baseline_gap_mb": base_peak - base_rss}
     while True:
         c0 = time.process_time()
         s0 = time.perf_counter()
@@ -232,7 +233,8 @@ def table(problem: str, rows: list[dict]) -> list[str]:
             f"| {nem['stencil_mean']:.2f} / {nem['stencil_max']} "
             f"| {_fmt_t(nem['basis_s'])} | {_fmt_t(nem['assembly_s'])} "
             f"| {_fmt_t(p2['basis_s'])} | {_fmt_t(p2['assembly_s'])} "
-            f"| {ratio:.2f} | {nem['cpu_s'] / p2['cpu_s']:.2f} | {paper if paper is not None else '-'} | {mem} "
+            f"| {ratio:.2f} | {nem['cpu_s'] / p2['cpu_s']:.2f} "
+            f"| {paper if paper is not None else '-'} | {mem} "
             f"| {_fmt_t(p1r['total_s'])} | {_fmt_t(nem['adopt_s'])} "
             f"| {nem['repeats']}/{p2['repeats']}/{p1r['repeats']} "
             f"| {_fmt_t(nem2['total_s'])} | {nem2['total_s'] / p2['total_s']:.2f} "
@@ -304,7 +306,8 @@ def main(argv=None):
                           f"{row[method]['total_s']:.4g} s x{row[method]['repeats']}, "
                           f"+{row[method]['peak_mb']:.0f} MB", file=sys.stderr, flush=True)
                     if row[method]["baseline_gap_mb"] > 20:
-                        print(f"# warning: a transient peak {row[method]['baseline_gap_mb']:.0f} MB "
+                        gap = row[method]['baseline_gap_mb']
+                        print(f"# warning: a transient peak {gap:.0f} MB "
                               f"above the resident memory before the run may hide part of its "
                               f"peak", file=sys.stderr)
                 results[problem].append(row)

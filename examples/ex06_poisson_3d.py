@@ -183,7 +183,8 @@ def visualize(path=FIGURE, k=33):
     for a, axis in zip(ax[:2], (2, 0)):
         ext, img = node_slice(node, axis, X=X)
         im = a.imshow(img, origin="lower", extent=ext, cmap="viridis", vmin=0, vmax=1)
-        a.contour(np.linspace(ext[0], ext[1], img.shape[1]), np.linspace(ext[2], ext[3], img.shape[0]),
+        a.contour(np.linspace(ext[0], ext[1], img.shape[1]),
+                  np.linspace(ext[2], ext[3], img.shape[0]),
                   img, levels=[0.01, 0.1, 0.3, 0.5, 0.7, 0.9], colors="w", linewidths=0.6)
         a.plot(p0[[d for d in range(3) if d != axis][0]], p0[[d for d in range(3) if d != axis][1]],
                "r+")

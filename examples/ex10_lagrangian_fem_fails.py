@@ -98,7 +98,8 @@ def visualize(fem, nem_out=None, path=FIGURE):
     import matplotlib.pyplot as plt
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig, ax = plt.subplots(2, 1, figsize=(12, 6))
-    ax[0].semilogy(fem["time"], fem["min_angle"], "s-", label="Lagrangian P2 FEM (fixed connectivity)")
+    ax[0].semilogy(fem["time"], fem["min_angle"], "s-",
+                   label="Lagrangian P2 FEM (fixed connectivity)")
     if nem_out is not None and (Path(nem_out) / "diagnostics.csv").exists():
         d = read_csv_columns(Path(nem_out) / "diagnostics.csv")
         ax[0].semilogy(d["time"], d["min_angle"], "-", label="NEM (Delaunay kept by flips)")

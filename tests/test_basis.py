@@ -110,7 +110,8 @@ def test_vector_basis_elasticity(mesh, vbasis):
     left = vbasis.get_dofs(lambda x: np.isclose(x[0], 0.0))
     assert np.all(np.isclose(x[left.nodal["u^1"] // 2], 0.0))
     np.testing.assert_array_equal(left.nodal["u^1"] % 2, 0)
-    np.testing.assert_array_equal(vbasis.get_dofs(lambda x: np.isclose(x[0], 0.0), skip=["u^2"]).flatten(),
+    np.testing.assert_array_equal(
+        vbasis.get_dofs(lambda x: np.isclose(x[0], 0.0), skip=["u^2"]).flatten(),
                                   left.nodal["u^1"])
     # patch test: linear displacement imposed on the boundary
     lin = np.zeros(vbasis.N)
@@ -146,7 +147,8 @@ def test_interpolate_probes_project(mesh, basis, vbasis):
     rng = np.random.default_rng(3)
     pts = rng.random((2, 50))
     val = basis.probes(pts) @ np.sin(mesh.p[0])
-    np.testing.assert_allclose(val, sibson_coordinates(mesh.p.T, pts.T) @ np.sin(mesh.p[0]), atol=1e-14)
+    np.testing.assert_allclose(val, sibson_coordinates(mesh.p.T, pts.T) @ np.sin(mesh.p[0]),
+                               atol=1e-14)
     np.testing.assert_allclose(basis.interpolator(u)(pts), 2 * pts[0] - pts[1] + 0.5, atol=1e-13)
     # L2 projection of a function in the space returns it
     p = basis.project(lambda x: 2 * x[0] - x[1] + 0.5)

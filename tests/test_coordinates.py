@@ -148,7 +148,8 @@ def grid_triangulations(n=7):
     x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
     p = np.c_[x.ravel(), y.ravel()]
     idx = np.arange(n * n).reshape(n, n)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
     t1 = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
     t2 = np.r_[np.c_[a, b, d], np.c_[b, c, d]]
     return p, Triangulation.from_triangles(p, t1), Triangulation.from_triangles(p, t2)
@@ -477,8 +478,10 @@ def test_non_delaunay_triangulation_terminates():
                 continue
             a, b, c = T[t, k], T[t, (k + 1) % 3], T[t, (k + 2) % 3]
             d = [T[u, j] for j in range(3) if N[u, j] == t][0]
-            o1 = (p[b, 0] - p[a, 0]) * (p[d, 1] - p[a, 1]) - (p[b, 1] - p[a, 1]) * (p[d, 0] - p[a, 0])
-            o2 = (p[d, 0] - p[a, 0]) * (p[c, 1] - p[a, 1]) - (p[d, 1] - p[a, 1]) * (p[c, 0] - p[a, 0])
+            o1 = ((p[b, 0] - p[a, 0]) * (p[d, 1] - p[a, 1])
+                  - (p[b, 1] - p[a, 1]) * (p[d, 0] - p[a, 0]))
+            o2 = ((p[d, 0] - p[a, 0]) * (p[c, 1] - p[a, 1])
+                  - (p[d, 1] - p[a, 1]) * (p[c, 0] - p[a, 0]))
             if o1 > 1e-9 and o2 > 1e-9 and not edge_violates(p, T, N, t, k):
                 flip_edge(T, N, t, k)
                 flips += 1

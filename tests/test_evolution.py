@@ -54,7 +54,8 @@ def test_shear_and_vortex_many_steps():
     p = jittered_square(400)
     lm = LagrangianMesh(p, node_fields={"x0": p})
     for _ in range(5):
-        lm.advance(lambda x: np.c_[0.6 * np.sin(np.pi * x[:, 0]) * (x[:, 1] - 0.5), 0 * x[:, 1]], 0.05)
+        lm.advance(lambda x: np.c_[0.6 * np.sin(np.pi * x[:, 0]) * (x[:, 1] - 0.5),
+                                   0 * x[:, 1]], 0.05)
     check_mesh(lm, p.shape[0])
     for _ in range(20):
         lm.advance(vortex, 0.02)
@@ -239,7 +240,7 @@ def test_failed_step_leaves_the_whole_state_unchanged(stage, tmp_path, monkeypat
 
     def failing(original):
         def f(*args, **kwargs):
-            out = original(*args, **kwargs)
+            original(*args, **kwargs)
             calls["n"] += 1
             raise RuntimeError(f"{stage} failed")
         return f

@@ -1,4 +1,5 @@
-"""Sibson coordinates in 2-4 dimensions by Lasserre's volume recursion (skfem_nem.coordinates.lasserre)."""
+"""Sibson coordinates in 2-4 dimensions by Lasserre's volume recursion
+(skfem_nem.coordinates.lasserre)."""
 import itertools
 
 import numpy as np

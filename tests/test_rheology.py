@@ -5,10 +5,10 @@ import pytest
 from skfem_nem import delaunay_mesh
 from skfem_nem.models.analytic import SolCx, viscoelastic_buildup
 from skfem_nem.geometry.nodesets import box_nodes
-from skfem_nem.models.rheology import (Material, combine_materials, deviator, from_ip_field, maxwell_coefficients,
-                                prescribed_velocity, return_map, rotate_stress, second_invariant,
-                                solve_stokes_bc, to_ip_field, velocity_gradient, vep_step,
-                                vep_update)
+from skfem_nem.models.rheology import (Material, combine_materials, deviator, from_ip_field,
+                                       maxwell_coefficients, prescribed_velocity, return_map,
+                                       rotate_stress, second_invariant, solve_stokes_bc,
+                                       to_ip_field, velocity_gradient, vep_step, vep_update)
 from skfem_nem.models.stokes import solve_stokes, stokes_spaces
 
 KYR = 1e3 * 3.15576e7
@@ -30,7 +30,8 @@ def area_mean(S, a):
 
 @pytest.mark.parametrize("kw, word", [
     (dict(viscosity=-1.0), "viscosity"), (dict(viscosity=0.0), "viscosity"),
-    (dict(viscosity=np.nan), "viscosity"), (dict(viscosity=1.0, shear_modulus=0.0), "shear_modulus"),
+    (dict(viscosity=np.nan), "viscosity"),
+    (dict(viscosity=1.0, shear_modulus=0.0), "shear_modulus"),
     (dict(viscosity=1.0, yield_stress=-5.0), "yield_stress"),
     (dict(viscosity=1.0, density=np.nan), "density"), (dict(viscosity=1.0, density=0.0), "density"),
     (dict(viscosity=np.inf), "both infinite")])

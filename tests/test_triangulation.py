@@ -61,7 +61,8 @@ def test_lawson_repairs_any_triangulation():
     x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
     p = np.c_[x.ravel(), y.ravel()]
     idx = np.arange(n * n).reshape(n, n)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
     T = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
     interior = (p[:, 0] > 0) & (p[:, 0] < 1) & (p[:, 1] > 0) & (p[:, 1] < 1)
     p[interior] += 0.3 / n * (rng.random((interior.sum(), 2)) - 0.5)

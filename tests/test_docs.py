@@ -38,6 +38,7 @@ def test_every_example_has_a_page(pages, example):
     assert f".. literalinclude:: ../../examples/{example.name}\n" in page
     title, paragraph = _gallery().example_summary(example)
     assert title in page and paragraph.splitlines()[0] in page
+    assert re.search(r"^\.\. figure:: ", page, re.M), f"{example.stem} shows no figure"
 
 
 def test_referenced_figures_exist(pages):

@@ -104,6 +104,7 @@ def run_nd(n: int, d: int, repeat: int) -> dict:
 
     from skfem_nem import sibson_coordinates
     from skfem_nem.coordinates import lasserre as L
+    from skfem_nem.geometry.hull import HULL_TOLERANCE
     from skfem_nem.geometry.simplices_nd import FLAT, circumcentre_cache
 
     numba.set_num_threads(1)
@@ -145,7 +146,7 @@ def run_nd(n: int, d: int, repeat: int) -> dict:
         out["stage_cache"] = best_of(lambda: circumcentre_cache(p, S, m))
         cache = circumcentre_cache(p, S, m)
         ncap, ccap, _ = L._CAPS[d]
-        tols = np.array([L._ZERO_ROW, L._TIE, L._INSPHERE, FLAT, L._HULL, L._LINEAR,
+        tols = np.array([L._ZERO_ROW, L._TIE, L._INSPHERE, FLAT, HULL_TOLERANCE, L._LINEAR,
                          L._WALK, L._VERTEX, L._SHAPE, L._LINEAR3, L._GRAD3, L._NEAR3])
         drv = _region_driver()
         drv(p, S, NB, q[:100], start[:100], ncap, ccap, tols, *cache)

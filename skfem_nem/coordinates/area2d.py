@@ -64,6 +64,7 @@ import numpy as np
 from numba import njit, prange
 
 from .batch import RowStore, check_queries, index_dtype, raise_outside, raise_undefined
+from ..geometry.hull import HULL_TOLERANCE, OUTSIDE_ROUNDOFF
 from ..geometry.status import AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW
 from ..geometry.predicates import orient2d
 from ..geometry.triangulation import Triangulation
@@ -75,8 +76,6 @@ __all__ = ["area_coordinates"]
 SIBSON = 0
 LAPLACE = 1
 
-# relative distance below which a point counts as lying on a hull edge
-_HULL_EPS = 1e-15
 
 
 @njit(cache=True, inline="always")
@@ -155,7 +154,7 @@ def _on_hull(P, nn, be_u, nb, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad):
             ey = P[b, 1] - P[a, 1]
             L2 = ex * ex + ey * ey
             o = orient2d(P[a, 0], P[a, 1], P[b, 0], P[b, 1], qx, qy)
-            if o <= _HULL_EPS * L2:
+            if o <= HULL_TOLERANCE * L2:
                 s = ((qx - P[a, 0]) * ex + (qy - P[a, 1]) * ey) / L2
                 s = min(max(s, 0.0), 1.0)
                 lo = min(a, b)
@@ -616,7 +615,8 @@ def _check_status(status, q, offset, gradient, undefined, tri):
 
 def area_coordinates(tri: Triangulation, x, gradient: bool = False, kind: str = "sibson",
                      undefined: str = "raise", chunk: int = 1 << 15,
-                     return_triangles: bool = False, hint=None, hull_tol: float = 1e-13):
+                     return_triangles: bool = False, hint=None,
+                     hull_tol: float = OUTSIDE_ROUNDOFF):
     """The 2D area method on a triangulation; the options and results of
     :func:`~skfem_nem.coordinates.natural_neighbour_coordinates` (``method="area"``)."""
     if kind not in ("sibson", "laplace"):

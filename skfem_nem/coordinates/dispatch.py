@@ -11,6 +11,7 @@ from typing import Literal, Optional
 import numpy as np
 from scipy.spatial import Delaunay
 
+from ..geometry.hull import OUTSIDE_ROUNDOFF
 from ..geometry.triangulation import Triangulation
 from .area2d import area_coordinates
 from .lasserre import sibson_coordinates_nd
@@ -62,7 +63,7 @@ def natural_neighbour_coordinates(
     chunk: int = 1 << 15,
     return_triangles: bool = False,
     hint=None,
-    hull_tol: float = 1e-13,
+    hull_tol: float = OUTSIDE_ROUNDOFF,
     method: Optional[Literal["area", "lasserre"]] = None,
 ):
     """Natural-neighbour coordinates (and gradients) of points in 2, 3 or 4 dimensions.

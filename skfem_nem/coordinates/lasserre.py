@@ -13,9 +13,9 @@ batches and the hull limits.
 
 Special points
     At a node: the Kronecker delta (gradients undefined). On the convex hull
-    (within ``_HULL`` times the distance to the facet's nodes, else outside
-    is an error): the limits from inside, see :func:`_on_hull` -- inside a
-    hull facet the weights ``integral over C_i of (|y - p_i|^2 - |y - x|^2)
+    (within :data:`~skfem_nem.geometry.hull.HULL_TOLERANCE` times the distance to
+    the facet's nodes, else outside is an error): the limits from inside, see
+    :func:`_on_hull` -- inside a hull facet the weights ``integral over C_i of (|y - p_i|^2 - |y - x|^2)
     dy`` over the (d-1)-dimensional second-order cells of the facet's nodes
     (not their (d-1)-dimensional Sibson coordinates), linear interpolation
     on hull edges. Points on interior Delaunay faces and edges need nothing
@@ -51,6 +51,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from .batch import check_queries, compress, index_dtype, raise_outside, raise_undefined
+from ..geometry.hull import FACET_PLANE, HULL_TOLERANCE
 from ..geometry.status import ON_HULL, OUTSIDE, OVERFLOW, UNBOUNDED
 from ..geometry.delaunay_nd import check_delaunay, check_nodes, delaunay_of, triangulate
 from ..geometry.simplices_nd import FLAT, circumcentre_cache, facet_planes
@@ -65,9 +66,6 @@ _ZERO_ROW = 1e-13
 _TIE = 1e-13
 # Relative tolerance of the in-sphere test (tolerant: includes borderline simplices).
 _INSPHERE = 1e-10
-# A point whose distance to a hull facet's plane is below this times its
-# distance to the facet's nodes is on the hull.
-_HULL = 1e-12
 # Linear precision residual |sum_i V_i (p_i - x)| / (V L) above which a query is
 # recomputed without the combinatorial facet filter (a safety net).
 _LINEAR = 1e-9
@@ -122,7 +120,7 @@ def _run(P, S, NB, Q, start, gradient, kind, caps, cache=None, out=None):
     count = np.empty(m, np.int64)
     status = np.empty(m, np.int64)
     info = np.empty(m, np.int64)
-    tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, FLAT, _HULL, _LINEAR, _WALK, _VERTEX,
+    tols = np.array([_ZERO_ROW, _TIE, _INSPHERE, FLAT, HULL_TOLERANCE, _LINEAR, _WALK, _VERTEX,
                      _SHAPE, _LINEAR3, _GRAD3, _NEAR3])
     nblocks = max(1, min(m // 16, 4 * numba.get_num_threads()))
     # small batches run serially: waking the thread pool costs more than it saves
@@ -170,7 +168,7 @@ def _on_hull(p, tri, Q, facets):
     S = np.ascontiguousarray(tri.simplices, dtype=np.int64)
     normal, off, F = facet_planes(p, S, facets)
     diam = np.ptp(p, axis=0).max()
-    tol = 1e-9 * diam
+    tol = FACET_PLANE * diam
     key = np.round(np.c_[normal, off / diam] * 1e8).astype(np.int64)
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     hull_nodes = np.unique(np.asarray(tri.convex_hull))

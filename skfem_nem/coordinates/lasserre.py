@@ -15,8 +15,9 @@ Special points
     At a node: the Kronecker delta (gradients undefined). On the convex hull
     (within :data:`~skfem_nem.geometry.hull.HULL_TOLERANCE` times the distance to
     the facet's nodes, else outside is an error): the limits from inside, see
-    :func:`_on_hull` -- inside a hull facet the weights ``integral over C_i of (|y - p_i|^2 - |y - x|^2)
-    dy`` over the (d-1)-dimensional second-order cells of the facet's nodes
+    :func:`_on_hull` -- inside a hull facet the weights
+    ``integral over C_i of (|y - p_i|^2 - |y - x|^2) dy`` over the
+    (d-1)-dimensional second-order cells of the facet's nodes
     (not their (d-1)-dimensional Sibson coordinates), linear interpolation
     on hull edges. Points on interior Delaunay faces and edges need nothing
     special: nothing divides by a quantity that vanishes there. Gradients at

@@ -92,7 +92,7 @@ from skfem.refdom import RefTri
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from ..basis import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
-from .stokes_solvers import SOLVERS, SaddlePointProblem, SaddlePointSolution, block_inverse
+from .stokes_solvers import SOLVERS, SaddlePointProblem, SaddlePointSolution
 
 __all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes", "outline_flux",
            "boundary_flux",
@@ -439,6 +439,26 @@ class StokesSystem:
     eta: np.ndarray         # (ne, nq) viscosity at quadrature points
     g: Optional[np.ndarray] = None  # (np,) right side of the continuity equation
     bubble: Optional[tuple] = None  # (Ainv_bb, A_bn, B_b, f_b) of the condensed bubbles
+
+
+def block_inverse(A: sp.csr_matrix, element_dofs: np.ndarray) -> sp.csr_matrix:
+    """Inverse of a matrix that is block diagonal with one block per element
+    (the dofs ``element_dofs[:, e]`` of element e), e.g. the bubble block
+    condensed by :func:`assemble_stokes`.
+
+    Raises ``ValueError`` naming the first element whose block is singular.
+    """
+    k, ne = element_dofs.shape
+    rows = np.repeat(element_dofs.T, k, axis=1).ravel()          # (ne*k*k)
+    cols = np.tile(element_dofs.T, (1, k)).ravel()
+    blocks = np.asarray(A[rows, cols]).reshape(ne, k, k)
+    det = np.linalg.det(blocks)
+    bad = ~(np.abs(det) > 0)
+    if bad.any():
+        raise ValueError(f"degenerate triangle {int(np.flatnonzero(bad)[0])}: its bubble "
+                         f"block is singular ({int(bad.sum())} triangle(s))")
+    inv = np.linalg.inv(blocks)
+    return sp.csr_matrix((inv.ravel(), (rows, cols)), shape=A.shape)
 
 
 def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,

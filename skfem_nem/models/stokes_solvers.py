@@ -39,7 +39,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "solve_direct",
-           "solve_schur", "solve_schur_amg", "solve_minres", "block_inverse", "rigid_modes"]
+           "solve_schur", "solve_schur_amg", "solve_minres", "rigid_modes"]
 
 # relative tolerance of the inner AMG-CG solves of the viscous block
 # ("schur-amg"): at most this, and two orders of magnitude below the outer tol
@@ -296,26 +296,6 @@ def rigid_modes(ubasis, free: np.ndarray) -> np.ndarray:
     Bm[comp == 0, 2] = -loc[1, comp == 0]
     Bm[comp == 1, 2] = loc[0, comp == 1]
     return Bm[free]
-
-
-def block_inverse(A: sp.csr_matrix, element_dofs: np.ndarray) -> sp.csr_matrix:
-    """Inverse of a matrix that is block diagonal with one block per element
-    (the dofs ``element_dofs[:, e]`` of element e), e.g. the bubble block
-    condensed by :func:`skfem_nem.models.stokes.assemble_stokes`.
-
-    Raises ``ValueError`` naming the first element whose block is singular.
-    """
-    k, ne = element_dofs.shape
-    rows = np.repeat(element_dofs.T, k, axis=1).ravel()          # (ne*k*k)
-    cols = np.tile(element_dofs.T, (1, k)).ravel()
-    blocks = np.asarray(A[rows, cols]).reshape(ne, k, k)
-    det = np.linalg.det(blocks)
-    bad = ~(np.abs(det) > 0)
-    if bad.any():
-        raise ValueError(f"degenerate triangle {int(np.flatnonzero(bad)[0])}: its bubble "
-                         f"block is singular ({int(bad.sum())} triangle(s))")
-    inv = np.linalg.inv(blocks)
-    return sp.csr_matrix((inv.ravel(), (rows, cols)), shape=A.shape)
 
 
 SOLVERS: Dict[str, Callable[..., SaddlePointSolution]] = {

@@ -41,8 +41,7 @@ from numba import njit
 from ..coordinates import sibson_coordinates
 from ..geometry.predicates import orient2d
 from ..geometry.triangulation import Triangulation
-from .stepping import (check_node_fields, check_step_arguments, evaluate_velocity,
-                       keep_in_box, predictor_corrector)
+from .stepping import LagrangianStep, check_node_fields
 
 __all__ = ["LagrangianMesh"]
 
@@ -214,7 +213,7 @@ def _split_values(P, parent, i, Ft):
     return new
 
 
-class LagrangianMesh:
+class LagrangianMesh(LagrangianStep):
     """A 2D node set carried by a flow, kept Delaunay by local flips.
 
     Parameters
@@ -396,9 +395,6 @@ class LagrangianMesh:
         return float(dt.min())
 
     # -- advection -------------------------------------------------------------
-    def _velocity(self, velocity, x):
-        return evaluate_velocity(velocity, x, self._on_wall if self.walls == "box" else None)
-
     def advance(self, velocity: Callable[[np.ndarray], np.ndarray], dt: float,
                 tol: float = 1e-10, maxiter: int = 10, max_substeps: int = 8,
                 inject: Optional[float] = None) -> dict:
@@ -427,29 +423,15 @@ class LagrangianMesh:
         interruption) in any stage -- velocity, move, relocation, injection --
         the mesh, its fields, clock and history are left exactly as they were.
         """
-        check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject)
-        state = self._state()
-        try:
-            report = self._advance(velocity, dt, tol, maxiter, max_substeps, inject)
-        except BaseException:
-            self._restore(state)
-            raise
-        self.history.append(report)
-        return report
+        return self.step_transaction(velocity, dt, tol, maxiter, max_substeps, inject)
 
-    def _advance(self, velocity, dt, tol, maxiter, max_substeps, inject):
-        x0 = self.nodes.copy()
-        x, it, converged = predictor_corrector(lambda y: self._velocity(velocity, y), x0, dt,
-                                               tol, maxiter, self.step + 1)
-        if self.walls == "box":
-            x = keep_in_box(x, x0, self._on_wall, self._box)
+    def _repair(self, x0, x, dt, max_substeps, inject):
+        """Flips (and, where triangles would invert, substeps and relocation), then
+        the clock, injection and the locality counts of the report."""
         self._touched = []
         flips, substeps, relocated = self._move(x0, x, max_substeps)
         self._invalidate()
-        report = {"step": self.step + 1, "time": self.time + dt, "dt": dt,
-                  "iterations": it, "converged": converged, "substeps": substeps,
-                  "flips": flips,
-                  "relocated": relocated}
+        report = {"substeps": substeps, "flips": flips, "relocated": relocated}
         self.time += dt
         self.step += 1
         report["injected"] = self.inject_nodes(inject) if inject else 0

@@ -26,14 +26,13 @@ from typing import Callable, Dict, Optional
 import numpy as np
 
 from ..basis import NaturalNeighbourBasis
-from .stepping import (check_node_fields, check_step_arguments, evaluate_velocity, keep_in_box,
-                       predictor_corrector)
+from .stepping import LagrangianStep, check_node_fields
 from ..geometry.meshes import delaunay_mesh
 
 __all__ = ["LagrangianMesh3D"]
 
 
-class LagrangianMesh3D:
+class LagrangianMesh3D(LagrangianStep):
     """A 3D node set carried by a flow, retriangulated (Qhull) every step.
 
     Parameters
@@ -131,13 +130,18 @@ class LagrangianMesh3D:
         :meth:`skfem_nem.LagrangianMesh.advance`. Returns the step's report
         (also appended to ``history``); on error nothing changes.
         """
-        check_step_arguments(velocity, dt, tol, maxiter, 1, None)
-        x0 = np.array(self.nodes)
-        x, it, converged = predictor_corrector(
-            lambda y: evaluate_velocity(velocity, y, self._on_wall), x0, dt, tol, maxiter,
-            self.step + 1)
-        if self.walls == "box":
-            x = keep_in_box(x, x0, self._on_wall, self._box)
+        return self.step_transaction(velocity, dt, tol, maxiter)
+
+    def _state(self):
+        return {"mesh": self._mesh, "bases": self._bases, "time": self.time,
+                "step": self.step}
+
+    def _restore(self, state):
+        self._mesh, self._bases = state["mesh"], state["bases"]
+        self.time, self.step = state["time"], state["step"]
+
+    def _repair(self, x0, x, dt, max_substeps, inject):
+        """Retriangulate (Qhull) the moved nodes; every node must stay a vertex."""
         try:
             mesh = delaunay_mesh(x)
         except ValueError as err:
@@ -149,11 +153,8 @@ class LagrangianMesh3D:
         self._bases = {}
         self.time += dt
         self.step += 1
-        report = {"step": self.step, "time": self.time, "dt": dt, "iterations": it,
-                  "converged": converged, "tetrahedra": int(new.shape[0]),
-                  "tetrahedra_changed": int(np.count_nonzero(~kept))}
-        self.history.append(report)
-        return report
+        return {"tetrahedra": int(new.shape[0]),
+                "tetrahedra_changed": int(np.count_nonzero(~kept))}
 
 
 def _rows_in(a, b):

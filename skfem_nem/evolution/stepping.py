@@ -11,7 +11,7 @@ from typing import Dict
 
 import numpy as np
 
-__all__ = ["check_node_fields", "evaluate_velocity", "check_step_arguments",
+__all__ = ["LagrangianStep", "check_node_fields", "evaluate_velocity", "check_step_arguments",
            "predictor_corrector", "keep_in_box"]
 
 
@@ -101,3 +101,38 @@ def keep_in_box(x, x0, on_wall, box):
         raise ValueError(f"{out.size} node(s) would leave the box, first node {out[0]} "
                          f"to {x[out[0]].tolist()}: reduce dt")
     return x
+
+
+class LagrangianStep:
+    """The transaction of one Lagrangian time step, shared by the 2D and 3D meshes.
+
+    :meth:`step_transaction` checks the arguments before anything moves, saves the state,
+    moves the nodes (predictor-corrector, box walls kept exactly), hands the move to the
+    dimension's repair, and on any error or interruption restores the saved state
+    exactly. A subclass provides ``nodes``, ``walls``, ``_on_wall``, ``_box``, ``step``,
+    ``history`` and three methods: ``_state()`` and ``_restore(state)`` (everything a step
+    may change), and ``_repair(x0, x, dt, max_substeps, inject)``, which moves the mesh
+    from x0 to x, advances the clock and returns the dimension's part of the report.
+    """
+
+    def _velocity(self, velocity, x):
+        return evaluate_velocity(velocity, x, self._on_wall if self.walls == "box" else None)
+
+    def step_transaction(self, velocity, dt, tol, maxiter, max_substeps=1, inject=None) -> dict:
+        """One step as a transaction; returns its report (appended to ``history``)."""
+        check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject)
+        state = self._state()
+        try:
+            x0 = np.array(self.nodes)
+            x, it, converged = predictor_corrector(lambda y: self._velocity(velocity, y), x0,
+                                                   dt, tol, maxiter, self.step + 1)
+            if self.walls == "box":
+                x = keep_in_box(x, x0, self._on_wall, self._box)
+            report = {"step": self.step + 1, "time": self.time + dt, "dt": dt,
+                      "iterations": it, "converged": converged}
+            report.update(self._repair(x0, x, dt, max_substeps, inject))
+        except BaseException:
+            self._restore(state)
+            raise
+        self.history.append(report)
+        return report

@@ -137,6 +137,38 @@ def test_named_boundaries_and_enforce():
     np.testing.assert_allclose(u[D], 1.0)
 
 
+def test_project_on_elements(mesh, basis, vbasis):
+    """``elements=`` projects on the functions of those triangles (their stencils'
+    nodes), the other dofs are zero, as scikit-fem's ``project(elements=...)``."""
+    def f(x):
+        return np.sin(3 * x[0]) + x[1]
+
+    def left(x):
+        return x[0] < 0.5
+
+    p = basis.project(f, elements=left)
+    dofs = basis.stencil_dofs(left)
+    outside = np.setdiff1d(np.arange(basis.N), dofs)
+    assert dofs.size and outside.size
+    assert np.all(p[outside] == 0.0) and np.all(p[dofs] != 0.0)
+    mask = np.zeros(mesh.nelements, bool)
+    mask[mesh.elements_satisfying(left)] = True
+    np.testing.assert_array_equal(basis.project(f, elements=mask), p)
+    np.testing.assert_allclose(basis.project(f, elements=np.arange(mesh.nelements)),
+                               basis.project(f), atol=1e-12)
+    # each stencil node's dof, for every component of a vector basis
+    assert np.array_equal(basis.stencil_dofs(left), np.sort(basis.dofs.nodal_dofs[0][dofs]))
+    assert vbasis.stencil_dofs(left).size == 2 * dofs.size
+    with pytest.raises(ValueError, match="real"):
+        basis.project(f, dtype=np.complex128)
+    with pytest.raises(ValueError, match=rf"element indices must lie in \[0, {mesh.nelements}\)"):
+        basis.project(f, elements=[mesh.nelements])
+    with pytest.raises(ValueError, match="element mask"):
+        basis.project(f, elements=np.ones(3, bool))
+    with pytest.raises(TypeError):
+        basis.project(f, I=[0])  # no keyword is swallowed
+
+
 def test_interpolate_probes_project(mesh, basis, vbasis):
     u = 2 * mesh.p[0] - mesh.p[1] + 0.5
     f = basis.interpolate(u)

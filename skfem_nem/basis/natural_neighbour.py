@@ -548,12 +548,20 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     def point_source(self, x: ndarray) -> ndarray:
         return self.probes(np.asarray(x, dtype=float)[:, None]).toarray()[0]
 
-    def project(self, interp, **kwargs) -> ndarray:
+    def project(self, interp, elements=None, dtype=None) -> ndarray:
         """L2 projection of ``interp`` (callable of x, DiscreteField or array
-        at the quadrature points) onto the basis; returns a dof vector."""
+        at the quadrature points) onto the basis; returns a dof vector.
+
+        ``elements`` (indices, a boolean mask or a callable of the midpoints, as
+        in scikit-fem) projects on those triangles' functions only: the dofs of
+        the nodes in their stencils; the other dofs are zero. ``dtype``: real
+        projections only (``None`` or a float type)."""
         from skfem.assembly import BilinearForm, LinearForm
         from skfem.helpers import inner
-        from skfem.utils import solve
+        from skfem.utils import condense, solve
+        if dtype is not None and not np.issubdtype(np.dtype(dtype), np.floating):
+            raise ValueError(f"project(dtype={np.dtype(dtype)}): natural-neighbour "
+                             f"projections are real")
         if callable(interp):
             interp = interp(self.global_coordinates())
         if isinstance(interp, tuple):
@@ -561,7 +569,30 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         f = np.asarray(interp, dtype=float) + np.zeros(self.dx.shape)
         M = BilinearForm(lambda u, v, w: inner(u, v)).assemble(self)
         b = LinearForm(lambda v, w: inner(w["f"], v)).assemble(self, f=DiscreteField(f))
-        return solve(M, b)
+        if elements is None:
+            return solve(M, b)
+        return solve(*condense(M, b, I=self.stencil_dofs(elements)))
+
+    def stencil_dofs(self, elements) -> ndarray:
+        """The dofs of the functions that are non-zero on ``elements`` (indices,
+        a boolean mask over the triangles, or a callable of their midpoints):
+        the nodes of their stencils, every component of a vector basis."""
+        if callable(elements):
+            elements = self.mesh.elements_satisfying(elements)
+        e = np.asarray(elements)
+        if e.dtype == bool:
+            if e.shape != (self.mesh.nelements,):
+                raise ValueError(f"an element mask must have {self.mesh.nelements} entries, "
+                                 f"got shape {e.shape}")
+            e = np.flatnonzero(e)
+        e = e.astype(np.int64).ravel()
+        if e.size and (e.min() < 0 or e.max() >= self.mesh.nelements):
+            raise ValueError(f"element indices must lie in [0, {self.mesh.nelements}), "
+                             f"got {int(e.min())}..{int(e.max())}")
+        ptr, sten = self.stencil_ptr, self.stencil_nodes
+        nodes = np.unique(np.concatenate([sten[ptr[k]:ptr[k + 1]] for k in e] or
+                                         [np.zeros(0, np.int64)]))
+        return np.sort(self.dofs.nodal_dofs[:, nodes].ravel())
 
     def refinterp(self, y: ndarray, nrefs: int = 2):
         """A refined MeshTri and the values of y at its nodes (for plotting; 2D)."""

@@ -555,7 +555,7 @@ class LagrangianMesh(LagrangianStep):
             raise ValueError(f"node {v} is on the hull and cannot be relocated: "
                              f"reduce dt") from None
         snap = self._snapshot(star)
-        slots, moves = tri.remove_vertex(v)
+        slots, moves = tri.remove_vertex(v, star)
         for k, F in self.ip_fields.items():
             for src, dst in moves:
                 F[dst] = F[src]
@@ -565,8 +565,9 @@ class LagrangianMesh(LagrangianStep):
 
     def _reinsert_vertex(self, v):
         tri = self.triangulation
-        snap = self._snapshot(tri.cavity(tri.nodes[v]))
-        cav, new = tri.reinsert_vertex(v)
+        cav = tri.cavity(tri.nodes[v])
+        snap = self._snapshot(cav)
+        cav, new = tri.reinsert_vertex(v, cav)
         for k, F in self.ip_fields.items():
             self.ip_fields[k] = np.concatenate([F, np.zeros((new.size,) + F.shape[1:])])
         self._fill_from(snap, np.r_[cav, new])

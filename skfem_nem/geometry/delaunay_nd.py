@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
-from .triangulation import validate_nodes
+from .triangulation import unused_nodes, validate_nodes
 
 __all__ = ["delaunay_of", "check_nodes", "triangulate", "check_delaunay"]
 
@@ -44,13 +44,12 @@ def check_delaunay(tri, p):
         raise ValueError(f"delaunay must be a scipy.spatial.Delaunay, got {type(tri).__name__}")
     if tri.points.shape != p.shape or not np.array_equal(tri.points, p):
         raise ValueError("delaunay was built on other points than nodes")
-    used = np.zeros(p.shape[0], dtype=bool)
-    used[tri.simplices.ravel()] = True
-    if not used.all():
-        i = int(np.flatnonzero(~used)[0])
+    unused = unused_nodes(p.shape[0], tri.simplices)
+    if unused.size:
+        i = int(unused[0])
         raise ValueError(
             f"node {i} at {p[i].tolist()} is not a vertex of any Delaunay simplex "
-            f"({np.count_nonzero(~used)} such node(s); Qhull drops nodes that nearly "
+            f"({unused.size} such node(s); Qhull drops nodes that nearly "
             f"coincide with others)")
 
 

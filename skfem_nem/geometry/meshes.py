@@ -16,7 +16,7 @@ from scipy.spatial import Delaunay
 from skfem import MeshTet, MeshTri
 
 from .delaunay_nd import delaunay_of
-from .triangulation import Triangulation, validate_nodes
+from .triangulation import Triangulation, unused_nodes, validate_nodes
 
 __all__ = ["adopt", "delaunay_mesh", "triangulation_of"]
 
@@ -65,13 +65,12 @@ def delaunay_mesh(points) -> MeshTri | MeshTet:
 
 
 def _check_used(p, t, what):
-    used = np.zeros(p.shape[0], dtype=bool)
-    used[t.ravel()] = True
-    if not used.all():
-        i = int(np.flatnonzero(~used)[0])
+    unused = unused_nodes(p.shape[0], t)
+    if unused.size:
+        i = int(unused[0])
         raise ValueError(
             f"mesh node {i} at {p[i].tolist()} belongs to no {what}, so no trial function "
-            f"would be defined there ({np.count_nonzero(~used)} such node(s)); build the mesh "
+            f"would be defined there ({unused.size} such node(s)); build the mesh "
             f"with skfem_nem.delaunay_mesh(points)")
 
 

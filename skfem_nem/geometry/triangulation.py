@@ -24,7 +24,7 @@ from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exac
                          grow_cavity, insert_vertex, lawson, locate_many, orientations)
 from .predicates import incircle_sign, orient2d
 
-__all__ = ["Triangulation", "validate_nodes"]
+__all__ = ["Triangulation", "validate_nodes", "unused_nodes"]
 
 
 # ---------------------------------------------------------------------------
@@ -56,6 +56,14 @@ def validate_nodes(nodes, dim: int = 2, name: str = "nodes") -> np.ndarray:
             f"{same.size} duplicate node(s) in {name}; first: {name}[{j}] coincides "
             f"with {name}[{i}] at {p[i].tolist()}")
     return p
+
+
+def unused_nodes(n: int, cells) -> np.ndarray:
+    """Indices of the nodes 0..n-1 that are a vertex of none of ``cells`` (k, d + 1):
+    such a node would get no trial function (Qhull drops nearly coincident nodes)."""
+    used = np.zeros(n, dtype=bool)
+    used[np.asarray(cells).ravel()] = True
+    return np.flatnonzero(~used)
 
 
 # ---------------------------------------------------------------------------
@@ -129,17 +137,15 @@ class Triangulation:
         self.triangles = T
         self.neighbours = N
         self._changed()
-        used = np.zeros(p.shape[0], dtype=bool)
-        used[T.ravel()] = True
-        if triangles is None and not used.all():
+        unused = unused_nodes(p.shape[0], T)
+        if triangles is None and unused.size:
             self.make_delaunay()
-            self._insert_nodes(np.flatnonzero(~used))
-            used[:] = True
-        if not used.all():
-            i = int(np.flatnonzero(~used)[0])
+            self._insert_nodes(unused)
+        elif unused.size:
+            i = int(unused[0])
             raise ValueError(
                 f"node {i} at {p[i].tolist()} is not a vertex of any triangle "
-                f"({np.count_nonzero(~used)} such node(s))")
+                f"({unused.size} such node(s))")
         self.last_flips = 0
         if make_delaunay:
             self.last_flips = self.make_delaunay()
@@ -471,21 +477,21 @@ class Triangulation:
             if t == t0:
                 return np.array(star, dtype=np.int64)
 
-    def remove_vertex(self, v: int):
+    def remove_vertex(self, v: int, star=None):
         """Take the interior node v out of the triangulation (it stays in
         :attr:`nodes`, in no triangle) and fill its star with Delaunay triangles
         (ear clipping with the exact in-circle test).
 
-        Returns ``(slots, moves)``: the triangles that now cover the old star, and the
+        ``star``: :meth:`star` of v if the caller has it already. Returns
+        ``(slots, moves)``: the triangles that now cover the old star, and the
         row moves ``(src, dst)`` made, in order, to close the gaps of the two triangles
         that disappear; apply the same moves to data stored per triangle, then cut it
         to :attr:`ntriangles` rows.
         """
-        star = self.star(v)
-        link = [int(self.triangles[t, (int(np.flatnonzero(self.triangles[t] == v)[0]) + 1) % 3])
-                for t in star]
-        outer = [int(self.neighbours[t, int(np.flatnonzero(self.triangles[t] == v)[0])])
-                 for t in star]
+        star = self.star(v) if star is None else star
+        at = [int(np.flatnonzero(self.triangles[t] == v)[0]) for t in star]
+        link = [int(self.triangles[t, (j + 1) % 3]) for t, j in zip(star, at)]
+        outer = [int(self.neighbours[t, j]) for t, j in zip(star, at)]
         m = len(link)
         slots = star[:m - 2]
         for s_, tri_v in zip(slots, self._ears(v, link)):
@@ -557,13 +563,13 @@ class Triangulation:
         self.neighbours = np.ascontiguousarray(N[:nt])
         return moves
 
-    def reinsert_vertex(self, v: int):
+    def reinsert_vertex(self, v: int, cavity=None):
         """Put node v (in :attr:`nodes` but in no triangle, see :meth:`remove_vertex`)
-        back by Bowyer--Watson insertion at its present position. Returns ``(cavity,
-        new)``: the old triangles it replaced (their rows are reused) and the rows
-        appended."""
+        back by Bowyer--Watson insertion at its present position (``cavity``: its
+        :meth:`cavity` if the caller has it already). Returns ``(cavity, new)``: the
+        old triangles it replaced (their rows are reused) and the rows appended."""
         x = self.nodes[v]
-        cav = self.cavity(x)
+        cav = self.cavity(x) if cavity is None else cavity
         nt = self.ntriangles
         T = np.vstack([self.triangles, np.zeros((2, 3), np.int64)])
         N = np.vstack([self.neighbours, np.zeros((2, 3), np.int64)])

@@ -482,7 +482,7 @@ def test_non_delaunay_triangulation_terminates():
                   - (p[b, 1] - p[a, 1]) * (p[d, 0] - p[a, 0]))
             o2 = ((p[d, 0] - p[a, 0]) * (p[c, 1] - p[a, 1])
                   - (p[d, 1] - p[a, 1]) * (p[c, 0] - p[a, 0]))
-            if o1 > 1e-9 and o2 > 1e-9 and not edge_violates(p, T, N, t, k):
+            if o1 > 1e-9 and o2 > 1e-9 and not edge_violates(p, T, N, np.empty(0, np.int64), t, k):
                 flip_edge(T, N, t, k)
                 flips += 1
                 break

@@ -68,8 +68,8 @@ from ..geometry.hull import HULL_TOLERANCE, OUTSIDE_ROUNDOFF
 from ..geometry.status import AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW
 from ..geometry.predicates import orient2d
 from ..geometry.triangulation import Triangulation
-from ..geometry.delaunay2d import (cavity_boundary, conflict_cycle, grow_cavity,
-                            locate_walk)
+from ..geometry.delaunay2d import (cavity_boundary, conflict_cycle, grow_cavity, is_segment,
+                                   locate_walk)
 
 __all__ = ["area_coordinates"]
 
@@ -104,13 +104,13 @@ def _at_node(P, T, t, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad):
 
 
 @njit(cache=True, inline="always")
-def _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn, be_b, be_c, be_u,
+def _general_cavity(P, T, N, S, qx, qy, t, cav, cnb, rej, nn, be_b, be_c, be_u,
                     cpar, cchd, cpa, cpb):
     """The cavity by :func:`grow_cavity` (any triangulation), in the form
     :func:`conflict_cycle` gives: returns ``(ncav, nb, nedge)`` and the
     internal edges e = 1..nedge in ``cpar, cchd, cpa, cpb``; ncav < 0 if the
     buffers are too small."""
-    ncav = grow_cavity(P, T, N, qx, qy, t, cav, cnb, rej)
+    ncav = grow_cavity(P, T, N, S, qx, qy, t, cav, cnb, rej)
     if ncav < 0:
         return -1, -1, 0
     nb = cavity_boundary(T, N, cav, cnb, ncav, nn, be_b, be_c, be_u)
@@ -143,13 +143,14 @@ def _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn, be_b, be_c, be_u,
 
 
 @njit(cache=True, inline="always")
-def _on_hull(P, nn, be_u, nb, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad):
+def _on_hull(P, S, nn, be_u, nb, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad):
     """2 (and the row of linear 1D weights, written from ``pos`` on) if the
-    point lies, to round-off, on a hull edge of the cavity boundary; else 0."""
+    point lies, to round-off, on a hull edge or a segment of the cavity
+    boundary; else 0."""
     for j in range(nb):
-        if be_u[j] < 0:
-            a = nn[j]
-            b = nn[j + 1 if j + 1 < nb else 0]
+        a = nn[j]
+        b = nn[j + 1 if j + 1 < nb else 0]
+        if be_u[j] < 0 or is_segment(S, a, b):
             ex = P[b, 0] - P[a, 0]
             ey = P[b, 1] - P[a, 1]
             L2 = ex * ex + ey * ey
@@ -319,7 +320,7 @@ def _write_row(nn, nb, area, gax, gay, want_grad, perm, pos, s_i, s_v, s_gx, s_g
 
 
 @njit(cache=True, inline="always")
-def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, general, width,
+def _query_block(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, general, width,
                  lo, hi, pos, end, s_i, s_v, s_gx, s_gy, count, status, tri):
     """Natural-neighbour coordinates of the points Q[lo:hi], one after another.
 
@@ -413,10 +414,10 @@ def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, g
             # the cavity, its boundary as a counter-clockwise cycle
             # nn[0..nb-1] around x, and its internal edges
             if general:
-                ncav, nb, nedge = _general_cavity(P, T, N, qx, qy, t, cav, cnb, rej, nn,
+                ncav, nb, nedge = _general_cavity(P, T, N, S, qx, qy, t, cav, cnb, rej, nn,
                                                   be_b, be_c, be_u, cpar, cchd, cpa, cpb)
             else:
-                ncav, nb = conflict_cycle(P, T, N, CC, qx, qy, t, cav, cpar, cpa, cpb,
+                ncav, nb = conflict_cycle(P, T, N, S, CC, qx, qy, t, cav, cpar, cpa, cpb,
                                           cedge, cstep, stk, nn, be_u, be_c)
                 nedge = ncav - 1
                 for e in range(1, ncav):
@@ -424,7 +425,7 @@ def _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, g
             if ncav < 0 or nb > width:
                 st = OVERFLOW
             else:
-                cnt = _on_hull(P, nn, be_u, nb, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad)
+                cnt = _on_hull(P, S, nn, be_u, nb, qx, qy, pos, s_i, s_v, s_gx, s_gy, want_grad)
                 if cnt:
                     st = ON_HULL
         if st == OK and cnt == 0:
@@ -450,7 +451,7 @@ _PARALLEL_MIN = 2000
 
 
 @njit(cache=True, parallel=True)
-def _query_all(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, general, width,
+def _query_all(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, general, width,
                room, chunk, block, nthreads, index_proto, status, tri, indptr):
     """Natural-neighbour coordinates of the m points Q (m, 2) as CSR arrays.
 
@@ -497,7 +498,7 @@ def _query_all(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, gen
             hi = c0 + (blk + 1) * mc // nblocks
             base = (lo - c0) * room + blk * width
             end = (hi - c0) * room + (blk + 1) * width
-            bfill[blk] = _query_block(P, T, N, CC, Q, start, grid, nc, glo, gspan, kind,
+            bfill[blk] = _query_block(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind,
                                       want_grad, general, width, lo, hi, base, end,
                                       s_i, s_v, s_gx, s_gy, count, status, tri) - base
         for r in range(c0, c1):
@@ -598,7 +599,8 @@ def _run(tri, q, start, ikind, gradient, general, width, room, chunk, status, tr
     indptr = np.empty(m + 1, dtype=np.int64)
     proto = np.empty(0, dtype=index_dtype(n, m * width))
     with numba.parallel_chunksize(1):
-        *arrays, nnz = _query_all(tri.nodes, tri.triangles, tri.neighbours, tri.circumcircles,
+        *arrays, nnz = _query_all(tri.nodes, tri.triangles, tri.neighbours, tri.segment_keys,
+                                  tri.circumcircles,
                                   q, start, grid, nc, lo, span, ikind, gradient, general, width,
                                   room, max(1, chunk), _BLOCK, _threads(), proto, status,
                                   tri_out, indptr)

@@ -2,8 +2,12 @@
 
 Flat arrays in, flat arrays out: ``P`` (n, 2) nodes, ``T`` (nt, 3) counter-clockwise
 triangles, ``N`` (nt, 3) neighbours (``N[t, k]`` across the edge opposite ``T[t, k]``, -1 on
-the hull). :class:`~skfem_nem.geometry.triangulation.Triangulation` orchestrates them; the 2D
-coordinates walk and grow cavities with the same kernels, so there is one point location and
+the hull), ``S`` the sorted keys (:func:`segment_key`) of the constrained edges (segments),
+empty for an unconstrained triangulation. A segment is a wall: cavities do not grow across
+it and flips never remove it, so the same kernels build and query constrained Delaunay
+triangulations (:mod:`skfem_nem.geometry.constrained`).
+:class:`~skfem_nem.geometry.triangulation.Triangulation` orchestrates them; the 2D coordinates
+walk and grow cavities with the same kernels, so there is one point location and
 one conflict region for both. Every decision goes through the exact predicates.
 """
 from __future__ import annotations
@@ -16,12 +20,31 @@ from .predicates import incircle_sign, orient2d, orient2d_sign
 __all__ = ["adjacency", "cavity_boundary", "circumcircle_table", "conflict_cycle",
            "count_non_delaunay", "edge_violates", "exact_hull", "first_fold",
            "flip_edge", "grow_cavity", "in_cavity", "in_circumcircle", "insert_vertex",
-           "lawson", "locate_many", "locate_walk", "orientations"]
+           "is_segment", "lawson", "locate_many", "locate_walk", "orientations",
+           "segment_key"]
 
 
 # ---------------------------------------------------------------------------
 # numba kernels
 # ---------------------------------------------------------------------------
+
+@njit(cache=True, inline="always")
+def segment_key(a, b):
+    """The key of the edge {a, b} in a segment table: (min << 32) | max."""
+    lo = min(a, b)
+    hi = max(a, b)
+    return (np.int64(lo) << 32) | np.int64(hi)
+
+
+@njit(cache=True, inline="always")
+def is_segment(S, a, b):
+    """True if the edge {a, b} is in the sorted segment keys ``S``."""
+    if S.shape[0] == 0:
+        return False
+    key = segment_key(a, b)
+    i = np.searchsorted(S, key)
+    return i < S.shape[0] and S[i] == key
+
 
 @njit(cache=True, inline="always")
 def locate_walk(P, T, N, qx, qy, start):
@@ -85,8 +108,9 @@ def in_cavity(P, T, t, qx, qy):
 
 
 @njit(cache=True)
-def grow_cavity(P, T, N, qx, qy, t0, cav, cnb, rej):
-    """Collect the triangles whose circumcircle strictly contains (qx, qy).
+def grow_cavity(P, T, N, S, qx, qy, t0, cav, cnb, rej):
+    """Collect the triangles whose circumcircle strictly contains (qx, qy) and that
+    are reached from ``t0`` without crossing a segment of ``S``.
 
     ``t0`` must contain the point and the point must not be a node. Fills
     ``cav[:count]`` and the local adjacency ``cnb[c, k]`` (index in ``cav`` of
@@ -105,7 +129,7 @@ def grow_cavity(P, T, N, qx, qy, t0, cav, cnb, rej):
         for k in range(3):
             u = N[t, k]
             cnb[head, k] = -1
-            if u < 0:
+            if u < 0 or is_segment(S, T[t, (k + 1) % 3], T[t, (k + 2) % 3]):
                 continue
             found = False
             for j in range(count):
@@ -172,9 +196,10 @@ def cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_c, be_u):
 
 
 @njit(cache=True, inline="always")
-def conflict_cycle(P, T, N, CC, qx, qy, t0, cav, cpar, cpa, cpb, cedge, cstep, stk, nn, be_u,
+def conflict_cycle(P, T, N, S, CC, qx, qy, t0, cav, cpar, cpa, cpb, cedge, cstep, stk, nn, be_u,
                    be_c):
-    """The Bowyer--Watson cavity of (qx, qy) and its boundary, in one traversal.
+    """The Bowyer--Watson cavity of (qx, qy) and its boundary, in one traversal
+    (not crossing the segments ``S``: the cavity of a constrained triangulation).
 
     ``t0`` must contain the point and the point must not be a node; ``CC``:
     :attr:`Triangulation.circumcircles`. In a Delaunay triangulation the
@@ -224,7 +249,8 @@ def conflict_cycle(P, T, N, CC, qx, qy, t0, cav, cpar, cpa, cpb, cedge, cstep, s
         if k >= 3:
             k -= 3
         u = N[t, k]
-        if u >= 0 and in_circumcircle(P, T, CC, u, qx, qy):
+        if u >= 0 and in_circumcircle(P, T, CC, u, qx, qy) and not is_segment(
+                S, T[t, k + 1 if k < 2 else 0], T[t, k - 1 if k > 0 else 2]):
             if ncav == ccap:
                 return -1, -1
             l = 0 if N[u, 0] == t else (1 if N[u, 1] == t else 2)
@@ -251,7 +277,7 @@ def conflict_cycle(P, T, N, CC, qx, qy, t0, cav, cpar, cpa, cpb, cedge, cstep, s
 
 
 @njit(cache=True)
-def insert_vertex(P, T, N, nt, i, t0, cav, cnb, rej, be_a, be_b, be_t, be_u, newt, extra):
+def insert_vertex(P, T, N, S, nt, i, t0, cav, cnb, rej, be_a, be_b, be_t, be_u, newt, extra):
     """Bowyer--Watson insertion of node i (inside the hull or on its boundary).
 
     The (up to) two triangles the insertion adds go to the slots ``extra[0]``,
@@ -268,7 +294,7 @@ def insert_vertex(P, T, N, nt, i, t0, cav, cnb, rej, be_a, be_b, be_t, be_u, new
         a = T[t, j]
         if P[a, 0] == qx and P[a, 1] == qy:
             return -2
-    ncav = grow_cavity(P, T, N, qx, qy, t, cav, cnb, rej)
+    ncav = grow_cavity(P, T, N, S, qx, qy, t, cav, cnb, rej)
     if ncav < 0:
         return -3
     nb = cavity_boundary(T, N, cav, cnb, ncav, be_a, be_b, be_t, be_u)
@@ -350,15 +376,18 @@ def flip_edge(T, N, t, k):
 
 
 @njit(cache=True)
-def edge_violates(P, T, N, t, k):
-    """True if the edge opposite vertex k of t fails the strict in-circle test
-    and its quadrilateral is strictly convex (so that it can be flipped)."""
+def edge_violates(P, T, N, S, t, k):
+    """True if the edge opposite vertex k of t is not a segment of ``S``, fails the
+    strict in-circle test and its quadrilateral is strictly convex (so that it
+    can be flipped)."""
     u = N[t, k]
     if u < 0:
         return False
     a = T[t, k]
     b = T[t, (k + 1) % 3]
     c = T[t, (k + 2) % 3]
+    if is_segment(S, b, c):
+        return False
     d = -1
     for j in range(3):
         if N[u, j] == t:
@@ -374,8 +403,9 @@ def edge_violates(P, T, N, t, k):
 
 
 @njit(cache=True)
-def lawson(P, T, N, stack, nstack, max_flips, log):
-    """Lawson's algorithm: flip non-Delaunay edges until none is left.
+def lawson(P, T, N, S, stack, nstack, max_flips, log):
+    """Lawson's algorithm: flip non-Delaunay edges (never a segment of ``S``)
+    until none is left.
 
     ``stack[:nstack]`` holds the triangles to check. Each flip is recorded in
     ``log`` (if it has rows) as ``(t, u, k, l, a, b, c, d)``: triangle
@@ -393,7 +423,7 @@ def lawson(P, T, N, stack, nstack, max_flips, log):
         nstack -= 1
         t = stack[nstack]
         for k in range(3):
-            if edge_violates(P, T, N, t, k):
+            if edge_violates(P, T, N, S, t, k):
                 if flips == max_flips or nstack + 2 > cap or (logcap > 0 and flips == logcap):
                     return flips, False
                 u = N[t, k]
@@ -420,12 +450,13 @@ def lawson(P, T, N, stack, nstack, max_flips, log):
 
 
 @njit(cache=True)
-def count_non_delaunay(P, T, N):
+def count_non_delaunay(P, T, N, S):
+    """Interior edges, other than the segments ``S``, that fail the in-circle test."""
     bad = 0
     for t in range(T.shape[0]):
         for k in range(3):
             u = N[t, k]
-            if u > t:
+            if u > t and not is_segment(S, T[t, (k + 1) % 3], T[t, (k + 2) % 3]):
                 a = T[t, 0]
                 b = T[t, 1]
                 c = T[t, 2]

@@ -5,23 +5,54 @@ nodes, not by a mesh's cells, so a basis first *adopts* its mesh: it checks
 that the cells are Delaunay (the quadrature lives on them, the coordinates on
 the triangulation) and caches on the mesh the triangulation the coordinates
 are computed on. :func:`delaunay_mesh` builds a mesh that passes the check
-by construction.
+by construction; given segments, it builds the constrained Delaunay
+triangulation (interfaces, outlines, the boundary of a non-convex domain),
+names the segments as the mesh's boundaries and drops the triangles of holes.
+
+The triangulation is cached on the mesh and, by the digest of its nodes and
+triangles, for every mesh with the same nodes and triangles: scikit-fem's
+``with_boundaries`` and ``with_subdomains`` return new mesh objects, which
+find their constrained triangulation there instead of losing the segments.
 """
 from __future__ import annotations
 
+import hashlib
 import warnings
+import weakref
 
 import numpy as np
 from scipy.spatial import Delaunay
 from skfem import MeshTet, MeshTri
 
+from .constrained import check_segments, flood_regions
 from .delaunay_nd import delaunay_of
 from .triangulation import Triangulation, unused_nodes, validate_nodes
 
 __all__ = ["adopt", "delaunay_mesh", "triangulation_of"]
 
 
-def delaunay_mesh(points) -> MeshTri | MeshTet:
+# triangulations of meshes by the digest of (nodes, triangles), kept while a mesh
+# holds them (weakly referenced: the cache on each mesh is the strong reference)
+_BY_DIGEST: "weakref.WeakValueDictionary[str, Triangulation]" = weakref.WeakValueDictionary()
+
+
+def _digest(p, t) -> str:
+    h = hashlib.blake2b(digest_size=16)
+    for a in (p, t):
+        a = np.ascontiguousarray(a)
+        h.update(str((a.shape, a.dtype.str)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _cache(mesh, tri):
+    mesh._skfem_nem_triangulation = tri
+    if isinstance(tri, Triangulation):
+        _BY_DIGEST[_digest(mesh.p, mesh.t)] = tri
+    return mesh
+
+
+def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
     """The Delaunay triangulation of points as a scikit-fem mesh.
 
     (n, 2) points give a ``MeshTri`` (robust 2D triangulation,
@@ -37,6 +68,21 @@ def delaunay_mesh(points) -> MeshTri | MeshTet:
     (the natural-neighbour basis gives their quadrature points zero weight),
     but scikit-fem's Lagrange elements cannot be used on such a mesh.
 
+    Segments (2D)
+        ``segments``: (k, 2) pairs of node indices, or a dict of such arrays by
+        name, that must be edges: the mesh is then the constrained Delaunay
+        triangulation, and natural-neighbour bases on it use constrained
+        coordinates (the natural neighbours of a point are the nodes it sees
+        without crossing a segment: functions kink across an interface and
+        interpolate along it). Each name (``"segments"`` for an array) becomes a
+        named boundary of the mesh, ``mesh.boundaries[name]``: the facets along
+        those segments, interior ones included (a facet basis on them integrates
+        over an interface). A node lying on a segment splits it; crossing
+        segments raise ``ValueError`` naming both. ``holes``: (h, 2) points; the
+        triangles of each region (bounded by segments) holding a hole point are
+        left out of the mesh (the notch of an L-shaped domain, a slit), but stay in
+        the triangulation the coordinates are computed on, as walls.
+
     Examples
     --------
     >>> import numpy as np
@@ -51,17 +97,99 @@ def delaunay_mesh(points) -> MeshTri | MeshTet:
     >>> tets = delaunay_mesh(np.array(cube, dtype=float))
     >>> type(tets).__name__, tets.t.shape
     ('MeshTet1', (4, 3))
+
+    An L-shaped domain: the boundary as segments, the notch as a hole.
+
+    >>> L = np.array([[0, 0], [1, 0], [1, .5], [.5, .5], [.5, 1], [0, 1]], float)
+    >>> outline = [[i, (i + 1) % 6] for i in range(6)]
+    >>> m = delaunay_mesh(L, segments={"outline": outline}, holes=[[.75, .75]])
+    >>> m.t.shape[1], sorted(m.boundaries)       # 4 triangles: the notch is left out
+    (4, ['outline'])
     """
     shape = np.shape(points)
+    if (segments is not None or holes is not None) and not (len(shape) == 2 and shape[1] == 2):
+        raise ValueError("segments and holes are supported for 2D points only")
+    if len(shape) == 2 and shape[1] == 2 and (segments is not None or holes is not None):
+        return _constrained_mesh(points, segments, holes)
     if len(shape) == 2 and shape[1] == 3:
         p = validate_nodes(points, dim=3, name="points")
         tri = delaunay_of(p)
         mesh = MeshTet(np.ascontiguousarray(p.T),
                        np.ascontiguousarray(tri.simplices.T, dtype=np.int64))
-        mesh._skfem_nem_triangulation = tri
-        return mesh
+        return _cache(mesh, tri)
     tri = Triangulation(points)
     return MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T))
+
+
+def _named(segments, n):
+    """The segments as a dict name -> (k, 2) int64 array (checked)."""
+    if not isinstance(segments, dict):
+        segments = {"segments": segments}
+    out = {}
+    for name, s in segments.items():
+        if not isinstance(name, str):
+            raise ValueError(f"segment names must be strings, got {name!r}")
+        out[name] = check_segments(s, n, name=f"segments[{name!r}]")
+    return out
+
+
+def _kept_triangles(tri, holes):
+    """(nt,) True for the triangles outside every region holding a hole point."""
+    keep = np.ones(tri.ntriangles, dtype=bool)
+    if holes is None:
+        return keep
+    h = np.array(holes, dtype=np.float64, ndmin=2)
+    if h.size == 0:
+        return keep
+    if h.ndim != 2 or h.shape[1] != 2 or not np.isfinite(h).all():
+        raise ValueError(f"holes must be finite points of shape (h, 2), got {np.shape(holes)}")
+    seeds = tri.locate(h)
+    bad = np.flatnonzero(seeds < 0)
+    if bad.size:
+        raise ValueError(f"holes[{bad[0]}] = {h[bad[0]].tolist()} is outside the convex hull "
+                         f"of the points")
+    label = flood_regions(tri.triangles, tri.neighbours, tri.segment_keys, seeds)
+    keep = label < 0
+    if not keep.any():
+        raise ValueError("the holes take every triangle: the segments do not separate the "
+                         "holes from the domain (is the outline closed?)")
+    return keep
+
+
+def _constrained_mesh(points, segments, holes):
+    """:func:`delaunay_mesh` with segments and holes (2D)."""
+    p = validate_nodes(points, name="points")
+    named = _named(segments if segments is not None else {}, p.shape[0])
+    allseg = np.concatenate([np.empty((0, 2), np.int64), *named.values()])
+    tri = Triangulation(p, segments=allseg)
+    keep = _kept_triangles(tri, holes)
+    tri.reorder_triangles(np.argsort(~keep, kind="stable"))
+    t = tri.triangles[:int(keep.sum())]
+    unused = unused_nodes(p.shape[0], t)
+    if unused.size:
+        i = int(unused[0])
+        raise ValueError(f"points[{i}] = {p[i].tolist()} lies in a hole ({unused.size} such "
+                         f"point(s)); remove it or move the hole")
+    mesh = MeshTri(np.ascontiguousarray(p.T), np.ascontiguousarray(t.T))
+    if named:
+        mesh = mesh.with_boundaries(_segment_facets(mesh, tri, named))
+    return _cache(mesh, tri)
+
+
+def _segment_facets(mesh, tri, named):
+    """Facet indices of the mesh along each name's segments (and their pieces)."""
+    f = np.sort(mesh.facets, axis=0).astype(np.int64)
+    fkey = (f[0] << 32) | f[1]
+    order = np.argsort(fkey)
+    first = np.cumsum([0] + [len(s) for s in named.values()])
+    out = {}
+    for r, name in enumerate(named):
+        mine = (tri.segment_source >= first[r]) & (tri.segment_source < first[r + 1])
+        keys = tri.segment_keys[mine]
+        pos = np.searchsorted(fkey[order], keys).clip(0, fkey.size - 1)
+        found = fkey[order][pos] == keys
+        out[name] = np.sort(order[pos[found]])
+    return out
 
 
 def _check_used(p, t, what):
@@ -115,6 +243,10 @@ def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
     :class:`~skfem_nem.Triangulation` (same triangle order), for a
     ``MeshTet`` a :class:`scipy.spatial.Delaunay` of its nodes."""
     cached = getattr(mesh, "_skfem_nem_triangulation", None)
+    if cached is None and isinstance(mesh, MeshTri):
+        cached = _BY_DIGEST.get(_digest(mesh.p, mesh.t))
+        if cached is not None:
+            mesh._skfem_nem_triangulation = cached
     if cached is not None:
         return cached
     if isinstance(mesh, MeshTet):

@@ -13,13 +13,16 @@ Conventions
 ``triangles[t] = (a, b, c)`` is counter-clockwise; ``neighbours[t, k]`` is the
 triangle across the edge opposite vertex ``triangles[t, k]`` (that is, the edge
 ``(triangles[t, k+1], triangles[t, k+2])``, indices mod 3), or ``-1`` on the
-convex hull.
+convex hull. ``segment_keys`` lists the constrained edges (segments), which
+flips never remove and cavities never cross (a constrained Delaunay
+triangulation, :mod:`skfem_nem.geometry.constrained`); empty by default.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
+from .constrained import check_segments, insert_segments, keys_of, segments_of
 from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exact_hull, first_fold,
                          grow_cavity, insert_vertex, lawson, locate_many, orientations)
 from .predicates import incircle_sign, orient2d
@@ -66,6 +69,18 @@ def unused_nodes(n: int, cells) -> np.ndarray:
     return np.flatnonzero(~used)
 
 
+def _edge_keys(T, segments, n):
+    """Sorted keys of ``segments`` (None: none), each checked to be an edge of T."""
+    s = check_segments(segments if segments is not None else [], n)
+    keys = keys_of(s)
+    e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
+    missing = np.flatnonzero(~np.isin(keys, (e[:, 0] << 32) | e[:, 1]))
+    if missing.size:
+        raise ValueError(f"segment {segments_of(keys[missing[:1]])[0].tolist()} is not an "
+                         f"edge of the stored triangles")
+    return keys
+
+
 # ---------------------------------------------------------------------------
 # the class
 # ---------------------------------------------------------------------------
@@ -83,6 +98,11 @@ class Triangulation:
         built with Qhull. Either way the result is checked with exact
         predicates and repaired by Lawson flips into a Delaunay one, unless
         ``make_delaunay=False``.
+    segments
+        Optional (k, 2) pairs of node indices that must be edges (material
+        interfaces, the boundary of a non-convex domain): the result is then the
+        constrained Delaunay triangulation. A node lying on a segment splits it;
+        crossing segments raise ``ValueError`` naming both.
 
     Attributes
     ----------
@@ -113,10 +133,13 @@ class Triangulation:
     (6, True)
     """
 
-    def __init__(self, nodes, triangles=None, make_delaunay: bool = True):
+    def __init__(self, nodes, triangles=None, make_delaunay: bool = True, segments=None):
         p = validate_nodes(nodes)
+        segments = check_segments(segments if segments is not None else [], p.shape[0])
         self.nodes = p
         self.nodes.flags.writeable = False
+        self.segment_keys = np.empty(0, dtype=np.int64)
+        self.segment_source = np.empty(0, dtype=np.int64)
         if triangles is None:
             T, N = self._qhull(p)
         else:
@@ -149,6 +172,10 @@ class Triangulation:
         self.last_flips = 0
         if make_delaunay:
             self.last_flips = self.make_delaunay()
+        if segments.size:
+            self.segment_keys, self.segment_source = insert_segments(
+                self.nodes, self.triangles, self.neighbours, segments)
+            self._changed()
 
     # -- construction -------------------------------------------------------
     @staticmethod
@@ -254,6 +281,25 @@ class Triangulation:
         return np.unique(e, axis=0)
 
     @property
+    def segments(self) -> np.ndarray:
+        """(k, 2) the constrained edges ``(i, j)``, i < j (empty if unconstrained);
+        ``segment_source[k]`` is the index of the given segment that edge k is
+        (a piece of)."""
+        return segments_of(self.segment_keys)
+
+    def reorder_triangles(self, order) -> None:
+        """Renumber the triangles in place: new triangle r is old ``order[r]``."""
+        order = np.asarray(order, dtype=np.int64)
+        if not np.array_equal(np.sort(order), np.arange(self.ntriangles)):
+            raise ValueError("order must be a permutation of the triangle indices")
+        inv = np.empty_like(order)
+        inv[order] = np.arange(order.size)
+        N = self.neighbours[order]
+        self.triangles = np.ascontiguousarray(self.triangles[order])
+        self.neighbours = np.ascontiguousarray(np.where(N >= 0, inv[np.maximum(N, 0)], -1))
+        self._changed()
+
+    @property
     def hull_edges(self) -> np.ndarray:
         """(nh, 2) convex-hull edges ``(a, b)``, counter-clockwise around the hull."""
         t, k = np.nonzero(self.neighbours < 0)
@@ -338,7 +384,8 @@ class Triangulation:
         return out
 
     def cavity(self, x) -> np.ndarray:
-        """Triangles whose circumcircle strictly contains the point x (2,).
+        """Triangles whose circumcircle strictly contains the point x (2,) and that
+        x sees (reached without crossing a segment).
 
         This is the Bowyer--Watson conflict region of x; its vertices are the
         natural neighbours of x. Empty if x is a node; raises ``ValueError``
@@ -353,7 +400,7 @@ class Triangulation:
         cap = 64
         while True:
             cav = np.empty(cap, dtype=np.int64)
-            cnt = grow_cavity(self.nodes, self.triangles, self.neighbours,
+            cnt = grow_cavity(self.nodes, self.triangles, self.neighbours, self.segment_keys,
                               q[0], q[1], t, cav, np.empty((cap, 3), np.int64),
                               np.empty(cap + 4, np.int64))
             if cnt >= 0:
@@ -404,8 +451,8 @@ class Triangulation:
                 cnb = np.empty((cap, 3), np.int64)
                 rej = np.empty(cap + 4, np.int64)
                 be = [np.empty(cap + 2, np.int64) for _ in range(5)]
-                r = insert_vertex(P, T, N, nt, i, int(start), cav, cnb, rej, *be,
-                                  np.array([nt, nt + 1], dtype=np.int64))
+                r = insert_vertex(P, T, N, self.segment_keys, nt, i, int(start), cav, cnb,
+                                  rej, *be, np.array([nt, nt + 1], dtype=np.int64))
                 if r != -3:
                     break
                 cap *= 4
@@ -434,19 +481,23 @@ class Triangulation:
     def snapshot(self) -> dict:
         """The whole state (nodes, triangles, neighbours), for :meth:`restore`."""
         return {"nodes": self.nodes, "triangles": self.triangles.copy(),
-                "neighbours": self.neighbours.copy()}
+                "neighbours": self.neighbours.copy(), "segment_keys": self.segment_keys,
+                "segment_source": self.segment_source}
 
     def restore(self, snap: dict) -> None:
         """Return exactly to a :meth:`snapshot` (the nodes are read-only, so shared)."""
         self.nodes = snap["nodes"]
         self.triangles = snap["triangles"].copy()
         self.neighbours = snap["neighbours"].copy()
+        self.segment_keys = snap.get("segment_keys", np.empty(0, dtype=np.int64))
+        self.segment_source = snap.get("segment_source", np.empty(0, dtype=np.int64))
         self._changed()
 
     @classmethod
-    def from_arrays(cls, nodes, triangles, neighbours) -> "Triangulation":
+    def from_arrays(cls, nodes, triangles, neighbours, segments=None) -> "Triangulation":
         """A triangulation from stored arrays (a checkpoint), trusted as they are: only
-        their shapes and index ranges are checked, nothing is flipped."""
+        their shapes and index ranges are checked, nothing is flipped. ``segments``:
+        its constrained edges (k, 2), which must be edges."""
         p = np.array(nodes, dtype=np.float64, copy=True)
         T = np.ascontiguousarray(triangles, dtype=np.int64).copy()
         N = np.ascontiguousarray(neighbours, dtype=np.int64).copy()
@@ -458,6 +509,8 @@ class Triangulation:
         self = cls.__new__(cls)
         p.flags.writeable = False
         self.nodes, self.triangles, self.neighbours = p, T, N
+        self.segment_keys = _edge_keys(T, segments, p.shape[0])
+        self.segment_source = np.arange(self.segment_keys.size)
         self.last_flips = 0
         self._changed()
         return self
@@ -575,7 +628,8 @@ class Triangulation:
         N = np.vstack([self.neighbours, np.zeros((2, 3), np.int64)])
         cap = max(64, 4 * cav.size)
         be = [np.empty(cap + 2, np.int64) for _ in range(5)]
-        r = insert_vertex(self.nodes, T, N, nt, v, int(cav[0]), np.empty(cap, np.int64),
+        r = insert_vertex(self.nodes, T, N, self.segment_keys, nt, v, int(cav[0]),
+                          np.empty(cap, np.int64),
                           np.empty((cap, 3), np.int64), np.empty(cap + 4, np.int64), *be,
                           np.array([nt, nt + 1], dtype=np.int64))
         if r < 0:
@@ -641,7 +695,8 @@ class Triangulation:
             stack = np.empty(start.size + 2 * min(max_flips, nt // 4 + 1024), dtype=np.int64)
             stack[:start.size] = start
             log = np.empty((min(max_flips, nt // 4 + 1024) if on_flips else 0, 8), np.int64)
-            flips, done = lawson(self.nodes, self.triangles, self.neighbours, stack,
+            flips, done = lawson(self.nodes, self.triangles, self.neighbours,
+                                 self.segment_keys, stack,
                                  start.size, max_flips - total, log)
             total += flips
             if flips:
@@ -662,8 +717,10 @@ class Triangulation:
         return self.non_delaunay_edges() == 0
 
     def non_delaunay_edges(self) -> int:
-        """Number of interior edges that fail the exact in-circle test."""
-        return int(count_non_delaunay(self.nodes, self.triangles, self.neighbours))
+        """Number of interior edges, segments excepted, that fail the exact in-circle
+        test."""
+        return int(count_non_delaunay(self.nodes, self.triangles, self.neighbours,
+                                      self.segment_keys))
 
     def __repr__(self) -> str:
         return f"Triangulation({self.npoints} nodes, {self.ntriangles} triangles)"

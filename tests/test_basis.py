@@ -288,10 +288,13 @@ def test_bad_meshes_and_elements():
         NaturalNeighbourBasis(m, ElementTriP1())
     with pytest.raises(NotImplementedError, match="NaturalNeighbourBasis"):
         Basis(m, ElementNaturalNeighbour())
-    # non-convex domain: warn
+    # a non-convex domain is no longer a warning: its boundary constrains the coordinates
     L = MeshTri.init_lshaped().refined(2)
-    with pytest.warns(UserWarning, match="not convex"):
-        NaturalNeighbourBasis(L)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        b = NaturalNeighbourBasis(L)
+    assert b.triangulation.segments.shape[0] == L.boundary_facets().size
 
 
 def test_save_and_plot(mesh, basis, tmp_path):

@@ -240,3 +240,25 @@ def test_evolve_step_smoke(evolve):
     assert out["steps_done"] == 3 and out["delaunay"]
     assert out["excl_s"] <= out["step_s"] and out["qhull_s"] > 0
     assert lm.ip_fields["stress"].shape == (lm.triangles.shape[0], 3, 3)
+
+
+# --------------------------------------------------------------------------
+# constrained natural neighbours: non-convex domains and the cost per query
+# --------------------------------------------------------------------------
+
+def test_nonconvex_study_table():
+    bench = load_benchmark("nonconvex")
+    rows = bench.study([300, 1200])
+    text = bench.table(rows)
+    assert text.count("\n") == 2 + len(rows) - 1
+    for name, n, bi_c, bi_u, l2, h1, pl2, ph1 in rows:
+        assert bi_c < 1e-12 < bi_u          # exact along the outline only when constrained
+        assert l2 < pl2 and h1 < ph1        # NEM below P1 on the same triangles
+
+
+def test_constrained_cost_table():
+    bench = load_benchmark("constrained")
+    row = bench.run_size(1500, 1)
+    assert row["segments"] > 8 * 30 and row["m"] == 3 * row["n"]
+    assert all(np.isfinite(row[k]) and row[k] > 0 for k in row)
+    assert "| ratio |" in bench.table([row])

@@ -327,3 +327,22 @@ def test_ex12_patch_test_and_figure(tmp_path):
         assert np.allclose(d, np.log10(err + 1e-17))
     assert (tmp_path / "ex12.png").exists()
     plt.close(fig)
+
+
+# --------------------------------------------------------------------------
+# ex13: constrained natural neighbours at an interface and a notch
+# --------------------------------------------------------------------------
+
+def test_ex13_interface_exact_and_notch(tmp_path):
+    ex13 = load("ex13_interfaces")
+    assert ex13.nodal_error["constrained"] < 1e-12       # measured 7e-15
+    assert ex13.nodal_error["plain"] > 1e-2              # measured 2.1e-2
+    seen, plain = (set(v.tolist()) for v in ex13.neighbours.values())
+    across = ex13.L_points[sorted(plain - seen)]
+    assert seen < plain and (across > 0.5).any(axis=1).all()   # the node across the notch
+    fig = ex13.visualize(tmp_path / "ex13.png")
+    drawn = [line.get_ydata() for line in fig.axes[0].lines[:2]]
+    assert np.abs(drawn[0]).max() < 1e-12 < 1e-3 < np.abs(drawn[1]).max()
+    marks = [line for line in fig.axes[1].lines if line.get_marker() in ("o", "x")]
+    assert [len(m.get_xdata()) for m in marks] == [len(seen), len(plain)]
+    plt.close(fig)

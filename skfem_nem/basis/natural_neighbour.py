@@ -37,7 +37,7 @@ from skfem.element import DiscreteField, Element, ElementTetP1, ElementTriP1, El
 from . import assembly
 from .assembly import stencil_position
 from ..coordinates import natural_neighbour_coordinates
-from ..geometry.meshes import adopt
+from ..geometry.meshes import adopt, outside_domain
 from .elements import element_for, gauss_rule, integration_scheme
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
@@ -514,11 +514,18 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         """Sparse matrix mapping a dof vector to its values at points x (dim, m).
 
         Scalar: shape (m, N). Vector: (dim * m, N), component-major rows, as
-        scikit-fem's ``CellBasis.probes``.
+        scikit-fem's ``CellBasis.probes``. Points outside the domain (outside the
+        convex hull, or in a hole or the notch of a non-convex 2D domain) raise
+        ``ValueError`` naming the first.
         """
         x = np.asarray(x, dtype=float)
         if x.ndim != 2 or x.shape[0] != self.mesh.dim():
             raise ValueError(f"points must have shape ({self.mesh.dim()}, m), got {x.shape}")
+        if self.mesh.dim() == 2:
+            out = outside_domain(self.mesh, x.T)
+            if out.size:
+                raise ValueError(f"point {out[0]} at {x[:, out[0]].tolist()} is outside the "
+                                 f"domain of the mesh ({out.size} such point(s))")
         Phi = self._coordinates(x.T, undefined="raise")
         if isinstance(self.elem, ElementVector):
             import scipy.sparse as sp

@@ -47,6 +47,9 @@ def _lasserre(src, x, gradient, kind, undefined, chunk, area_options):
         raise ValueError("hint and return_triangles are options of the 2D area method "
                          "(method='area')")
     if isinstance(src, Triangulation):
+        if src.segment_keys.size:
+            raise ValueError("the triangulation has segments: constrained coordinates come "
+                             "from the 2D area method only (method='area')")
         src = src.nodes
     if isinstance(src, Delaunay):
         return sibson_coordinates_nd(src.points, x, gradient=gradient, delaunay=src,

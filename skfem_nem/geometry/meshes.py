@@ -17,7 +17,6 @@ find their constrained triangulation there instead of losing the segments.
 from __future__ import annotations
 
 import hashlib
-import warnings
 import weakref
 
 import numpy as np
@@ -26,14 +25,18 @@ from skfem import MeshTet, MeshTri
 
 from .constrained import check_segments, flood_regions
 from .delaunay_nd import delaunay_of
+from .predicates import orient2d
 from .triangulation import Triangulation, unused_nodes, validate_nodes
 
-__all__ = ["adopt", "delaunay_mesh", "triangulation_of"]
+__all__ = ["adopt", "delaunay_mesh", "outside_domain", "triangulation_of"]
 
 
 # triangulations of meshes by the digest of (nodes, triangles), kept while a mesh
 # holds them (weakly referenced: the cache on each mesh is the strong reference)
 _BY_DIGEST: "weakref.WeakValueDictionary[str, Triangulation]" = weakref.WeakValueDictionary()
+# the triangles of a mesh's triangulation that lie outside the mesh (holes, the notch of a
+# non-convex domain): walls for the coordinates, outside for point queries
+_VOID: "weakref.WeakKeyDictionary[Triangulation, np.ndarray]" = weakref.WeakKeyDictionary()
 
 
 def _digest(p, t) -> str:
@@ -45,11 +48,44 @@ def _digest(p, t) -> str:
     return h.hexdigest()
 
 
-def _cache(mesh, tri):
+def _cache(mesh, tri, void=None):
     mesh._skfem_nem_triangulation = tri
     if isinstance(tri, Triangulation):
         _BY_DIGEST[_digest(mesh.p, mesh.t)] = tri
+        if void is not None and void.any():
+            _VOID[tri] = void
     return mesh
+
+
+def outside_domain(mesh, x) -> np.ndarray:
+    """Indices of the points x (m, 2) that lie outside a 2D mesh's domain but inside
+    the convex hull of its nodes: in a hole or in the notch of a non-convex domain
+    (points on the domain's boundary are inside). Points outside the hull are left
+    to the coordinates, which report them."""
+    tri = triangulation_of(mesh)
+    void = _VOID.get(tri) if isinstance(tri, Triangulation) else None
+    if void is None:
+        return np.empty(0, dtype=np.int64)
+    x = np.asarray(x, dtype=np.float64).reshape(-1, 2)
+    t = tri.locate(x)
+    cand = np.flatnonzero(t >= 0)
+    cand = cand[void[t[cand]]]
+    return np.array([i for i in cand if not _on_domain(tri, void, int(t[i]), x[i])],
+                    dtype=np.int64)
+
+
+def _on_domain(tri, void, t, x):
+    """True if x, in the closed void triangle t, is a node or on an edge that t shares
+    with a triangle of the domain."""
+    P, T, N = tri.nodes, tri.triangles, tri.neighbours
+    if (P[T[t]] == x).all(axis=1).any():
+        return True
+    for k in range(3):
+        a, b = T[t, (k + 1) % 3], T[t, (k + 2) % 3]
+        u = N[t, k]
+        if u >= 0 and not void[u] and orient2d(*P[a], *P[b], *x) == 0.0:
+            return True
+    return False
 
 
 def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
@@ -164,7 +200,8 @@ def _constrained_mesh(points, segments, holes):
     tri = Triangulation(p, segments=allseg)
     keep = _kept_triangles(tri, holes)
     tri.reorder_triangles(np.argsort(~keep, kind="stable"))
-    t = tri.triangles[:int(keep.sum())]
+    nkeep = int(keep.sum())
+    t = tri.triangles[:nkeep]
     unused = unused_nodes(p.shape[0], t)
     if unused.size:
         i = int(unused[0])
@@ -173,7 +210,7 @@ def _constrained_mesh(points, segments, holes):
     mesh = MeshTri(np.ascontiguousarray(p.T), np.ascontiguousarray(t.T))
     if named:
         mesh = mesh.with_boundaries(_segment_facets(mesh, tri, named))
-    return _cache(mesh, tri)
+    return _cache(mesh, tri, np.arange(tri.ntriangles) >= nkeep)
 
 
 def _segment_facets(mesh, tri, named):
@@ -238,10 +275,14 @@ def _tet_delaunay(mesh: MeshTet) -> Delaunay:
 
 
 def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
-    """The triangulation the coordinates of a mesh are computed on, checked to
-    be Delaunay and cached on the mesh: for a ``MeshTri`` its
-    :class:`~skfem_nem.Triangulation` (same triangle order), for a
-    ``MeshTet`` a :class:`scipy.spatial.Delaunay` of its nodes."""
+    """The triangulation the coordinates of a mesh are computed on, cached on the
+    mesh: for a ``MeshTet`` a :class:`scipy.spatial.Delaunay` of its nodes (its
+    tetrahedra checked to be Delaunay); for a ``MeshTri`` whose boundary is
+    convex its own triangles as a :class:`~skfem_nem.Triangulation` (same order,
+    checked to be Delaunay); for a non-convex ``MeshTri`` (an L-shape, an annulus,
+    a mesh read from gmsh) the constrained Delaunay triangulation of its nodes
+    with its boundary facets as segments, so that no natural neighbour is seen
+    through the outside."""
     cached = getattr(mesh, "_skfem_nem_triangulation", None)
     if cached is None and isinstance(mesh, MeshTri):
         cached = _BY_DIGEST.get(_digest(mesh.p, mesh.t))
@@ -259,40 +300,76 @@ def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
     p, t = mesh.p.T, mesh.t.T
     _check_used(p, t, "triangle")
     tri = Triangulation.from_triangles(p, t, make_delaunay=False)
+    if not _convex_boundary(tri):
+        tri, void = _constrained_of(mesh)
+        _cache(mesh, tri, void)
+        return tri
     bad = tri.non_delaunay_edges()
     if bad:
         raise ValueError(
             f"the mesh is not a Delaunay triangulation ({bad} edge(s) fail the in-circle "
             f"test); natural-neighbour trial functions need one: build the mesh with "
             f"skfem_nem.delaunay_mesh(points)")
+    _cache(mesh, tri)
+    return tri
+
+
+def _convex_boundary(tri) -> bool:
+    """True if the hull edges of the mesh's triangles form one closed convex curve
+    (else the domain is not the convex hull of its nodes)."""
     he = tri.hull_edges
-    # convex boundary? each boundary vertex must turn left (or go straight)
     nxt = {int(a): int(b) for a, b in he}
     P = tri.nodes
-    a = he[:, 0]
-    b = he[:, 1]
+    a, b = he[:, 0], he[:, 1]
     c = np.array([nxt.get(int(v), -1) for v in b])
-    if (c < 0).any():
-        warnings.warn("the mesh boundary is not a single closed curve; natural-neighbour "
-                      "coordinates assume the domain is the convex hull of the nodes",
-                      stacklevel=3)
-    else:
-        turn = ((P[b, 0] - P[a, 0]) * (P[c, 1] - P[a, 1])
-                - (P[b, 1] - P[a, 1]) * (P[c, 0] - P[a, 0]))
-        if (turn < -1e-12 * np.ptp(P, axis=0).max() ** 2).any():
-            v = int(b[np.argmin(turn)])
-            warnings.warn(
-                f"the mesh boundary is not convex (e.g. at node {v}); Sibson/Laplace "
-                f"functions are then not interpolating along the concave part of the "
-                f"boundary (a known NEM limitation)", stacklevel=3)
-    mesh._skfem_nem_triangulation = tri
-    return tri
+    if (c < 0).any() or len(nxt) != len(he):
+        return False
+    # one loop: follow it from the first edge
+    v, seen = int(a[0]), 0
+    while True:
+        v, seen = nxt[v], seen + 1
+        if v == int(a[0]) or seen > len(he):
+            break
+    if seen != len(he):
+        return False
+    turn = np.array([orient2d(*P[i], *P[j], *P[k]) for i, j, k in zip(a, b, c)])
+    return bool((turn >= 0).all())
+
+
+def _constrained_of(mesh):
+    """The constrained Delaunay triangulation of a non-convex mesh's nodes with its
+    boundary facets as segments, and the mask of its triangles outside the mesh: the
+    natural neighbours of a point are then the nodes it sees inside the domain."""
+    p = np.ascontiguousarray(mesh.p.T)
+    tri = Triangulation(p, segments=mesh.facets[:, mesh.boundary_facets()].T)
+    label = flood_regions(tri.triangles, tri.neighbours, tri.segment_keys,
+                          np.arange(tri.ntriangles))
+    regions, first = np.unique(label, return_index=True)
+    centroids = tri.nodes[tri.triangles[first]].mean(axis=1)
+    inside = _in_mesh(mesh, centroids)
+    return tri, ~inside[np.searchsorted(regions, label)]
+
+
+def _in_mesh(mesh, x):
+    """(m,) True for the points x (m, 2) inside some triangle of the mesh."""
+    V = mesh.p[:, mesh.t]                      # (2, 3, ne)
+    out = np.zeros(x.shape[0], dtype=bool)
+    for i, q in enumerate(x):
+        d = [((V[0, (k + 1) % 3] - q[0]) * (V[1, (k + 2) % 3] - q[1])
+              - (V[1, (k + 1) % 3] - q[1]) * (V[0, (k + 2) % 3] - q[0])) for k in range(3)]
+        d = np.array(d)
+        out[i] = bool((((d >= 0).all(axis=0)) | ((d <= 0).all(axis=0))).any())
+    return out
 
 
 def adopt(mesh, method):
     """The triangulation a basis on ``mesh`` queries with ``method`` (cached)."""
     tri = triangulation_of(mesh)
     if method == "lasserre" and isinstance(tri, Triangulation):
+        if tri.segment_keys.size:
+            raise ValueError("the mesh has segments (interfaces or a non-convex boundary): "
+                             "constrained coordinates come from the 2D area method only "
+                             "(method='area', the 2D default)")
         cached = getattr(mesh, "_skfem_nem_delaunay", None)
         if cached is None:
             cached = delaunay_of(np.ascontiguousarray(tri.nodes))

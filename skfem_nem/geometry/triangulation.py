@@ -423,14 +423,16 @@ class Triangulation:
         if bad.size:
             raise ValueError(f"inserted point {bad[0]} is not finite: {q[bad[0]].tolist()}")
         n0 = self.npoints
-        old = (self.nodes, self.triangles, self.neighbours)
+        old = (self.nodes, self.triangles, self.neighbours, self.segment_keys,
+               self.segment_source)
         nodes = np.vstack([self.nodes, q])
         nodes.flags.writeable = False
         self.nodes = nodes
         try:
             self._insert_nodes(np.arange(n0, n0 + q.shape[0]))
         except ValueError:
-            self.nodes, self.triangles, self.neighbours = old
+            (self.nodes, self.triangles, self.neighbours, self.segment_keys,
+             self.segment_source) = old
             self._changed()
             raise
         return np.arange(n0, n0 + q.shape[0])
@@ -446,12 +448,15 @@ class Triangulation:
         starts = self.start_triangles(P[idx])
         for i, start in zip(idx, starts):
             i = int(i)
+            # a node on a segment splits it: the cavity may cross that segment
+            cut = self._segment_through(T[:nt], N[:nt], i, int(start))
+            S = self.segment_keys if cut is None else self.segment_keys[self.segment_keys != cut]
             while True:
                 cav = np.empty(cap, np.int64)
                 cnb = np.empty((cap, 3), np.int64)
                 rej = np.empty(cap + 4, np.int64)
                 be = [np.empty(cap + 2, np.int64) for _ in range(5)]
-                r = insert_vertex(P, T, N, self.segment_keys, nt, i, int(start), cav, cnb,
+                r = insert_vertex(P, T, N, S, nt, i, int(start), cav, cnb,
                                   rej, *be, np.array([nt, nt + 1], dtype=np.int64))
                 if r != -3:
                     break
@@ -461,10 +466,38 @@ class Triangulation:
                                  f"and cannot be inserted")
             if r == -2:
                 raise ValueError(f"node {i} at {P[i].tolist()} coincides with an existing node")
+            if cut is not None:
+                self._split_key(cut, i)
             nt += r
         self.triangles = np.ascontiguousarray(T[:nt])
         self.neighbours = np.ascontiguousarray(N[:nt])
         self._changed()
+
+    def _segment_through(self, T, N, i, start):
+        """The key of the segment whose interior node i lies on, or None."""
+        if not self.segment_keys.size:
+            return None
+        P = self.nodes
+        out = np.empty(1, dtype=np.int64)
+        locate_many(P, T, N, P[i:i + 1], np.array([start], dtype=np.int64), out)
+        t = int(out[0])
+        for k in range(3 if t >= 0 else 0):
+            a, b = int(T[t, (k + 1) % 3]), int(T[t, (k + 2) % 3])
+            key = (min(a, b) << 32) | max(a, b)
+            if (np.searchsorted(self.segment_keys, key) < self.segment_keys.size
+                    and key in self.segment_keys and orient2d(*P[a], *P[b], *P[i]) == 0.0):
+                return key
+        return None
+
+    def _split_key(self, key, i):
+        """Replace the segment ``key`` by its two pieces through node i (same source)."""
+        a, b = key >> 32, key & 0xFFFFFFFF
+        at = int(np.flatnonzero(self.segment_keys == key)[0])
+        src = self.segment_source[at]
+        keys = np.r_[np.delete(self.segment_keys, at), keys_of([[a, i], [i, b]])]
+        order = np.argsort(keys)
+        self.segment_keys = keys[order]
+        self.segment_source = np.r_[np.delete(self.segment_source, at), src, src][order]
 
     # -- mutation: the evolving mesh changes a triangulation only through these -----
     def move_nodes(self, x) -> None:

@@ -36,10 +36,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .delaunay2d import flip_edge, is_segment, lawson, segment_key
-from .predicates import orient2d_sign
+from .delaunay2d import flip_edge, is_segment, lawson, locate_many, segment_key
+from .predicates import orient2d, orient2d_sign
 
-__all__ = ["check_segments", "flood_regions", "insert_segments", "keys_of", "segments_of"]
+__all__ = ["check_segments", "edge_keys", "flood_regions", "insert_segments", "keys_of",
+           "segment_through", "segments_of", "split_key"]
 
 # codes of the segment insertion kernel
 _DONE = 0
@@ -82,6 +83,43 @@ def check_segments(segments, n: int, name: str = "segments") -> np.ndarray:
     if bad.size:
         raise ValueError(f"{name}[{bad[0]}] = {s[bad[0]].tolist()} joins a node to itself")
     return s
+
+
+def edge_keys(T, segments, n):
+    """Sorted keys of ``segments`` (None: none), each checked to be an edge of T."""
+    s = check_segments(segments if segments is not None else [], n)
+    keys = keys_of(s)
+    e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
+    missing = np.flatnonzero(~np.isin(keys, (e[:, 0] << 32) | e[:, 1]))
+    if missing.size:
+        raise ValueError(f"segment {segments_of(keys[missing[:1]])[0].tolist()} is not an "
+                         f"edge of the stored triangles")
+    return keys
+
+
+def segment_through(P, T, N, S, i, start):
+    """The key of the segment of ``S`` whose interior node i lies on (found from the
+    triangle containing it, walking from ``start``), or None."""
+    if not S.size:
+        return None
+    out = np.empty(1, dtype=np.int64)
+    locate_many(P, T, N, P[i:i + 1], np.array([start], dtype=np.int64), out)
+    t = int(out[0])
+    for k in range(3 if t >= 0 else 0):
+        a, b = int(T[t, (k + 1) % 3]), int(T[t, (k + 2) % 3])
+        if is_segment(S, a, b) and orient2d(*P[a], *P[b], *P[i]) == 0.0:
+            return int(segment_key(a, b))
+    return None
+
+
+def split_key(keys, source, key, i):
+    """``(keys, source)`` with the segment ``key`` replaced by its two pieces through
+    node i (both from the same source)."""
+    a, b = key >> 32, key & 0xFFFFFFFF
+    at = int(np.flatnonzero(keys == key)[0])
+    new = np.r_[np.delete(keys, at), keys_of([[a, i], [i, b]])]
+    order = np.argsort(new)
+    return new[order], np.r_[np.delete(source, at), source[at], source[at]][order]
 
 
 @njit(cache=True, inline="always")

@@ -22,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
-from .constrained import check_segments, insert_segments, keys_of, segments_of
+from .constrained import (check_segments, edge_keys, insert_segments, segment_through,
+                          segments_of, split_key)
 from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exact_hull, first_fold,
                          grow_cavity, insert_vertex, lawson, locate_many, orientations)
 from .predicates import incircle_sign, orient2d
@@ -67,18 +68,6 @@ def unused_nodes(n: int, cells) -> np.ndarray:
     used = np.zeros(n, dtype=bool)
     used[np.asarray(cells).ravel()] = True
     return np.flatnonzero(~used)
-
-
-def _edge_keys(T, segments, n):
-    """Sorted keys of ``segments`` (None: none), each checked to be an edge of T."""
-    s = check_segments(segments if segments is not None else [], n)
-    keys = keys_of(s)
-    e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
-    missing = np.flatnonzero(~np.isin(keys, (e[:, 0] << 32) | e[:, 1]))
-    if missing.size:
-        raise ValueError(f"segment {segments_of(keys[missing[:1]])[0].tolist()} is not an "
-                         f"edge of the stored triangles")
-    return keys
 
 
 # ---------------------------------------------------------------------------
@@ -449,7 +438,7 @@ class Triangulation:
         for i, start in zip(idx, starts):
             i = int(i)
             # a node on a segment splits it: the cavity may cross that segment
-            cut = self._segment_through(T[:nt], N[:nt], i, int(start))
+            cut = segment_through(P, T[:nt], N[:nt], self.segment_keys, i, int(start))
             S = self.segment_keys if cut is None else self.segment_keys[self.segment_keys != cut]
             while True:
                 cav = np.empty(cap, np.int64)
@@ -467,37 +456,12 @@ class Triangulation:
             if r == -2:
                 raise ValueError(f"node {i} at {P[i].tolist()} coincides with an existing node")
             if cut is not None:
-                self._split_key(cut, i)
+                self.segment_keys, self.segment_source = split_key(
+                    self.segment_keys, self.segment_source, cut, i)
             nt += r
         self.triangles = np.ascontiguousarray(T[:nt])
         self.neighbours = np.ascontiguousarray(N[:nt])
         self._changed()
-
-    def _segment_through(self, T, N, i, start):
-        """The key of the segment whose interior node i lies on, or None."""
-        if not self.segment_keys.size:
-            return None
-        P = self.nodes
-        out = np.empty(1, dtype=np.int64)
-        locate_many(P, T, N, P[i:i + 1], np.array([start], dtype=np.int64), out)
-        t = int(out[0])
-        for k in range(3 if t >= 0 else 0):
-            a, b = int(T[t, (k + 1) % 3]), int(T[t, (k + 2) % 3])
-            key = (min(a, b) << 32) | max(a, b)
-            if (np.searchsorted(self.segment_keys, key) < self.segment_keys.size
-                    and key in self.segment_keys and orient2d(*P[a], *P[b], *P[i]) == 0.0):
-                return key
-        return None
-
-    def _split_key(self, key, i):
-        """Replace the segment ``key`` by its two pieces through node i (same source)."""
-        a, b = key >> 32, key & 0xFFFFFFFF
-        at = int(np.flatnonzero(self.segment_keys == key)[0])
-        src = self.segment_source[at]
-        keys = np.r_[np.delete(self.segment_keys, at), keys_of([[a, i], [i, b]])]
-        order = np.argsort(keys)
-        self.segment_keys = keys[order]
-        self.segment_source = np.r_[np.delete(self.segment_source, at), src, src][order]
 
     # -- mutation: the evolving mesh changes a triangulation only through these -----
     def move_nodes(self, x) -> None:
@@ -542,7 +506,7 @@ class Triangulation:
         self = cls.__new__(cls)
         p.flags.writeable = False
         self.nodes, self.triangles, self.neighbours = p, T, N
-        self.segment_keys = _edge_keys(T, segments, p.shape[0])
+        self.segment_keys = edge_keys(T, segments, p.shape[0])
         self.segment_source = np.arange(self.segment_keys.size)
         self.last_flips = 0
         self._changed()

@@ -122,6 +122,14 @@ def split_key(keys, source, key, i):
     return new[order], np.r_[np.delete(source, at), source[at], source[at]][order]
 
 
+@njit(cache=True)
+def _vertex_triangles(T, vt):
+    """``vt[v]``: a triangle with vertex v (flips later make some entries stale)."""
+    for t in range(T.shape[0]):
+        for j in range(3):
+            vt[T[t, j]] = t
+
+
 @njit(cache=True, inline="always")
 def _slot(T, t, v):
     """Position of vertex v in triangle t."""
@@ -303,6 +311,7 @@ def insert_segments(P, T, N, segments):
     for a, b, i in todo[::-1]:
         origin.setdefault(int(segment_key(a, b)), i)
     vt = np.full(P.shape[0], -1, dtype=np.int64)
+    _vertex_triangles(T, vt)
     while todo:
         a, b, i = todo.pop()
         cap = 64
@@ -349,14 +358,16 @@ def _make_edge(P, T, N, S, vt, a, b, i, crossing):
         raise RuntimeError(f"segments[{i}] = {[a, b]}: the flips made no progress")
     if ntouch > touched.shape[0]:
         touched, ntouch = np.arange(T.shape[0], dtype=np.int64), T.shape[0]
+    room = 16 * ntouch + 1024     # Lawson's stack: local first, everything if it runs out
     while True:
-        stack = np.empty(ntouch + 2 * T.shape[0] + 64, dtype=np.int64)
+        stack = np.empty(ntouch + room, dtype=np.int64)
         stack[:ntouch] = touched[:ntouch]
         _, done = lawson(P, T, N, S, stack, ntouch, 10 * T.shape[0] + 100,
                          np.empty((0, 8), np.int64))
         if done:
             return
         touched, ntouch = np.arange(T.shape[0], dtype=np.int64), T.shape[0]
+        room = 2 * T.shape[0] + 64
 
 
 @njit(cache=True)

@@ -130,6 +130,13 @@ def test_coordinates_see_only_visible_nodes():
     F0 = natural_neighbour_coordinates(Triangulation(p), q).toarray()
     r0, c0 = np.nonzero(F0)
     assert np.any(np.sign(p[c0, 0] - .5) * np.sign(q[r0, 0] - .5) < 0)
+    # exact gradients of the constrained functions (central differences, h = 1e-6)
+    for kind in ("sibson", "laplace"):
+        _, (Dx, Dy) = natural_neighbour_coordinates(tri, q, gradient=True, kind=kind)
+        for D, e in ((Dx, [1e-6, 0]), (Dy, [0, 1e-6])):
+            fd = (natural_neighbour_coordinates(tri, q + e, kind=kind)
+                  - natural_neighbour_coordinates(tri, q - e, kind=kind)) / 2e-6
+            assert abs(fd - D).max() < 1e-5 * max(1.0, abs(D).max())
     # on a segment: the linear 1D weights of its two nodes
     y = rng.random(50)
     on = natural_neighbour_coordinates(tri, np.c_[np.full(50, .5), y]).toarray()

@@ -381,15 +381,17 @@ def _check_method(mesh, coordinates, method):
 
 
 class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
-    """Natural-neighbour (Sibson or Laplace) trial functions on a Delaunay
-    ``MeshTri`` or ``MeshTet``.
+    """Natural-neighbour (Sibson or Laplace) trial functions on a ``MeshTri`` or
+    a Delaunay ``MeshTet``.
 
     Parameters
     ----------
     mesh
-        A ``MeshTri`` whose triangles, or a ``MeshTet`` whose tetrahedra, are
-        Delaunay (build it with :func:`delaunay_mesh`). Checked; a
-        ``ValueError`` says how to fix it.
+        A ``MeshTri`` (any triangles: the functions come from the Delaunay
+        triangulation of its nodes, constrained by its boundary if the domain is
+        not convex and by the segments of :func:`delaunay_mesh`), or a
+        ``MeshTet`` whose tetrahedra are Delaunay (build it with
+        :func:`delaunay_mesh`; checked, a ``ValueError`` says how to fix it).
     elem
         ``ElementNaturalNeighbour()`` (default) or
         ``ElementVector(ElementNaturalNeighbour())``; dofs are numbered as

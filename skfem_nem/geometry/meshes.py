@@ -278,11 +278,13 @@ def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
     """The triangulation the coordinates of a mesh are computed on, cached on the
     mesh: for a ``MeshTet`` a :class:`scipy.spatial.Delaunay` of its nodes (its
     tetrahedra checked to be Delaunay); for a ``MeshTri`` whose boundary is
-    convex its own triangles as a :class:`~skfem_nem.Triangulation` (same order,
-    checked to be Delaunay); for a non-convex ``MeshTri`` (an L-shape, an annulus,
-    a mesh read from gmsh) the constrained Delaunay triangulation of its nodes
-    with its boundary facets as segments, so that no natural neighbour is seen
-    through the outside."""
+    convex its own triangles as a :class:`~skfem_nem.Triangulation` (same order)
+    if they are Delaunay, else the Delaunay triangulation of its nodes (a refined,
+    smoothed or imported mesh keeps its triangles for integration; the functions
+    depend on the nodes only); for a non-convex ``MeshTri`` (an L-shape, an
+    annulus, a mesh read from gmsh) the constrained Delaunay triangulation of its
+    nodes with its boundary facets as segments, so that no natural neighbour is
+    seen through the outside."""
     cached = getattr(mesh, "_skfem_nem_triangulation", None)
     if cached is None and isinstance(mesh, MeshTri):
         cached = _BY_DIGEST.get(_digest(mesh.p, mesh.t))
@@ -304,12 +306,8 @@ def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
         tri, void = _constrained_of(mesh)
         _cache(mesh, tri, void)
         return tri
-    bad = tri.non_delaunay_edges()
-    if bad:
-        raise ValueError(
-            f"the mesh is not a Delaunay triangulation ({bad} edge(s) fail the in-circle "
-            f"test); natural-neighbour trial functions need one: build the mesh with "
-            f"skfem_nem.delaunay_mesh(points)")
+    if tri.non_delaunay_edges():
+        tri = Triangulation(np.ascontiguousarray(p))
     _cache(mesh, tri)
     return tri
 

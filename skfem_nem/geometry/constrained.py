@@ -39,7 +39,8 @@ from numba import njit
 from .delaunay2d import flip_edge, is_segment, lawson, segment_key
 from .predicates import orient2d_sign
 
-__all__ = ["check_segments", "flood_regions", "insert_segments", "keys_of", "segments_of"]
+__all__ = ["check_segments", "flood_regions", "insert_segments", "keys_of", "recover_segments",
+           "segments_of"]
 
 # codes of the segment insertion kernel
 _DONE = 0
@@ -290,6 +291,20 @@ def insert_segments(P, T, N, segments):
         if count:
             _make_edge(P, T, N, S, vt, a, b, i, out[:count])
     return S, np.array([origin[int(k)] for k in S], dtype=np.int64)
+
+
+def recover_segments(P, T, N, keys, source):
+    """Make every segment (sorted ``keys`` with their ``source``) an edge of the valid
+    triangulation (P, T, N) again, in place, by the flips of :func:`insert_segments`
+    (after a node that ends segments was taken out and put back). Every segment takes
+    part, so a missing one is checked against all the others. Returns the new
+    ``(keys, source)`` (a node now lying on a segment splits it); ``ValueError``
+    naming two segments that would cross."""
+    e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
+    if np.isin(keys, (e[:, 0] << 32) | e[:, 1]).all():
+        return keys, source
+    S, src = insert_segments(P, T, N, segments_of(keys))
+    return S, np.asarray(source, dtype=np.int64)[src]
 
 
 def _split(S, origin, a, b, v, i):

@@ -303,8 +303,19 @@ def recover_segments(P, T, N, keys, source):
     e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
     if np.isin(keys, (e[:, 0] << 32) | e[:, 1]).all():
         return keys, source
-    S, src = insert_segments(P, T, N, segments_of(keys))
-    return S, np.asarray(source, dtype=np.int64)[src]
+    source = np.asarray(source, dtype=np.int64)
+    try:
+        S, src = insert_segments(P, T, N, segments_of(keys))
+    except ValueError as err:
+        import re
+        m = re.match(r"segments\[(\d+)\] = (\[\d+, \d+\]) crosses segments\[(-?\d+)\] = "
+                     r"(\[\d+, \d+\])", str(err))
+        if m is None:
+            raise
+        i, j = int(m.group(1)), int(m.group(3))
+        raise ValueError(f"segment {m.group(2)} (of given segment {source[i]}) would cross "
+                         f"segment {m.group(4)} (of given segment {source[j]})") from None
+    return S, source[src]
 
 
 def _split(S, origin, a, b, v, i):

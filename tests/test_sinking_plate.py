@@ -8,7 +8,7 @@ import pytest
 
 from skfem_nem.apps.cli import main
 from skfem_nem.apps.output import read_csv_columns
-from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate, load_config
+from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate, initial_nodes, load_config
 
 SMALL = dict(nodes=500, end_time=24.0, max_dt=4.0, output_interval=8.0, checkpoint_every=2)
 
@@ -45,6 +45,30 @@ def test_coarse_run_physics(coarse_run):
     # the plate stresses up to the yield stress and no further
     assert d["max_plate_stress"].max() <= sim.cfg.yield_stress * (1 + 1e-9)
     assert d["max_plate_stress"].max() > 0.5 * sim.cfg.yield_stress
+
+
+def test_outline_and_interface_are_segments(coarse_run):
+    """By default the plate outline and the layer interface are edges of the mesh at
+    every step: no triangle straddles either, and nodes injected on the outline's
+    stretched segments take their places in the plate polygon."""
+    sim, out, _ = coarse_run
+    lm, c = sim.lm, sim.cfg
+    keys = lm.triangulation.segment_keys
+    o = sim.outline
+    pairs = np.sort(np.c_[o, np.roll(o, -1)], axis=1)
+    assert np.isin((pairs[:, 0] << 32) | pairs[:, 1], keys).all()
+    assert lm.triangulation.missing_segments().size == 0
+    z0 = lm.node_fields["z0"][lm.triangles]           # initial heights of the vertices
+    above, below = (z0 >= c.interface_z).all(1), (z0 <= c.interface_z).all(1)
+    assert (above | below).all()
+    interface = np.flatnonzero(lm.node_fields["z0"] == c.interface_z)
+    assert interface.size > 100 and np.isin(lm.triangulation.segments, interface).any()
+    d = read_csv_columns(out / "diagnostics.csv")
+    assert np.all(np.diff(d["outline_nodes"]) >= 0)
+    _, o0, i0 = initial_nodes(c)
+    assert d["outline_nodes"][-1] == len(o)
+    # every split put one node on the outline or on the interface
+    assert len(o) - len(o0) + len(interface) - len(i0) == d["segments_split"].sum()
 
 
 def test_outputs(coarse_run):
@@ -196,6 +220,20 @@ def test_command_line_short_run(tmp_path):
     meta = json.loads((out / "checkpoint.json").read_text())
     assert meta["config"]["nodes"] == 400
     assert (out / "plate.pvd").exists() and (out / "fig6.png").exists()
+    assert meta["config"]["segments"] is True
+    assert SinkingPlate.restart(out).lm.triangulation.segment_keys.size > 0
+
+
+def test_command_line_without_segments(tmp_path):
+    out = tmp_path / "plain"
+    assert main(["sinking-plate", "-o", str(out), "--nodes", "300", "--end-time", "2",
+                 "--max-dt", "2", "--quiet", "--no-segments"]) == 0
+    meta = json.loads((out / "checkpoint.json").read_text())
+    assert meta["config"]["segments"] is False
+    sim = SinkingPlate.restart(out)
+    assert sim.lm.triangulation.segment_keys.size == 0
+    # the node set of the runs before segments: no line of nodes on the interface
+    assert not np.any(sim.lm.node_fields["z0"] == sim.cfg.interface_z)
 
 
 def test_lagrangian_fem_inverts_where_nem_does_not(tmp_path):

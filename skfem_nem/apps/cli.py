@@ -194,8 +194,12 @@ def _add_plate_parser(sub):
     g = sp.add_argument_group("parameters (nondimensional)")
     for f in dfields(PlateConfig):
         default = getattr(PlateConfig, f.name)
-        typ = type(default) if not isinstance(default, bool) else str
-        g.add_argument("--" + f.name.replace("_", "-"), dest=f.name, type=typ, default=None,
+        flag = "--" + f.name.replace("_", "-")
+        if isinstance(default, bool):  # --segments / --no-segments
+            g.add_argument(flag, dest=f.name, action=argparse.BooleanOptionalAction,
+                           default=None, help=f"{HELP.get(f.name, '')} (default {default})")
+            continue
+        g.add_argument(flag, dest=f.name, type=type(default), default=None,
                        help=f"{HELP.get(f.name, '')} (default {default})")
     return sp
 

@@ -109,6 +109,8 @@ class PlateConfig:
     picard_tol: float = 1e-3
     #: write a checkpoint every this many steps
     checkpoint_every: int = 10
+    #: keep the plate outline and the layer interface as segments (constrained mesh)
+    segments: bool = True
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first bad parameter."""
@@ -126,6 +128,8 @@ class PlateConfig:
             v = getattr(self, k)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"{k} must be a positive integer, got {v!r}")
+        if not isinstance(self.segments, bool):
+            raise ValueError(f"segments must be true or false, got {self.segments!r}")
         if not isinstance(self.seed, int):
             raise ValueError(f"seed must be an integer, got {self.seed!r}")
         if not (isinstance(self.inject, (int, float)) and (self.inject == 0 or self.inject > 1)):
@@ -183,6 +187,9 @@ HELP = {
                    '(3-point rule)',
     'picard_tol': 'Picard tolerance of the plastic iterations',
     'checkpoint_every': 'write a checkpoint every this many steps',
+    'segments': 'keep the plate outline and the layer interface (a line of nodes) as edges '
+                'of the mesh: a constrained Delaunay triangulation, constrained '
+                'natural-neighbour functions, stretched segments split',
 }
 
 
@@ -295,6 +302,49 @@ def node_spacing(P: np.ndarray, T: np.ndarray) -> np.ndarray:
     return np.sqrt(share)
 
 
+def initial_nodes(c: PlateConfig):
+    """The initial node set: walls, the plate outline, random nodes with density
+    ``1 / (1 + d / density_length)`` (d: distance to the plate) and, with
+    ``c.segments``, a line of nodes along the layer interface whose spacing grows
+    like the random nodes' from the outline's spacing under the plate. Returns
+    the nodes and the node indices of the outline (in order) and of the interface
+    (left to right; empty without segments)."""
+    x0, x1 = c.plate_x - c.plate_length / 2, c.plate_x + c.plate_length / 2
+    z0, z1 = c.plate_z - c.plate_thickness / 2, c.plate_z + c.plate_thickness / 2
+    rect = [[x0, z0], [x1, z0], [x1, z1], [x0, z1]]
+    h0 = c.outline_spacing * c.plate_thickness
+    outline = polyline_nodes(rect, h0, closed=True)
+
+    def dist(p):
+        dx = np.maximum(np.maximum(x0 - p[:, 0], p[:, 0] - x1), 0)
+        dz = np.maximum(np.maximum(z0 - p[:, 1], p[:, 1] - z1), 0)
+        return np.hypot(dx, dz)
+
+    def density(p):
+        return 1.0 / (1.0 + dist(p) / c.density_length)
+
+    lines = [np.r_[outline, outline[:1]]]
+    if c.segments:
+        xs = [0.0]
+        while xs[-1] < c.width:
+            at = np.array([[xs[-1], c.interface_z]])
+            xs.append(xs[-1] + h0 / np.sqrt(density(at)[0]))
+        xs = np.array(xs) * (c.width / xs[-1])
+        xs[-1] = c.width
+        lines.append(np.c_[xs, np.full(xs.size, c.interface_z)])
+    nodes = box_nodes(c.nodes, c.width, c.height, density=density, seed=c.seed, lines=lines,
+                      boundary_spacing=max(c.width, c.height) / 60)
+    from scipy.spatial import cKDTree
+    tree = cKDTree(nodes)
+    idx = []
+    for line in (outline, lines[1] if c.segments else np.empty((0, 2))):
+        d, i = tree.query(line) if line.size else (np.zeros(1), np.empty(0, np.int64))
+        if d.max() > 1e-12:
+            raise RuntimeError("plate outline or interface nodes were not kept in the node set")
+        idx.append(np.asarray(i, dtype=np.int64))
+    return nodes, idx[0], idx[1]
+
+
 def _inside(poly, pts):
     from matplotlib.path import Path as MPath
     return MPath(poly).contains_points(pts, radius=0.0)
@@ -321,37 +371,20 @@ class SinkingPlate:
             self.outputs = meta["outputs"]
             self.first_output = meta.get("first_output")
             return
-        c = cfg
-        x0, x1 = c.plate_x - c.plate_length / 2, c.plate_x + c.plate_length / 2
-        z0, z1 = c.plate_z - c.plate_thickness / 2, c.plate_z + c.plate_thickness / 2
-        rect = [[x0, z0], [x1, z0], [x1, z1], [x0, z1]]
-        outline = polyline_nodes(rect, c.outline_spacing * c.plate_thickness, closed=True)
-
-        def dist(p):
-            dx = np.maximum(np.maximum(x0 - p[:, 0], p[:, 0] - x1), 0)
-            dz = np.maximum(np.maximum(z0 - p[:, 1], p[:, 1] - z1), 0)
-            return np.hypot(dx, dz)
-
-        def density(p):
-            return 1.0 / (1.0 + dist(p) / c.density_length)
-
-        nodes = box_nodes(c.nodes, c.width, c.height, density=density, seed=c.seed,
-                          lines=[np.r_[outline, outline[:1]]],
-                          boundary_spacing=max(c.width, c.height) / 60)
-        # the outline's node indices, in order along the polygon
-        from scipy.spatial import cKDTree
-        d, idx = cKDTree(nodes).query(outline)
-        if d.max() > 1e-12:
-            raise RuntimeError("plate outline nodes were not kept in the node set")
+        nodes, outline, interface = initial_nodes(cfg)
+        segs = None
+        if cfg.segments:
+            segs = np.r_[np.c_[outline, np.roll(outline, -1)],
+                         np.c_[interface[:-1], interface[1:]]]
         fields_ = {"x0": nodes[:, 0].copy(), "z0": nodes[:, 1].copy()}
-        lm = LagrangianMesh(nodes, node_fields=fields_, remap=c.remap)
+        lm = LagrangianMesh(nodes, node_fields=fields_, remap=cfg.remap, segments=segs)
         nt = lm.triangles.shape[0]
         lm.ip_fields["stress"] = np.zeros((nt, 3, 2, 2))
         lm.ip_fields["plastic_strain"] = np.zeros((nt, 3))
         self.lm = lm
-        self.outline = idx.astype(np.int64)
+        self.outline = outline
         self.next_output = 0.0
-        self.dt_next = c.max_dt
+        self.dt_next = cfg.max_dt
         self.outputs = 0
         self.first_output = None
 
@@ -433,6 +466,9 @@ class SinkingPlate:
 
         rep = lm.advance(velocity, dt, tol=1e-8, maxiter=20,
                          inject=c.inject if c.inject else None)
+        if lm.triangulation.segment_keys.size:
+            # nodes injected on the outline's segments take their places in it
+            self.outline = lm.polyline(self.outline, closed=True)
         # the next step's dt from this step's velocity
         self.dt_next = self._stable_dt(v)
         A, cen = self.plate_area_centroid()
@@ -449,6 +485,7 @@ class SinkingPlate:
                "max_speed": float(np.hypot(*v.T).max()),
                "flips": rep["flips"], "injected": rep["injected"],
                "relocated": rep["relocated"], "substeps": rep["substeps"],
+               "segments_split": rep["segments_split"], "outline_nodes": len(self.outline),
                "nodes": lm.nodes.shape[0], "min_angle": rep["min_angle"],
                "picard_iterations": r.iterations, "solver_iterations": r.solution.iterations,
                "solve_seconds": t_solve, "step_seconds": _time.perf_counter() - t0}

@@ -40,7 +40,9 @@ from numba import njit
 
 from ..coordinates import sibson_coordinates
 from ..geometry.predicates import orient2d
+from ..geometry.meshes import triangulation_mesh
 from ..geometry.triangulation import Triangulation
+from .remap import child_values, remap_average, remap_conservative
 from .stepping import LagrangianStep, check_node_fields
 
 __all__ = ["LagrangianMesh"]
@@ -52,112 +54,8 @@ _A3 = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 /
 
 
 # ---------------------------------------------------------------------------
-# remap kernels
+# mesh quality kernels
 # ---------------------------------------------------------------------------
-
-@njit(cache=True)
-def _remap_average(log, F):
-    """The paper's averaging-and-splitting rule for a batch of flips."""
-    for r in range(log.shape[0]):
-        t, u, k, l = log[r, 0], log[r, 1], log[r, 2], log[r, 3]
-        ta = F[t, k].copy()
-        tb = F[t, (k + 1) % 3].copy()
-        tc = F[t, (k + 2) % 3].copy()
-        ud = F[u, l].copy()
-        uc = F[u, (l + 1) % 3].copy()
-        ub = F[u, (l + 2) % 3].copy()
-        # new t = (a, b, d), new u = (a, d, c)
-        F[t, 0] = ta
-        F[t, 1] = 0.5 * (tb + ub)
-        F[t, 2] = ud
-        F[u, 0] = ta
-        F[u, 1] = ud
-        F[u, 2] = 0.5 * (tc + uc)
-
-
-@njit(cache=True)
-def _vertex_values(f):
-    """Vertex values of the linear field with values f at the 3-point rule's points."""
-    s = f[0] + f[1] + f[2]
-    return 2.0 * f[0] - s / 3.0, 2.0 * f[1] - s / 3.0, 2.0 * f[2] - s / 3.0
-
-
-@njit(cache=True)
-def _bary(px, py, ax, ay, bx, by, cx, cy):
-    d = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-    l1 = ((px - ax) * (cy - ay) - (py - ay) * (cx - ax)) / d
-    l2 = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / d
-    return 1.0 - l1 - l2, l1, l2
-
-
-@njit(cache=True)
-def _remap_conservative(P, log, F):
-    """L2-projection remap over the four sub-triangles, for a batch of flips.
-
-    Log rows ``(t, u, k, l, a, b, c, d)`` as written by the Lawson kernel.
-    """
-    ncomp = F.shape[2]
-    for r in range(log.shape[0]):
-        t, u = log[r, 0], log[r, 1]
-        a = log[r, 4]
-        b = log[r, 5]
-        c = log[r, 6]
-        d = log[r, 7]
-        k, l = log[r, 2], log[r, 3]
-        ax, ay = P[a, 0], P[a, 1]
-        bx, by = P[b, 0], P[b, 1]
-        cx, cy = P[c, 0], P[c, 1]
-        dx, dy = P[d, 0], P[d, 1]
-        # intersection O of the diagonals a-d and b-c
-        den = (dx - ax) * (cy - by) - (dy - ay) * (cx - bx)
-        s = ((bx - ax) * (cy - by) - (by - ay) * (cx - bx)) / den
-        ox = ax + s * (dx - ax)
-        oy = ay + s * (dy - ay)
-        for m in range(ncomp):
-            # old vertex values: t = (a, b, c) from position k, u = (d, c, b) from l
-            fa, fb, fc = _vertex_values(np.array([F[t, k, m], F[t, (k + 1) % 3, m],
-                                                  F[t, (k + 2) % 3, m]]))
-            gd, gc, gb = _vertex_values(np.array([F[u, l, m], F[u, (l + 1) % 3, m],
-                                                  F[u, (l + 2) % 3, m]]))
-            # old field at O, from either side (they differ: the field jumps)
-            la, lb, lc = _bary(ox, oy, ax, ay, bx, by, cx, cy)
-            fo_t = la * fa + lb * fb + lc * fc
-            ld, lc2, lb2 = _bary(ox, oy, dx, dy, cx, cy, bx, by)
-            fo_u = ld * gd + lc2 * gc + lb2 * gb
-            # new t = (a, b, d) covers sub-triangles (a, b, O) [old t] and (b, d, O) [old u]
-            # new u = (a, d, c) covers (d, c, O) [old u] and (c, a, O) [old t]
-            for which in range(2):
-                if which == 0:
-                    v0x, v0y, v1x, v1y, v2x, v2y = ax, ay, bx, by, dx, dy
-                    subs = ((ax, ay, fa, bx, by, fb, fo_t),
-                            (bx, by, gb, dx, dy, gd, fo_u))
-                else:
-                    v0x, v0y, v1x, v1y, v2x, v2y = ax, ay, dx, dy, cx, cy
-                    subs = ((dx, dy, gd, cx, cy, gc, fo_u),
-                            (cx, cy, fc, ax, ay, fa, fo_t))
-                area = 0.5 * ((v1x - v0x) * (v2y - v0y) - (v1y - v0y) * (v2x - v0x))
-                rhs = np.zeros(3)
-                for (p1x, p1y, f1, p2x, p2y, f2, fo) in subs:
-                    sa = 0.5 * abs((p2x - p1x) * (oy - p1y) - (p2y - p1y) * (ox - p1x))
-                    # int over the sub-triangle (p1, p2, O) of f * lambda_j:
-                    # (|S| / 12) (sum_i f_i lam_ji + (sum_i f_i)(sum_i lam_ji))
-                    l1 = _bary(p1x, p1y, v0x, v0y, v1x, v1y, v2x, v2y)
-                    l2 = _bary(p2x, p2y, v0x, v0y, v1x, v1y, v2x, v2y)
-                    l3 = _bary(ox, oy, v0x, v0y, v1x, v1y, v2x, v2y)
-                    fs = f1 + f2 + fo
-                    for j in range(3):
-                        lj = l1[j] * f1 + l2[j] * f2 + l3[j] * fo
-                        rhs[j] += sa / 12.0 * (lj + fs * (l1[j] + l2[j] + l3[j]))
-                # P1 mass matrix (|T| / 12)(I + 1 1^T): inverse (12/|T|)(I - 1 1^T / 4)
-                tot = rhs[0] + rhs[1] + rhs[2]
-                nv = np.empty(3)
-                for j in range(3):
-                    nv[j] = 12.0 / area * (rhs[j] - tot / 4.0)
-                s3 = nv[0] + nv[1] + nv[2]
-                tgt = t if which == 0 else u
-                for j in range(3):
-                    F[tgt, j, m] = 0.5 * nv[j] + s3 / 6.0
-
 
 @njit(cache=True)
 def _min_angles(P, T, out):
@@ -197,22 +95,6 @@ def _cross(u, v):
 # ---------------------------------------------------------------------------
 
 
-def _split_values(P, parent, i, Ft):
-    """Values at the 3-point rule's points of the three children ``(i, b, c), (i, c, a),
-    (i, a, b)`` of ``parent = (a, b, c)`` from the parent's linear field (its values Ft
-    (3, m) at the parent's own points)."""
-    a, b, c = parent
-    Fv = 2.0 * Ft - Ft.sum(axis=0) / 3.0  # values at vertices a, b, c
-    M = np.array([[P[a, 0], P[b, 0], P[c, 0]], [P[a, 1], P[b, 1], P[c, 1]], [1, 1, 1]])
-    new = np.empty((3, 3, Ft.shape[1]))
-    for r, tri_v in enumerate(((i, b, c), (i, c, a), (i, a, b))):
-        q = P[list(tri_v)]
-        for k in range(3):
-            y = (2 / 3) * q[k] + (1 / 6) * (q[(k + 1) % 3] + q[(k + 2) % 3])
-            new[r, k] = np.linalg.solve(M, np.array([y[0], y[1], 1.0])) @ Fv
-    return new
-
-
 class LagrangianMesh(LagrangianStep):
     """A 2D node set carried by a flow, kept Delaunay by local flips.
 
@@ -231,6 +113,16 @@ class LagrangianMesh(LagrangianStep):
         ``"conservative"`` (default: conserves integrals exactly, keeps linear
         fields; see the module docs and docs/evolution.md for the measured
         diffusion) or ``"average"`` (the paper's rule).
+    segments
+        Optional (k, 2) pairs of node indices that stay edges (material interfaces,
+        the outline of a body): the triangulation is then the constrained Delaunay
+        one, the segments move with their nodes, flips never remove them, relocation
+        puts them back by flips, and with ``inject`` a segment stretched past
+        ``sqrt(inject)`` times its initial length is split at its midpoint (both
+        halves stay segments; ``triangulation.segment_source`` names the given
+        segment each piece comes from). A step after which a segment would not be an
+        edge (segments crossing) raises ``ValueError`` ("reduce dt") and leaves the
+        mesh as it was.
     walls
         ``"box"`` (default): nodes on the bounding box of the initial nodes
         keep their wall coordinate exactly (free slip: only the tangential
@@ -265,8 +157,8 @@ class LagrangianMesh(LagrangianStep):
 
     def __init__(self, nodes, node_fields: Optional[Dict[str, np.ndarray]] = None,
                  ip_fields: Optional[Dict[str, np.ndarray]] = None,
-                 remap: str = "conservative", walls: Optional[str] = "box"):
-        self.triangulation = Triangulation(nodes)
+                 remap: str = "conservative", walls: Optional[str] = "box", segments=None):
+        self.triangulation = Triangulation(nodes, segments=segments)
         n, nt = self.triangulation.npoints, self.triangulation.ntriangles
         if remap not in ("conservative", "average"):
             raise ValueError(f"remap must be 'conservative' or 'average', got {remap!r}")
@@ -291,6 +183,8 @@ class LagrangianMesh(LagrangianStep):
         if walls == "box":
             self._on_wall = (P == lo) | (P == hi)
         self._ref_area = self.node_areas()
+        self._segment_ref = self._segment_lengths(np.asarray(segments).reshape(-1, 2).shape[0]
+                                                  if segments is not None else 0)
         self.time = 0.0
         self.step = 0
         self.history = []
@@ -312,9 +206,16 @@ class LagrangianMesh(LagrangianStep):
         """The current scikit-fem ``MeshTri`` (vertex order as ``triangles``,
         so quadrature point k of element t is the ip field's slot k)."""
         if "mesh" not in self._cache:
-            from skfem import MeshTri
-            self._cache["mesh"] = MeshTri(np.ascontiguousarray(self.nodes.T),
-                                          np.ascontiguousarray(self.triangles.T), sort_t=False)
+            tri = self.triangulation
+            if tri.segment_keys.size:
+                # the mesh keeps a copy of the constrained triangulation (this one moves on)
+                self._cache["mesh"] = triangulation_mesh(Triangulation.from_arrays(
+                    tri.nodes, tri.triangles, tri.neighbours, tri.segments, tri.segment_source))
+            else:
+                from skfem import MeshTri
+                self._cache["mesh"] = MeshTri(np.ascontiguousarray(self.nodes.T),
+                                              np.ascontiguousarray(self.triangles.T),
+                                              sort_t=False)
         return self._cache["mesh"]
 
     def basis(self, elem=None, integration: str = "smoothed"):
@@ -435,6 +336,11 @@ class LagrangianMesh(LagrangianStep):
         self.time += dt
         self.step += 1
         report["injected"] = self.inject_nodes(inject) if inject else 0
+        split = self.split_segments(inject) if inject else 0
+        report["injected"] += split
+        report["segments_split"] = split
+        if self.triangulation.segment_keys.size:
+            self._check_segments()
         report["min_angle"] = self.min_angle()
         # locality: triangles changed by flips / injection / relocation, and the
         # stencils (triangles whose quadrature points may have other natural
@@ -502,8 +408,7 @@ class LagrangianMesh(LagrangianStep):
             inv = np.flatnonzero(self.triangulation.orientation() <= 0)
             if not inv.size:
                 break
-            cand = [v for v in np.unique(T[inv]) if not self._on_wall[v].any()
-                    and v not in removed]
+            cand = self._relocation_candidates(inv, removed)
             if not cand:
                 raise ValueError(f"triangle {inv[0]} ({T[inv[0]].tolist()}) inverts and none of "
                                  f"its vertices can be relocated: reduce dt")
@@ -514,12 +419,51 @@ class LagrangianMesh(LagrangianStep):
         self.triangulation.make_delaunay(on_flips=self._on_flips)
         for v in removed:
             self._reinsert_vertex(v)
+        if self.segment_nodes()[removed].any():
+            self._recover_segments()
         return len(removed)
 
+    def _relocation_candidates(self, inv, removed):
+        """Vertices to take out for the inverted triangles ``inv``: not on a wall, not
+        taken out already, and not ending a segment where the triangle has another."""
+        on_seg = self.segment_nodes()
+        pick = set()
+        for t in inv:
+            vs = [int(v) for v in self.triangles[t]
+                  if not self._on_wall[v].any() and v not in removed]
+            pick.update([v for v in vs if not on_seg[v]] or vs)
+        return sorted(pick)
+
+    def _recover_segments(self):
+        """Segments of relocated nodes made edges again by flips; the ip fields of the
+        triangles those flips changed filled from the old triangles' linear fields."""
+        tri = self.triangulation
+        T0 = tri.triangles.copy()
+        try:
+            tri.recover_segments()
+        except ValueError as err:
+            raise ValueError(f"{err}; the segments of relocated nodes cannot be edges "
+                             f"again: reduce dt") from None
+        changed = np.flatnonzero((tri.triangles != T0).any(axis=1))
+        if changed.size:
+            self._fill_from(self._snapshot(changed, T0), changed)
+        self._touched.append(changed)
+
+    def _check_segments(self):
+        """``ValueError`` ("reduce dt") unless every segment is an edge and every
+        triangle positive: a step never loses a segment silently."""
+        missing = self.triangulation.missing_segments()
+        if missing.size:
+            raise ValueError(f"segment {missing[0].tolist()} is no longer an edge "
+                             f"({missing.shape[0]} segment(s)): reduce dt")
+        if _inverted(self.nodes, self.triangles):
+            raise ValueError("a triangle inverts after the repair: reduce dt")
+
     # -- local surgery (rare: relocation of colliding nodes) ---------------------
-    def _snapshot(self, tris):
-        """Geometry and linear ip fields of triangles ``tris`` (for re-evaluation)."""
-        X = self.nodes[self.triangles[tris]].copy()
+    def _snapshot(self, tris, T=None):
+        """Geometry and linear ip fields of triangles ``tris`` (rows of T, by default the
+        triangles; for re-evaluation)."""
+        X = self.nodes[(self.triangles if T is None else T)[tris]].copy()
         vals = {k: 2.0 * F[tris].reshape(len(tris), 3, -1)
                 - F[tris].reshape(len(tris), 3, -1).sum(axis=1, keepdims=True) / 3.0
                 for k, F in self.ip_fields.items()}
@@ -580,9 +524,9 @@ class LagrangianMesh(LagrangianStep):
         for name, F in self.ip_fields.items():
             flat = F.reshape(F.shape[0], 3, -1)
             if self.remap == "average":
-                _remap_average(log, flat)
+                remap_average(log, flat)
             else:
-                _remap_conservative(self.nodes, log, flat)
+                remap_conservative(self.nodes, log, flat)
             self.ip_fields[name] = flat.reshape(F.shape)
 
     def _invalidate(self):
@@ -650,14 +594,121 @@ class LagrangianMesh(LagrangianStep):
         tri = self.triangulation
         nt = tri.ntriangles
         parent = tri.triangles[t].copy()
-        i = tri.split_triangle(t, x)
+        tri.split_triangle(t, x)
         self._touched.append(np.array([t, nt, nt + 1], dtype=np.int64))
         for name, F in self.ip_fields.items():
             flat = F.reshape(F.shape[0], 3, -1)
-            new = _split_values(tri.nodes, parent, i, flat[t])
+            new = child_values(tri.nodes[parent], flat[t],
+                               tri.nodes[tri.triangles[[t, nt, nt + 1]]])
             flat = np.concatenate([flat, new[1:]])
             flat[t] = new[0]
             self.ip_fields[name] = flat.reshape((flat.shape[0],) + F.shape[1:])
+
+    # -- segments ----------------------------------------------------------------
+    def segment_nodes(self) -> np.ndarray:
+        """(n,) True for the nodes that end a segment."""
+        on = np.zeros(self.triangulation.npoints, dtype=bool)
+        on[self.triangulation.segments.ravel()] = True
+        return on
+
+    def _segment_lengths(self, nsources):
+        """(nsources,) reference length of each given segment: its longest piece now."""
+        tri = self.triangulation
+        seg = tri.segments
+        ref = np.zeros(nsources)
+        np.maximum.at(ref, tri.segment_source, np.hypot(*(self.nodes[seg[:, 0]]
+                                                          - self.nodes[seg[:, 1]]).T))
+        return ref
+
+    def split_segments(self, factor: float = 2.0) -> int:
+        """Insert a node at the midpoint of every segment longer than ``sqrt(factor)``
+        times the initial length of the segment it comes from (the length scale of the
+        node-area ``factor`` of :meth:`inject_nodes`); both halves become segments. The
+        two triangles at the segment are split in two each (integration-point values
+        from their linear fields), then Lawson flips with the remap. Node fields of a
+        new node: the mean of the segment's two nodes (natural-neighbour functions are
+        linear along a segment). Returns the number of nodes inserted."""
+        if factor <= 1:
+            raise ValueError(f"the injection factor must exceed 1, got {factor}")
+        tri = self.triangulation
+        seg = tri.segments
+        if not seg.size:
+            return 0
+        P = self.nodes
+        length = np.hypot(*(P[seg[:, 0]] - P[seg[:, 1]]).T)
+        long = seg[length > np.sqrt(factor) * self._segment_ref[tri.segment_source]]
+        if not long.size:
+            return 0
+        for a, b in long:
+            self._split_segment(int(a), int(b))
+        a, b = long[:, 0], long[:, 1]
+        for k, v in self.node_fields.items():
+            self.node_fields[k] = np.concatenate([v, 0.5 * (v[a] + v[b])])
+        same = self._on_wall[a] & self._on_wall[b] & (P[a] == P[b])
+        self._on_wall = np.concatenate([self._on_wall, same])
+        tri.make_delaunay(on_flips=self._on_flips)
+        area = self.node_areas()
+        self._ref_area = np.concatenate([self._ref_area, area[-long.shape[0]:]])
+        self._invalidate()
+        return int(long.shape[0])
+
+    def _split_segment(self, a, b):
+        """Split the segment a-b at its midpoint, with the ip fields of its triangles."""
+        tri = self.triangulation
+        T, nt = tri.triangles, tri.ntriangles
+        t = int(np.flatnonzero((T == a).any(axis=1) & (T == b).any(axis=1))[0])
+        k = int(np.flatnonzero((T[t] != a) & (T[t] != b))[0])
+        u = int(tri.neighbours[t, k])
+        parents = [(t, T[t].copy(), [t, nt])] + ([(u, T[u].copy(), [u, nt + 1])] if u >= 0
+                                                  else [])
+        tri.split_edge(t, k, 0.5 * (self.nodes[a] + self.nodes[b]))
+        rows = [t, nt] + ([u, nt + 1] if u >= 0 else [])
+        self._touched.append(np.array(rows, dtype=np.int64))
+        for name, F in self.ip_fields.items():
+            flat = F.reshape(F.shape[0], 3, -1)
+            flat = np.concatenate([flat, np.zeros((tri.ntriangles - nt,) + flat.shape[1:])])
+            for p, verts, children in parents:
+                flat[children] = child_values(tri.nodes[verts], flat[p],
+                                              tri.nodes[tri.triangles[children]])
+            self.ip_fields[name] = flat.reshape((flat.shape[0],) + F.shape[1:])
+
+    def polyline(self, nodes, closed: bool = False) -> np.ndarray:
+        """The nodes of a polyline of segments, given by its nodes in order at an earlier
+        time, with the nodes inserted on its segments since (:meth:`split_segments`) put
+        in their places: e.g. the current outline of a body."""
+        tri = self.triangulation
+        nb: Dict[tuple, list] = {}
+        for (i, j), s in zip(tri.segments.tolist(), tri.segment_source.tolist()):
+            nb.setdefault((i, s), []).append(j)
+            nb.setdefault((j, s), []).append(i)
+        sources = {}
+        for (i, s) in nb:
+            sources.setdefault(i, set()).add(s)
+        nodes = [int(v) for v in nodes]
+        out = [nodes[0]]
+        for a, b in zip(nodes, nodes[1:] + nodes[:1] if closed else nodes[1:]):
+            for s in sorted(sources.get(a, set()) & sources.get(b, set())):
+                path = self._walk(nb, a, b, s)
+                if path is not None:
+                    out += path[1:]
+                    break
+            else:
+                raise ValueError(f"nodes {a} and {b} are not joined by segments")
+        return np.array(out[:-1] if closed else out, dtype=np.int64)
+
+    @staticmethod
+    def _walk(nb, a, b, s):
+        """The path from a to b along the segments of source s, or None."""
+        for first in nb.get((a, s), []):
+            path = [a, first]
+            while path[-1] != b and len(path) <= len(nb):
+                step = [v for v in nb.get((path[-1], s), []) if v != path[-2]]
+                if not step:
+                    break
+                path.append(step[0])
+            if path[-1] == b:
+                return path
+        return None
 
     # -- checkpoints -------------------------------------------------------------
     def save(self, path) -> None:
@@ -670,7 +721,9 @@ class LagrangianMesh(LagrangianStep):
         arrays = {"nodes": self.nodes, "triangles": self.triangles,
                   "neighbours": self.triangulation.neighbours, "ref_area": self._ref_area,
                   "on_wall": self._on_wall, "box_lo": self._box[0], "box_hi": self._box[1],
-                  "meta": np.array(json.dumps(meta))}
+                  "segments": self.triangulation.segments,
+                  "segment_source": self.triangulation.segment_source,
+                  "segment_ref": self._segment_ref, "meta": np.array(json.dumps(meta))}
         arrays.update({f"node__{k}": v for k, v in self.node_fields.items()})
         arrays.update({f"ip__{k}": v for k, v in self.ip_fields.items()})
         folder = os.path.dirname(os.path.abspath(path))
@@ -693,7 +746,11 @@ class LagrangianMesh(LagrangianStep):
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
             self = cls.__new__(cls)
-            tri = Triangulation.from_arrays(z["nodes"], z["triangles"], z["neighbours"])
+            seg = {k: z[k] for k in ("segments", "segment_source") if k in z.files}
+            tri = Triangulation.from_arrays(z["nodes"], z["triangles"], z["neighbours"],
+                                            **seg)
+            self._segment_ref = z["segment_ref"].copy() if "segment_ref" in z.files \
+                else np.zeros(0)
             self.triangulation = tri
             self.remap = meta["remap"]
             self.walls = meta["walls"]

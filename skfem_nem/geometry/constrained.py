@@ -40,7 +40,7 @@ from .delaunay2d import flip_edge, is_segment, lawson, locate_many, segment_key
 from .predicates import orient2d, orient2d_sign
 
 __all__ = ["check_segments", "edge_keys", "flood_regions", "insert_segments", "keys_of",
-           "segment_through", "segments_of", "split_key"]
+           "recover_segments", "segment_through", "segments_of", "split_key"]
 
 # codes of the segment insertion kernel
 _DONE = 0
@@ -337,6 +337,31 @@ def insert_segments(P, T, N, segments):
         if count:
             _make_edge(P, T, N, S, vt, a, b, i, out[:count])
     return S, np.array([origin[int(k)] for k in S], dtype=np.int64)
+
+
+def recover_segments(P, T, N, keys, source):
+    """Make every segment (sorted ``keys`` with their ``source``) an edge of the valid
+    triangulation (P, T, N) again, in place, by the flips of :func:`insert_segments`
+    (after a node that ends segments was taken out and put back). Every segment takes
+    part, so a missing one is checked against all the others. Returns the new
+    ``(keys, source)`` (a node now lying on a segment splits it); ``ValueError``
+    naming two segments that would cross."""
+    e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
+    if np.isin(keys, (e[:, 0] << 32) | e[:, 1]).all():
+        return keys, source
+    source = np.asarray(source, dtype=np.int64)
+    try:
+        S, src = insert_segments(P, T, N, segments_of(keys))
+    except ValueError as err:
+        import re
+        m = re.match(r"segments\[(\d+)\] = (\[\d+, \d+\]) crosses segments\[(-?\d+)\] = "
+                     r"(\[\d+, \d+\])", str(err))
+        if m is None:
+            raise
+        i, j = int(m.group(1)), int(m.group(3))
+        raise ValueError(f"segment {m.group(2)} (of given segment {source[i]}) would cross "
+                         f"segment {m.group(4)} (of given segment {source[j]})") from None
+    return S, source[src]
 
 
 def _split(S, origin, a, b, v, i):

@@ -28,7 +28,7 @@ from .delaunay_nd import delaunay_of
 from .predicates import orient2d
 from .triangulation import Triangulation, unused_nodes, validate_nodes
 
-__all__ = ["adopt", "delaunay_mesh", "outside_domain", "triangulation_of"]
+__all__ = ["adopt", "delaunay_mesh", "outside_domain", "triangulation_mesh", "triangulation_of"]
 
 
 # triangulations of meshes by the digest of (nodes, triangles), kept while a mesh
@@ -155,6 +155,16 @@ def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
         return _cache(mesh, tri)
     tri = Triangulation(points)
     return MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T))
+
+
+def triangulation_mesh(tri: Triangulation) -> MeshTri:
+    """The ``MeshTri`` of a :class:`~skfem_nem.Triangulation` (same nodes, same
+    triangles in the same order) with ``tri`` cached as its triangulation: bases on
+    it use ``tri`` as it is, segments (constrained coordinates) included. ``tri``
+    must not change afterwards: pass a copy of one that will."""
+    mesh = MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T),
+                   sort_t=False)
+    return _cache(mesh, tri)
 
 
 def _named(segments, n):

@@ -22,8 +22,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
-from .constrained import (check_segments, edge_keys, insert_segments, segment_through,
-                          segments_of, split_key)
+from .constrained import (check_segments, edge_keys, insert_segments, recover_segments,
+                          segment_through, segments_of, split_key)
 from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exact_hull, first_fold,
                          grow_cavity, insert_vertex, lawson, locate_many, orientations)
 from .predicates import incircle_sign, orient2d
@@ -491,10 +491,12 @@ class Triangulation:
         self._changed()
 
     @classmethod
-    def from_arrays(cls, nodes, triangles, neighbours, segments=None) -> "Triangulation":
+    def from_arrays(cls, nodes, triangles, neighbours, segments=None,
+                    segment_source=None) -> "Triangulation":
         """A triangulation from stored arrays (a checkpoint), trusted as they are: only
         their shapes and index ranges are checked, nothing is flipped. ``segments``:
-        its constrained edges (k, 2), which must be edges."""
+        its constrained edges (k, 2), which must be edges; ``segment_source``: their
+        :attr:`segment_source` in the order of :attr:`segments` (default 0..k-1)."""
         p = np.array(nodes, dtype=np.float64, copy=True)
         T = np.ascontiguousarray(triangles, dtype=np.int64).copy()
         N = np.ascontiguousarray(neighbours, dtype=np.int64).copy()
@@ -508,9 +510,34 @@ class Triangulation:
         self.nodes, self.triangles, self.neighbours = p, T, N
         self.segment_keys = edge_keys(T, segments, p.shape[0])
         self.segment_source = np.arange(self.segment_keys.size)
+        if segment_source is not None:
+            src = np.asarray(segment_source, dtype=np.int64).reshape(-1)
+            if src.size != self.segment_keys.size:
+                raise ValueError(f"{src.size} segment sources for {self.segment_keys.size} "
+                                 f"segments")
+            self.segment_source = src.copy()
         self.last_flips = 0
         self._changed()
         return self
+
+    def missing_segments(self) -> np.ndarray:
+        """(k, 2) the segments that are not edges of the triangles (none, unless a node
+        that ends segments is out of the triangulation: see :meth:`recover_segments`)."""
+        T = self.triangles
+        e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
+        return segments_of(self.segment_keys[~np.isin(self.segment_keys,
+                                                      (e[:, 0] << 32) | e[:, 1])])
+
+    def recover_segments(self) -> None:
+        """Make every segment an edge again by exact flips (Sloan's, as when segments are
+        inserted), then restore the constrained Delaunay property around them: after
+        :meth:`remove_vertex` and :meth:`reinsert_vertex` of a node that ends segments.
+        ``ValueError`` naming two segments that would cross (the triangulation is then
+        partly flipped: restore a :meth:`snapshot`)."""
+        self.segment_keys, self.segment_source = recover_segments(
+            self.nodes, self.triangles, self.neighbours, self.segment_keys,
+            self.segment_source)
+        self._changed()
 
     def star(self, v: int) -> np.ndarray:
         """The triangles around the interior node v, counter-clockwise (``ValueError``
@@ -657,6 +684,46 @@ class Triangulation:
                 N[nbr][N[nbr] == t] = new
         P.flags.writeable = False
         self.nodes, self.triangles, self.neighbours = P, T, N
+        self._changed()
+        return i
+
+    def split_edge(self, t: int, k: int, x) -> int:
+        """Append the node x (strictly inside the edge b-c opposite vertex k of triangle
+        t = (a, b, c)) and split the edge's triangles in two: t becomes ``(a, b, i)``
+        and row ``nt`` is appended as ``(a, i, c)``; the neighbour u = (d, c, b), if
+        any, becomes ``(d, i, b)`` and row ``nt + 1`` ``(d, c, i)``. A segment b-c is
+        replaced by the segments b-i and i-c (same :attr:`segment_source`). Returns i.
+        Not Delaunay-repaired: call :meth:`make_delaunay` after a batch."""
+        T, N = self.triangles, self.neighbours
+        nt = T.shape[0]
+        i = self.npoints
+        a, b, c = (int(T[t, (k + j) % 3]) for j in range(3))
+        u, nca, nab = (int(N[t, (k + j) % 3]) for j in range(3))
+        rows_t, rows_n = [[a, i, c]], [[-1 if u < 0 else nt + 1, nca, t]]
+        T[t], N[t] = (a, b, i), (u, nt, nab)
+        if u >= 0:
+            ll = int(np.flatnonzero(N[u] == t)[0])
+            d, nbd, ndc = int(T[u, ll]), int(N[u, (ll + 1) % 3]), int(N[u, (ll + 2) % 3])
+            rows_t.append([d, c, i])
+            rows_n.append([nt, u, ndc])
+            T[u], N[u] = (d, i, b), (t, nbd, nt + 1)
+            if ndc >= 0:
+                N[ndc][N[ndc] == u] = nt + 1
+        if nca >= 0:
+            N[nca][N[nca] == t] = nt
+        P = np.vstack([self.nodes, np.asarray(x, dtype=np.float64)[None]])
+        P.flags.writeable = False
+        self.nodes = P
+        self.triangles, self.neighbours = np.vstack([T, rows_t]), np.vstack([N, rows_n])
+        key = (min(b, c) << 32) | max(b, c)
+        at = np.flatnonzero(self.segment_keys == key)
+        if at.size:
+            keys = np.r_[np.delete(self.segment_keys, at), (min(b, i) << 32) | i,
+                         (min(c, i) << 32) | i]
+            src = np.r_[np.delete(self.segment_source, at), self.segment_source[at[0]],
+                        self.segment_source[at[0]]]
+            order = np.argsort(keys)
+            self.segment_keys, self.segment_source = keys[order], src[order]
         self._changed()
         return i
 

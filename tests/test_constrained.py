@@ -8,6 +8,7 @@ from skfem.helpers import dot, grad
 from conftest import load_benchmark
 from helpers import check_properties, edge_set
 
+from skfem_nem.geometry.meshes import triangulation_of
 from skfem_nem import (NaturalNeighbourBasis, NaturalNeighbourFacetBasis, Triangulation,
                        delaunay_mesh, natural_neighbour_coordinates)
 
@@ -239,3 +240,20 @@ def test_non_convex_rates():
         rh1 = nonconvex.rate(a[1], b[1], a[5], b[5])
         assert rl2 >= 1.9 and rh1 >= 0.95, (a[0], rl2, rh1)
         assert b[4] < b[6] and b[5] < b[7], "NEM below P1 on the same triangles"
+
+
+def test_plain_mesh_with_the_same_triangles_stays_plain():
+    """Segments that are Delaunay edges already give the same triangles as the plain
+    mesh; only the constrained mesh and the meshes scikit-fem derives from it (which
+    keep its named boundaries) get the constrained triangulation."""
+    p = np.random.default_rng(7).random((60, 2))
+    seg = Triangulation(p).edges[::7]
+    mc = delaunay_mesh(p, segments={"faults": seg})
+    mu = delaunay_mesh(p)
+    assert np.array_equal(mc.t, mu.t)
+    assert triangulation_of(mc).segments.shape[0] == seg.shape[0]
+    for plain in (mu, MeshTri(mc.p, mc.t), mu.with_boundaries({"left": lambda x: x[0] < .1})):
+        assert triangulation_of(plain).segments.size == 0
+    derived = mc.with_boundaries({"left": lambda x: x[0] < .1}).with_subdomains(
+        {"half": lambda x: x[0] < .5})
+    assert triangulation_of(derived) is triangulation_of(mc)

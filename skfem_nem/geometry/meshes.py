@@ -31,9 +31,12 @@ from .triangulation import Triangulation, unused_nodes, validate_nodes
 __all__ = ["adopt", "delaunay_mesh", "outside_domain", "triangulation_mesh", "triangulation_of"]
 
 
-# triangulations of meshes by the digest of (nodes, triangles), kept while a mesh
-# holds them (weakly referenced: the cache on each mesh is the strong reference)
+# the constrained triangulations of delaunay_mesh(points, segments=...) by the digest of
+# the mesh's (nodes, triangles), kept while a mesh holds them (weakly referenced: the cache
+# on each mesh is the strong reference), and the named boundaries (segment facets) that a
+# mesh must carry to be given one: a plain mesh with the same nodes and triangles is not
 _BY_DIGEST: "weakref.WeakValueDictionary[str, Triangulation]" = weakref.WeakValueDictionary()
+_NAMED: "weakref.WeakKeyDictionary[Triangulation, dict]" = weakref.WeakKeyDictionary()
 # the triangles of a mesh's triangulation that lie outside the mesh (holes, the notch of a
 # non-convex domain): walls for the coordinates, outside for point queries
 _VOID: "weakref.WeakKeyDictionary[Triangulation, np.ndarray]" = weakref.WeakKeyDictionary()
@@ -48,13 +51,30 @@ def _digest(p, t) -> str:
     return h.hexdigest()
 
 
-def _cache(mesh, tri, void=None):
+def _cache(mesh, tri, void=None, named=None):
+    """Cache ``tri`` on the mesh; ``void``: its triangles outside the mesh; ``named``:
+    the mesh's segment boundaries (name -> facets), which identify meshes derived from
+    it by scikit-fem (``with_boundaries``, ``with_subdomains``)."""
     mesh._skfem_nem_triangulation = tri
     if isinstance(tri, Triangulation):
-        _BY_DIGEST[_digest(mesh.p, mesh.t)] = tri
         if void is not None and void.any():
             _VOID[tri] = void
+        if named:
+            _BY_DIGEST[_digest(mesh.p, mesh.t)] = tri
+            _NAMED[tri] = named
     return mesh
+
+
+def _registered(mesh):
+    """The constrained triangulation of the mesh ``mesh`` was derived from, if any."""
+    tri = _BY_DIGEST.get(_digest(mesh.p, mesh.t))
+    if tri is None:
+        return None
+    have = mesh._boundaries or {}
+    for name, facets in _NAMED.get(tri, {}).items():
+        if name not in have or not np.array_equal(np.asarray(have[name]), facets):
+            return None
+    return tri
 
 
 def outside_domain(mesh, x) -> np.ndarray:
@@ -218,9 +238,10 @@ def _constrained_mesh(points, segments, holes):
         raise ValueError(f"points[{i}] = {p[i].tolist()} lies in a hole ({unused.size} such "
                          f"point(s)); remove it or move the hole")
     mesh = MeshTri(np.ascontiguousarray(p.T), np.ascontiguousarray(t.T))
-    if named:
-        mesh = mesh.with_boundaries(_segment_facets(mesh, tri, named))
-    return _cache(mesh, tri, np.arange(tri.ntriangles) >= nkeep)
+    facets = _segment_facets(mesh, tri, named) if named else {}
+    if facets:
+        mesh = mesh.with_boundaries(facets)
+    return _cache(mesh, tri, np.arange(tri.ntriangles) >= nkeep, facets)
 
 
 def _segment_facets(mesh, tri, named):
@@ -297,7 +318,7 @@ def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
     seen through the outside."""
     cached = getattr(mesh, "_skfem_nem_triangulation", None)
     if cached is None and isinstance(mesh, MeshTri):
-        cached = _BY_DIGEST.get(_digest(mesh.p, mesh.t))
+        cached = _registered(mesh)
         if cached is not None:
             mesh._skfem_nem_triangulation = cached
     if cached is not None:

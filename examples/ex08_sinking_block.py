@@ -9,14 +9,16 @@ the fluid through, a strong one sinks as a rigid body).
 
 The problem is solved nondimensionally (lengths / L, viscosity / eta1,
 force / (drho g)), so the nondimensional velocity ``w`` gives
-``|v_z| eta1 / drho = w g L^2``. Natural-neighbour velocity (stabilised P1
-pressure) and Taylor-Hood on the same triangles; a Taylor-Hood solution on
-about four times as many nodes is the reference. The block's edges carry
-nodes and are edges of the triangulation.
+``|v_z| eta1 / drho = w g L^2``. Natural-neighbour velocity (with bubbles,
+P1 pressure) and Taylor-Hood on the same triangles; a Taylor-Hood solution on
+about four times as many nodes is the reference. The block's outline carries
+nodes joined as segments, so the natural-neighbour velocity may kink across it
+(constrained natural neighbours).
 """
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from skfem_nem import delaunay_mesh
 from skfem_nem.geometry.nodesets import box_nodes, polyline_nodes
@@ -30,14 +32,29 @@ HALF = 0.125
 RATIOS = 10.0 ** np.arange(-4, 5)   # eta1 / eta2
 
 
-def nodes(n, seed=0):
-    """Random nodes in the unit box, the walls and the block's outline."""
-    h = 1 / np.sqrt(n)
+def outline(n):
+    """Nodes along the block's outline, 0.7 h apart (h: the mean spacing)."""
     cx, cz = CENTRE
     square = [[cx - HALF, cz - HALF], [cx + HALF, cz - HALF], [cx + HALF, cz + HALF],
               [cx - HALF, cz + HALF]]
-    outline = polyline_nodes(square, 0.7 * h, closed=True)
-    return box_nodes(n, lines=[np.r_[outline, outline[:1]]], seed=seed)
+    return polyline_nodes(square, 0.7 / np.sqrt(n), closed=True)
+
+
+def nodes(n, seed=0):
+    """Random nodes in the unit box, the walls and the block's outline."""
+    line = outline(n)
+    return box_nodes(n, lines=[np.r_[line, line[:1]]], seed=seed)
+
+
+def make_mesh(n, seed=0, constrained=True):
+    """The triangulation of ``nodes(n, seed)``, the outline as segments
+    (``mesh.boundaries["block"]``) unless ``constrained`` is False."""
+    p = nodes(n, seed)
+    if not constrained:
+        return delaunay_mesh(p, segments={})
+    dist, idx = cKDTree(p).query(outline(n))
+    assert dist.max() < 1e-9        # the outline nodes are kept (to rounding)
+    return delaunay_mesh(p, segments={"block": np.c_[idx, np.roll(idx, -1)]})
 
 
 def inside(x):
@@ -59,10 +76,10 @@ def centre_velocity(mesh, method, ratio):
     return float((P @ s.u)[1]), s.iterations
 
 
-def run(n=3000, ratios=RATIOS, reference=True, verbose=True):
+def run(n=3000, ratios=RATIOS, reference=True, verbose=True, constrained=True):
     """Rows of (ratio, NEM, Taylor-Hood, reference) scaled velocities."""
-    mesh = delaunay_mesh(nodes(n))
-    fine = delaunay_mesh(nodes(4 * n, seed=1)) if reference else None
+    mesh = make_mesh(n, constrained=constrained)
+    fine = make_mesh(4 * n, seed=1) if reference else None
     rows = []
     scale = G * L ** 2
     for r in ratios:

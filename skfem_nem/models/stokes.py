@@ -52,7 +52,11 @@ spurious buoyancy-driven flow cannot arise (with ``-(div v, q)`` a block
 Natural-neighbour functions are C1 across element edges, so they cannot
 follow the kink of the velocity at a viscosity jump: velocity errors at
 material interfaces converge about like h (Taylor-Hood on triangles whose
-edges follow the interface: h^3). See ``docs/stokes.md``.
+edges follow the interface: h^3). On a mesh whose interface nodes are
+joined as segments (``delaunay_mesh(points, segments=...)``) the velocity
+basis is built from constrained natural neighbours, which may kink across
+the segments: the velocity converges at rate 2 again and the pressure
+spikes at the interface nodes disappear. See ``docs/stokes.md``.
 
 Boundary conditions
 -------------------

@@ -4,7 +4,7 @@ Prints the tables of docs/stokes.md ("Sharp interfaces: constrained natural
 neighbours") for three discretisations on the same nodes:
 
 - ``NEM``: natural-neighbour velocity (with bubbles) and P1 pressure on the plain
-  Delaunay triangulation (``delaunay_mesh(points, segments={})``); its functions
+  Delaunay triangulation (``delaunay_mesh(points)``); its functions
   are C1 across the interface;
 - ``C-NEM``: the same pair with the interface nodes joined as segments
   (``delaunay_mesh(points, segments=...)``): constrained natural neighbours, whose

@@ -41,9 +41,11 @@ def interface_segments(points):
 def make_mesh(n, seed=1, constrained=True):
     """The triangulation of ``nodes(n, seed)``; with ``constrained`` the interface
     is a named set of segments (``mesh.boundaries["interface"]``), otherwise the
-    plain Delaunay triangulation (``segments={}``)."""
+    plain Delaunay triangulation."""
     p = nodes(n, seed)
-    return delaunay_mesh(p, segments={"interface": interface_segments(p)} if constrained else {})
+    if not constrained:
+        return delaunay_mesh(p)
+    return delaunay_mesh(p, segments={"interface": interface_segments(p)})
 
 
 def errors(spaces, s, exact):

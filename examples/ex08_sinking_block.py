@@ -51,7 +51,7 @@ def make_mesh(n, seed=0, constrained=True):
     (``mesh.boundaries["block"]``) unless ``constrained`` is False."""
     p = nodes(n, seed)
     if not constrained:
-        return delaunay_mesh(p, segments={})
+        return delaunay_mesh(p)
     dist, idx = cKDTree(p).query(outline(n))
     assert dist.max() < 1e-9        # the outline nodes are kept (to rounding)
     return delaunay_mesh(p, segments={"block": np.c_[idx, np.roll(idx, -1)]})

@@ -10,7 +10,8 @@ from skfem_nem.apps.cli import main
 from skfem_nem.apps.output import read_csv_columns
 from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate, initial_nodes, load_config
 
-SMALL = dict(nodes=500, end_time=24.0, max_dt=4.0, output_interval=8.0, checkpoint_every=2)
+SMALL = dict(nodes=500, end_time=24.0, max_dt=4.0, output_interval=8.0, checkpoint_every=2,
+             segments=True)
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +49,7 @@ def test_coarse_run_physics(coarse_run):
 
 
 def test_outline_and_interface_are_segments(coarse_run):
-    """By default the plate outline and the layer interface are edges of the mesh at
+    """With segments the plate outline and the layer interface are edges of the mesh at
     every step: no triangle straddles either, and nodes injected on the outline's
     stretched segments take their places in the plate polygon."""
     sim, out, _ = coarse_run
@@ -220,20 +221,22 @@ def test_command_line_short_run(tmp_path):
     meta = json.loads((out / "checkpoint.json").read_text())
     assert meta["config"]["nodes"] == 400
     assert (out / "plate.pvd").exists() and (out / "fig6.png").exists()
-    assert meta["config"]["segments"] is True
-    assert SinkingPlate.restart(out).lm.triangulation.segment_keys.size > 0
-
-
-def test_command_line_without_segments(tmp_path):
-    out = tmp_path / "plain"
-    assert main(["sinking-plate", "-o", str(out), "--nodes", "300", "--end-time", "2",
-                 "--max-dt", "2", "--quiet", "--no-segments"]) == 0
-    meta = json.loads((out / "checkpoint.json").read_text())
     assert meta["config"]["segments"] is False
     sim = SinkingPlate.restart(out)
     assert sim.lm.triangulation.segment_keys.size == 0
-    # the node set of the runs before segments: no line of nodes on the interface
+    # the default node set: no line of nodes on the interface
     assert not np.any(sim.lm.node_fields["z0"] == sim.cfg.interface_z)
+
+
+def test_command_line_with_segments(tmp_path):
+    out = tmp_path / "segments"
+    assert main(["sinking-plate", "-o", str(out), "--nodes", "300", "--end-time", "2",
+                 "--max-dt", "2", "--quiet", "--segments"]) == 0
+    meta = json.loads((out / "checkpoint.json").read_text())
+    assert meta["config"]["segments"] is True
+    sim = SinkingPlate.restart(out)
+    assert sim.lm.triangulation.segment_keys.size > 0
+    assert np.count_nonzero(sim.lm.node_fields["z0"] == sim.cfg.interface_z) > 100
 
 
 def test_lagrangian_fem_inverts_where_nem_does_not(tmp_path):

@@ -18,10 +18,9 @@ nodes joined as segments, so the natural-neighbour velocity may kink across it
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from skfem_nem import delaunay_mesh
-from skfem_nem.geometry.nodesets import box_nodes, polyline_nodes
+from skfem_nem.geometry.nodesets import box_nodes, line_segments, polyline_nodes
 from skfem_nem.models.stokes import solve_stokes, stokes_spaces
 
 L = 512e3          # m
@@ -52,9 +51,7 @@ def make_mesh(n, seed=0, constrained=True):
     p = nodes(n, seed)
     if not constrained:
         return delaunay_mesh(p)
-    dist, idx = cKDTree(p).query(outline(n))
-    assert dist.max() < 1e-9        # the outline nodes are kept (to rounding)
-    return delaunay_mesh(p, segments={"block": np.c_[idx, np.roll(idx, -1)]})
+    return delaunay_mesh(p, segments={"block": line_segments(p, outline(n), closed=True)})
 
 
 def inside(x):

@@ -257,3 +257,15 @@ def test_plain_mesh_with_the_same_triangles_stays_plain():
     derived = mc.with_boundaries({"left": lambda x: x[0] < .1}).with_subdomains(
         {"half": lambda x: x[0] < .5})
     assert triangulation_of(derived) is triangulation_of(mc)
+
+
+def test_line_segments_of_box_nodes():
+    from skfem_nem.geometry.nodesets import box_nodes, line_segments, polyline_nodes
+    ring = polyline_nodes([[.3, .3], [.7, .3], [.7, .7], [.3, .7]], 0.05, closed=True)
+    p = box_nodes(300, lines=[np.r_[ring, ring[:1]]], seed=2)
+    seg = line_segments(p, ring, closed=True)
+    assert seg.shape == (ring.shape[0], 2) and np.allclose(p[seg[:, 0]], ring, atol=1e-12)
+    mesh = delaunay_mesh(p, segments={"ring": seg})
+    assert mesh.boundaries["ring"].size == ring.shape[0]
+    with pytest.raises(ValueError, match=r"line point 1 at \[0.5, 0.51\] is not a node"):
+        line_segments(p, [[.3, .3], [.5, .51]])

@@ -10,7 +10,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["box_nodes", "polyline_nodes", "remove_close"]
+__all__ = ["box_nodes", "line_segments", "polyline_nodes", "remove_close"]
 
 # random nodes closer than this fraction of the local spacing to a side or a
 # line node are dropped (near-duplicates make slivers)
@@ -123,6 +123,30 @@ def box_nodes(n: int, width: float = 1.0, height: float = 1.0,
     if len(lines):
         inner = _clear_lines(inner, lines, h, density)
     return np.concatenate([fixed, inner])
+
+
+def line_segments(nodes, line, closed: bool = False) -> np.ndarray:
+    """The polyline ``line`` (k, 2), whose points are nodes of ``nodes`` (n, 2) (as
+    :func:`box_nodes` keeps the nodes of its ``lines``, rounded to ``MERGE_DECIMALS``
+    decimals), as (k - 1, 2) segments of node indices (k with ``closed``), for
+    ``delaunay_mesh(nodes, segments=...)``. Raises ``ValueError`` naming the first
+    point of the line that is no node to that rounding.
+
+    >>> import numpy as np
+    >>> line = np.array([[0.5, 0.0], [0.5, 0.5], [0.5, 1.0]])
+    >>> p = box_nodes(50, lines=[line], seed=1)
+    >>> segs = line_segments(p, line)
+    >>> segs.shape, bool((p[segs[:, 0], 0] == 0.5).all())
+    ((2, 2), True)
+    """
+    from scipy.spatial import cKDTree
+    line = np.asarray(line, dtype=np.float64).reshape(-1, 2)
+    dist, idx = cKDTree(np.asarray(nodes, dtype=np.float64)).query(line)
+    bad = np.flatnonzero(dist > 10.0 ** -MERGE_DECIMALS)
+    if bad.size:
+        raise ValueError(f"line point {bad[0]} at {line[bad[0]].tolist()} is not a node")
+    nxt = np.roll(idx, -1) if closed else idx[1:]
+    return np.c_[idx[:nxt.size], nxt]
 
 
 def _check_box(n, width, height) -> None:

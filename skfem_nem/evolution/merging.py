@@ -27,13 +27,13 @@ from ..geometry.predicates import orient2d
 __all__ = ["NodeRemoval", "conservative_fill", "CLUSTER_FRACTION", "FOLD_ANGLE"]
 
 #: a node whose spacing (square root of its share of the triangle areas) fell below this
-#: fraction of its reference spacing (the square root of its reference area, the one
-#: injection compares with) is removed. Injection adds a node where an area doubled
-#: (spacing x 1.4); nodes are removed only where the flow has squeezed them 5-fold in
-#: length (25-fold in area), far from the injection threshold, so the two rules never
-#: undo each other's work, while the clusters that set the time step (spacing a hundredth
-#: of the reference) go. The same fraction of a segment's reference length marks a segment
-#: node whose two segments were both squeezed short.
+#: fraction of its reference spacing (the square root of the largest reference area, the
+#: one injection compares with, of the node and its neighbours) is removed. Injection adds
+#: a node where an area doubled (spacing x 1.4); nodes are removed only where the flow has
+#: squeezed them 5-fold in length (25-fold in area), far from the injection threshold, so
+#: the two rules never undo each other's work, while the clusters that set the time step
+#: (spacing a hundredth of the reference) go. The same fraction of a segment's reference
+#: length marks a segment node whose two segments were both squeezed short.
 CLUSTER_FRACTION = 0.2
 #: an outline (segment polyline) node where its two segments meet at an angle below this
 #: (degrees) is a fold about to close: merging its segments blunts the fold before the
@@ -359,10 +359,17 @@ class NodeRemoval:
         np.add.at(share, T.ravel(), np.repeat(area / 3.0, 3))
         free = ~self._on_wall.any(axis=1)
         free[tri.hull_edges.ravel()] = False
+        # the reference: the largest reference area of the node and its neighbours (a
+        # node injected into a crowded place got a small one: a cluster of them is
+        # compared with the density the place had)
+        ref = self._ref_area.copy()
+        E = tri.edges
+        np.maximum.at(ref, E[:, 0], self._ref_area[E[:, 1]])
+        np.maximum.at(ref, E[:, 1], self._ref_area[E[:, 0]])
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.sqrt(share / self._ref_area)
+            ratio = np.sqrt(share / ref)
         on_seg = self.segment_nodes()
-        crowded = np.flatnonzero(free & (self._ref_area > 0) & (ratio < fraction))
+        crowded = np.flatnonzero(free & (ref > 0) & (ratio < fraction))
         crowded = crowded[np.lexsort((ratio[crowded], on_seg[crowded]))]
         seg, src = tri.segments, tri.segment_source
         count = np.bincount(seg.ravel(), minlength=P.shape[0])

@@ -110,8 +110,9 @@ class PlateConfig:
     #: write a checkpoint every this many steps
     checkpoint_every: int = 10
     #: keep the plate outline and the layer interface as segments (constrained mesh); off
-    #: by default: the full run then stops where a horn of the outline folds (t = 762),
-    #: which needs node merging there (docs/sinking_plate.md, "Segments")
+    #: by default: alone, the full run stops where a horn of the outline folds (t = 762);
+    #: with ``merge`` it reaches t = 1000 but the plate area drifts by 0.6%
+    #: (docs/sinking_plate.md, "Segments")
     segments: bool = False
     #: remove nodes the flow crowds together (spacing below a fifth of their reference) and
     #: merge the segments at folds of the outline (docs/evolution.md, "Node removal")

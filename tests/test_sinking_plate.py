@@ -239,6 +239,26 @@ def test_command_line_with_segments(tmp_path):
     assert np.count_nonzero(sim.lm.node_fields["z0"] == sim.cfg.interface_z) > 100
 
 
+def test_command_line_with_segments_and_merging(tmp_path):
+    out = tmp_path / "merge"
+    assert main(["sinking-plate", "-o", str(out), "--nodes", "300", "--end-time", "6",
+                 "--max-dt", "2", "--quiet", "--segments", "--merge"]) == 0
+    meta = json.loads((out / "checkpoint.json").read_text())
+    assert meta["config"]["merge"] is True
+    d = read_csv_columns(out / "diagnostics.csv")
+    sim = SinkingPlate.restart(out)
+    n0 = initial_nodes(sim.cfg)[0].shape[0]
+    # every node removed or merged is counted
+    assert d["nodes"][-1] == n0 + d["injected"].sum() - d["removed"].sum() - d["merged"].sum()
+    assert d["removed"].sum() > 0
+    assert sim.lm.nodes.shape[0] == d["nodes"][-1]
+    # the outline is still a closed chain of segments
+    o = sim.outline
+    keys = (np.minimum(o, np.roll(o, -1)) << 32) | np.maximum(o, np.roll(o, -1))
+    assert np.isin(keys, sim.lm.triangulation.segment_keys).all()
+    assert d["outline_crossings"].max() == 0
+
+
 def test_lagrangian_fem_inverts_where_nem_does_not(tmp_path):
     import sys
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))

@@ -42,6 +42,7 @@ from ..coordinates import sibson_coordinates
 from ..geometry.predicates import orient2d
 from ..geometry.meshes import triangulation_mesh
 from ..geometry.triangulation import Triangulation
+from .merging import NodeRemoval
 from .remap import child_values, remap_average, remap_conservative
 from .stepping import LagrangianStep, check_node_fields
 
@@ -95,7 +96,7 @@ def _cross(u, v):
 # ---------------------------------------------------------------------------
 
 
-class LagrangianMesh(LagrangianStep):
+class LagrangianMesh(NodeRemoval, LagrangianStep):
     """A 2D node set carried by a flow, kept Delaunay by local flips.
 
     Parameters
@@ -187,6 +188,7 @@ class LagrangianMesh(LagrangianStep):
                                                   if segments is not None else 0)
         self.time = 0.0
         self.step = 0
+        self.node_map = np.arange(n)
         self.history = []
         self._version = 0
         self._cache = {}
@@ -298,7 +300,7 @@ class LagrangianMesh(LagrangianStep):
     # -- advection -------------------------------------------------------------
     def advance(self, velocity: Callable[[np.ndarray], np.ndarray], dt: float,
                 tol: float = 1e-10, maxiter: int = 10, max_substeps: int = 8,
-                inject: Optional[float] = None) -> dict:
+                inject: Optional[float] = None, merge: bool = False) -> dict:
         """Move the nodes by one time step and repair the triangulation.
 
         Parameters
@@ -318,15 +320,22 @@ class LagrangianMesh(LagrangianStep):
         inject
             If given, inject nodes where a node's area has grown past
             ``inject`` times its initial area (see :meth:`inject_nodes`).
+        merge
+            If True, then remove crowded nodes and merge folded segments
+            (:meth:`merge_nodes`; ``removed`` and ``merged`` in the report, the
+            map of this step's node indices in :attr:`node_map`).
 
         Returns the step's report (also appended to ``history``). The
         arguments are checked before anything moves, and on any error (or
         interruption) in any stage -- velocity, move, relocation, injection --
         the mesh, its fields, clock and history are left exactly as they were.
         """
-        return self.step_transaction(velocity, dt, tol, maxiter, max_substeps, inject)
+        if not isinstance(merge, (bool, np.bool_)):
+            raise ValueError(f"merge must be True or False, got {merge!r}")
+        return self.step_transaction(velocity, dt, tol, maxiter, max_substeps, inject,
+                                     merge=bool(merge))
 
-    def _repair(self, x0, x, dt, max_substeps, inject):
+    def _repair(self, x0, x, dt, max_substeps, inject, merge=False):
         """Flips (and, where triangles would invert, substeps and relocation), then
         the clock, injection and the locality counts of the report."""
         self._touched = []
@@ -339,6 +348,10 @@ class LagrangianMesh(LagrangianStep):
         split = self.split_segments(inject) if inject else 0
         report["injected"] += split
         report["segments_split"] = split
+        n = self.triangulation.npoints
+        merged = self.merge_nodes() if merge else {"removed": 0, "merged": 0,
+                                                   "node_map": np.arange(n)}
+        report.update(removed=merged["removed"], merged=merged["merged"])
         if self.triangulation.segment_keys.size:
             self._check_segments()
         report["min_angle"] = self.min_angle()
@@ -351,6 +364,7 @@ class LagrangianMesh(LagrangianStep):
         nb = self.triangulation.neighbours[changed].ravel()
         report["triangles_changed"] = int(changed.size)
         report["stencils_affected"] = int(np.union1d(changed, nb[nb >= 0]).size)
+        self.node_map = merged["node_map"]
         return report
 
     def _state(self):
@@ -692,8 +706,11 @@ class LagrangianMesh(LagrangianStep):
                 if path is not None:
                     out += path[1:]
                     break
-            else:
-                raise ValueError(f"nodes {a} and {b} are not joined by segments")
+            else:  # pieces of other sources since a merge (merge_nodes)
+                path = self.walk_segments(a, b, set(nodes))
+                if path is None:
+                    raise ValueError(f"nodes {a} and {b} are not joined by segments")
+                out += path[1:]
         return np.array(out[:-1] if closed else out, dtype=np.int64)
 
     @staticmethod
@@ -762,6 +779,7 @@ class LagrangianMesh(LagrangianStep):
             self.time = meta["time"]
             self.step = meta["step"]
             self.history = meta["history"]
+            self.node_map = np.arange(tri.npoints)
             self._version = 0
             self._cache = {}
             self._touched = []

@@ -118,8 +118,10 @@ class LagrangianStep:
     def _velocity(self, velocity, x):
         return evaluate_velocity(velocity, x, self._on_wall if self.walls == "box" else None)
 
-    def step_transaction(self, velocity, dt, tol, maxiter, max_substeps=1, inject=None) -> dict:
-        """One step as a transaction; returns its report (appended to ``history``)."""
+    def step_transaction(self, velocity, dt, tol, maxiter, max_substeps=1, inject=None,
+                         **options) -> dict:
+        """One step as a transaction; returns its report (appended to ``history``).
+        ``options``: further keywords of the dimension's repair."""
         check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject)
         state = self._state()
         try:
@@ -130,7 +132,7 @@ class LagrangianStep:
                 x = keep_in_box(x, x0, self._on_wall, self._box)
             report = {"step": self.step + 1, "time": self.time + dt, "dt": dt,
                       "iterations": it, "converged": converged}
-            report.update(self._repair(x0, x, dt, max_substeps, inject))
+            report.update(self._repair(x0, x, dt, max_substeps, inject, **options))
         except BaseException:
             self._restore(state)
             raise

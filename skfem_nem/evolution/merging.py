@@ -1,0 +1,390 @@
+"""Node removal and merging for the Lagrangian mesh: where the flow converges, nodes crowd.
+
+Injection adds nodes where the mesh thins out; where the flow converges (a stagnation point,
+the tip of a horn drawn out of a body) nodes come ever closer, and with them the time step
+that a CFL condition on the node spacing allows, and an outline folds onto itself. The
+mixin :class:`NodeRemoval` of :class:`~skfem_nem.evolution.lagrangian.LagrangianMesh`
+takes nodes out for good:
+
+* :meth:`NodeRemoval.remove_nodes` removes interior nodes: each vertex is taken out of the
+  triangulation, its star refilled with Delaunay triangles, the integration-point fields
+  of the refilled star are the L2 projection of the old piecewise linear fields onto
+  linear fields per new triangle (exact intersections of old and new triangles, so the
+  integrals of every component are conserved to round-off and linear fields are kept);
+  a node that ends exactly two segments (a, v), (v, b) has them merged into (a, b) if no
+  other node lies in or on the triangle (a, v, b) (then a-b crosses no segment and a
+  polygon stays simple), and every per-node array is compacted (indices stay 0..n-1).
+* :meth:`NodeRemoval.merge_nodes` is the policy ``advance(..., merge=True)`` runs after
+  injection: crowded nodes and folds of segment polylines are removed.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..geometry.predicates import orient2d
+
+__all__ = ["NodeRemoval", "conservative_fill", "CLUSTER_FRACTION", "FOLD_ANGLE"]
+
+#: a node whose spacing (square root of its share of the triangle areas) fell below this
+#: fraction of its reference spacing (the square root of the largest reference area, the
+#: one injection compares with, of the node and its neighbours) is removed. Injection adds
+#: a node where an area doubled (spacing x 1.4); nodes are removed only where the flow has
+#: squeezed them 5-fold in length (25-fold in area), far from the injection threshold, so
+#: the two rules never undo each other's work, while the clusters that set the time step
+#: (spacing a hundredth of the reference) go. The same fraction of a segment's reference
+#: length marks a segment node whose two segments were both squeezed short.
+CLUSTER_FRACTION = 0.2
+#: an outline (segment polyline) node where its two segments meet at an angle below this
+#: (degrees) is a fold about to close: merging its segments blunts the fold before the
+#: outline can pass through itself within a step.
+FOLD_ANGLE = 20.0
+
+
+# ---------------------------------------------------------------------------
+# kernels
+# ---------------------------------------------------------------------------
+
+@njit(cache=True)
+def _clip_half(src, ns, px, py, qx, qy, dst):
+    """Sutherland-Hodgman: the part of the convex polygon src[:ns] left of p->q."""
+    m = 0
+    for i in range(ns):
+        x1, y1 = src[i, 0], src[i, 1]
+        x2, y2 = src[(i + 1) % ns, 0], src[(i + 1) % ns, 1]
+        s1 = (qx - px) * (y1 - py) - (qy - py) * (x1 - px)
+        s2 = (qx - px) * (y2 - py) - (qy - py) * (x2 - px)
+        if s1 >= 0.0:
+            dst[m, 0], dst[m, 1] = x1, y1
+            m += 1
+        if (s1 > 0.0 and s2 < 0.0) or (s1 < 0.0 and s2 > 0.0):
+            t = s1 / (s1 - s2)
+            dst[m, 0], dst[m, 1] = x1 + t * (x2 - x1), y1 + t * (y2 - y1)
+            m += 1
+    return m
+
+
+@njit(cache=True)
+def _bary(x, y, X):
+    ax, ay = X[0, 0], X[0, 1]
+    d = (X[1, 0] - ax) * (X[2, 1] - ay) - (X[1, 1] - ay) * (X[2, 0] - ax)
+    l1 = ((x - ax) * (X[2, 1] - ay) - (y - ay) * (X[2, 0] - ax)) / d
+    l2 = ((X[1, 0] - ax) * (y - ay) - (X[1, 1] - ay) * (x - ax)) / d
+    return 1.0 - l1 - l2, l1, l2
+
+
+@njit(cache=True)
+def _piece_moments(poly, ns, Xo, Vo, Xn, rhs):
+    """Add the integrals over the polygon poly[:ns] (inside old triangle Xo with vertex
+    values Vo (3, c)) of the old linear field times the new triangle's barycentrics."""
+    for f in range(1, ns - 1):
+        x0, y0 = poly[0, 0], poly[0, 1]
+        x1, y1 = poly[f, 0], poly[f, 1]
+        x2, y2 = poly[f + 1, 0], poly[f + 1, 1]
+        sa = 0.5 * ((x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0))
+        for e in range(3):  # edge midpoints: exact for quadratics
+            if e == 0:
+                mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+            elif e == 1:
+                mx, my = 0.5 * (x1 + x2), 0.5 * (y1 + y2)
+            else:
+                mx, my = 0.5 * (x2 + x0), 0.5 * (y2 + y0)
+            o0, o1, o2 = _bary(mx, my, Xo)
+            n0, n1, n2 = _bary(mx, my, Xn)
+            for c in range(Vo.shape[1]):
+                fv = o0 * Vo[0, c] + o1 * Vo[1, c] + o2 * Vo[2, c]
+                rhs[0, c] += sa / 3.0 * n0 * fv
+                rhs[1, c] += sa / 3.0 * n1 * fv
+                rhs[2, c] += sa / 3.0 * n2 * fv
+
+
+@njit(cache=True)
+def conservative_fill(Xo, Vo, Xn):
+    """Values at the 3-point rule's points of the new triangles ``Xn`` (k, 3, 2): the L2
+    projection onto linear fields of the piecewise linear field given by the old
+    triangles ``Xo`` (m, 3, 2) (tiling the same region) with vertex values ``Vo``
+    (m, 3, c). Conserves the integral of every component; keeps linear fields."""
+    k, c = Xn.shape[0], Vo.shape[2]
+    out = np.zeros((k, 3, c))
+    a = np.empty((12, 2))
+    b = np.empty((12, 2))
+    for j in range(k):
+        Y = Xn[j]
+        area = 0.5 * ((Y[1, 0] - Y[0, 0]) * (Y[2, 1] - Y[0, 1])
+                      - (Y[1, 1] - Y[0, 1]) * (Y[2, 0] - Y[0, 0]))
+        rhs = np.zeros((3, c))
+        for i in range(Xo.shape[0]):
+            a[:3] = Y
+            ns = 3
+            for e in range(3):
+                p, q = Xo[i, e], Xo[i, (e + 1) % 3]
+                ns = _clip_half(a, ns, p[0], p[1], q[0], q[1], b)
+                a[:ns] = b[:ns]
+                if ns < 3:
+                    break
+            if ns >= 3:
+                _piece_moments(a, ns, Xo[i], Vo[i], Y, rhs)
+        for m in range(c):
+            tot = rhs[0, m] + rhs[1, m] + rhs[2, m]
+            nv0 = 12.0 / area * (rhs[0, m] - tot / 4.0)
+            nv1 = 12.0 / area * (rhs[1, m] - tot / 4.0)
+            nv2 = 12.0 / area * (rhs[2, m] - tot / 4.0)
+            s3 = (nv0 + nv1 + nv2) / 6.0
+            out[j, 0, m] = 0.5 * nv0 + s3
+            out[j, 1, m] = 0.5 * nv1 + s3
+            out[j, 2, m] = 0.5 * nv2 + s3
+    return out
+
+
+@njit(cache=True)
+def _occupied(P, alive, a, v, b):
+    """True if a live node other than a, v, b lies in or on the triangle (a, v, b)."""
+    o = orient2d(P[a, 0], P[a, 1], P[v, 0], P[v, 1], P[b, 0], P[b, 1])
+    for i in range(P.shape[0]):
+        if not alive[i] or i == a or i == v or i == b:
+            continue
+        s1 = orient2d(P[a, 0], P[a, 1], P[v, 0], P[v, 1], P[i, 0], P[i, 1])
+        s2 = orient2d(P[v, 0], P[v, 1], P[b, 0], P[b, 1], P[i, 0], P[i, 1])
+        s3 = orient2d(P[b, 0], P[b, 1], P[a, 0], P[a, 1], P[i, 0], P[i, 1])
+        if o > 0.0 and s1 >= 0.0 and s2 >= 0.0 and s3 >= 0.0:
+            return True
+        if o < 0.0 and s1 <= 0.0 and s2 <= 0.0 and s3 <= 0.0:
+            return True
+        if o == 0.0 and s1 == 0.0 and s2 == 0.0 and \
+                min(P[a, 0], P[b, 0]) <= P[i, 0] <= max(P[a, 0], P[b, 0]) and \
+                min(P[a, 1], P[b, 1]) <= P[i, 1] <= max(P[a, 1], P[b, 1]):
+            return True
+    return False
+
+
+# ---------------------------------------------------------------------------
+# the mixin
+# ---------------------------------------------------------------------------
+
+class NodeRemoval:
+    """Node removal and segment merging for
+    :class:`~skfem_nem.evolution.lagrangian.LagrangianMesh` (which provides the state,
+    the snapshot of linear ip fields and the segment recovery used here)."""
+
+    def remove_nodes(self, idx) -> np.ndarray:
+        """Take the interior nodes ``idx`` out of the mesh for good (see the module docs):
+        stars refilled with (constrained) Delaunay triangles, ip fields remapped
+        conservatively, a node ending two segments has them merged into one, and every
+        per-node array compacted. Returns the map old -> new node index (-1: removed).
+        ``ValueError`` for a wall or hull node, or a segment node whose segments cannot
+        be merged; on any error the mesh is left exactly as it was."""
+        idx = np.unique(np.asarray(idx, dtype=np.int64).reshape(-1))
+        n = self.triangulation.npoints
+        if idx.size and (idx[0] < 0 or idx[-1] >= n):
+            raise ValueError(f"node indices must lie in [0, {n}), got {idx.tolist()}")
+        state = self._state()
+        try:
+            alive = np.ones(n, dtype=bool)
+            for v in idx.tolist():
+                if self._on_wall[v].any():
+                    raise ValueError(f"node {v} is on a wall and cannot be removed")
+                merge = self.segment_merge(v, alive)
+                if merge is False:
+                    raise ValueError(f"node {v} ends segments that cannot be merged into one "
+                                     f"(not exactly two, or another node in their triangle)")
+                self._take_out(v, merge)
+                alive[v] = False
+            self.triangulation.make_delaunay(on_flips=self._on_flips)
+            new = self._compact()
+        except BaseException:
+            self._restore(state)
+            raise
+        self._invalidate()
+        return new
+
+    def segment_merge(self, v: int, alive=None):
+        """How node v's segments would merge if it were removed: None if v ends no
+        segment; ``(a, b, source)`` if it ends exactly two, (a, v) and (v, b), that can
+        become the segment (a, b) (of the source of (a, v)): no segment a-b yet and no
+        other node (``alive``: the nodes still in the mesh) in or on the triangle
+        (a, v, b); False otherwise."""
+        tri = self.triangulation
+        seg = tri.segments
+        rows = np.flatnonzero((seg == v).any(axis=1))
+        if not rows.size:
+            return None
+        if rows.size != 2:
+            return False
+        a, b = (int(seg[r, 0] if seg[r, 1] == v else seg[r, 1]) for r in rows)
+        key = (min(a, b) << 32) | max(a, b)
+        if np.isin(key, tri.segment_keys):
+            return False
+        alive = np.ones(tri.npoints, dtype=bool) if alive is None else alive
+        if _occupied(tri.nodes, alive, a, v, b):
+            return False
+        return a, b, int(tri.segment_source[rows[0]])
+
+    def _take_out(self, v, merge):
+        """Remove vertex v from the triangulation (it stays a node until compaction),
+        refill its star conservatively, and merge its segments (``merge``)."""
+        tri = self.triangulation
+        try:
+            star = tri.star(v)
+        except ValueError:
+            raise ValueError(f"node {v} is on the hull and cannot be removed") from None
+        X, vals = self._snapshot(star)
+        slots, moves = tri.remove_vertex(v, star)
+        for k, F in self.ip_fields.items():
+            for src, dst in moves:
+                F[dst] = F[src]
+            self.ip_fields[k] = np.ascontiguousarray(F[:tri.ntriangles])
+        self._refill(X, vals, slots)
+        self._touched.append(np.asarray(slots, dtype=np.int64))
+        if merge is None:
+            return
+        a, b, s = merge
+        seg, src = tri.segments, tri.segment_source
+        keep = ~(seg == v).any(axis=1)
+        seg = np.r_[seg[keep], [[min(a, b), max(a, b)]]]
+        src = np.r_[src[keep], s]
+        keys = (seg[:, 0] << 32) | seg[:, 1]
+        order = np.argsort(keys)
+        snap = tri.snapshot()
+        snap["segment_keys"], snap["segment_source"] = keys[order], src[order]
+        tri.restore(snap)
+        T0 = tri.triangles.copy()
+        tri.recover_segments()
+        changed = np.flatnonzero((tri.triangles != T0).any(axis=1))
+        if changed.size:
+            X, vals = self._snapshot(changed, T0)
+            self._refill(X, vals, changed)
+            self._touched.append(changed)
+
+    def _refill(self, X, vals, tris):
+        """ip fields of the triangles ``tris`` from the old triangles X (with linear
+        fields ``vals``, vertex values) that tile the same region: conservative."""
+        Y = self.nodes[self.triangles[tris]]
+        for k, F in self.ip_fields.items():
+            flat = F.reshape(F.shape[0], 3, -1).copy()
+            flat[tris] = conservative_fill(X, np.ascontiguousarray(vals[k]), Y)
+            self.ip_fields[k] = flat.reshape(F.shape)
+
+    def _compact(self):
+        """Drop the nodes in no triangle from the triangulation and every per-node array;
+        returns the map old -> new index (-1 for a dropped node)."""
+        tri = self.triangulation
+        used = np.zeros(tri.npoints, dtype=bool)
+        used[tri.triangles.ravel()] = True
+        new = np.full(tri.npoints, -1, dtype=np.int64)
+        new[used] = np.arange(int(used.sum()))
+        if used.all():
+            return new
+        P = np.ascontiguousarray(tri.nodes[used])
+        P.flags.writeable = False
+        seg = new[tri.segments]  # the map is increasing: the keys stay sorted
+        tri.restore({"nodes": P, "triangles": new[tri.triangles], "neighbours": tri.neighbours,
+                     "segment_keys": (seg[:, 0] << 32) | seg[:, 1],
+                     "segment_source": tri.segment_source.copy()})
+        self.node_fields = {k: f[used].copy() for k, f in self.node_fields.items()}
+        self._on_wall = self._on_wall[used].copy()
+        self._ref_area = self._ref_area[used].copy()
+        return new
+
+    def walk_segments(self, a: int, b: int, listed=()):
+        """The path of nodes from a to b along segments whatever their sources, through
+        nodes that end exactly two segments and are not ``listed``, or None: how
+        :meth:`polyline` joins two nodes after a merge joined pieces of two given
+        segments (a node inserted on the one next to the merged node ends up between)."""
+        nb = {}
+        for i, j in self.triangulation.segments.tolist():
+            nb.setdefault(i, []).append(j)
+            nb.setdefault(j, []).append(i)
+        for first in nb.get(a, []):
+            path = [a, first]
+            while path[-1] != b and path[-1] not in listed and len(nb[path[-1]]) == 2 \
+                    and len(path) <= len(nb):
+                path.append(next(w for w in nb[path[-1]] if w != path[-2]))
+            if path[-1] == b:
+                return path
+        return None
+
+    # -- the policy ----------------------------------------------------------------
+    def merge_nodes(self, fraction: float = CLUSTER_FRACTION,
+                    fold_angle: float = FOLD_ANGLE) -> dict:
+        """Remove crowded nodes and folds (what ``advance(..., merge=True)`` runs after
+        injection): a node off the walls and the hull whose spacing (square root of its
+        share of the triangle areas) fell below ``fraction`` of its reference spacing;
+        and a node ending two segments that meet at less than ``fold_angle`` degrees or
+        are both shorter than ``fraction`` of their reference length, by merging them.
+        Nodes off segments go first, the most crowded first; no two neighbours go in
+        one call (a cluster keeps one node); a segment node goes only if its segments
+        can merge (:meth:`segment_merge`). Returns ``{"removed": nodes off segments
+        removed, "merged": segment nodes removed, "node_map": old -> new index}``."""
+        order = self._merge_candidates(fraction, fold_angle)
+        if not order.size:
+            return {"removed": 0, "merged": 0, "node_map": np.arange(self.triangulation.npoints)}
+        state = self._state()
+        try:
+            return self._merge(order)
+        except BaseException:
+            self._restore(state)
+            raise
+
+    def _merge(self, order):
+        tri = self.triangulation
+        n = tri.npoints
+        E = tri.edges
+        blocked = np.zeros(n, dtype=bool)
+        alive = np.ones(n, dtype=bool)
+        removed = merged = 0
+        for v in order.tolist():
+            if blocked[v]:
+                continue
+            merge = self.segment_merge(v, alive)
+            if merge is False:
+                continue
+            self._take_out(v, merge)
+            alive[v] = False
+            blocked[E[(E == v).any(axis=1)].ravel()] = True
+            removed += merge is None
+            merged += merge is not None
+        tri.make_delaunay(on_flips=self._on_flips)
+        new = self._compact()
+        self._invalidate()
+        return {"removed": removed, "merged": merged, "node_map": new}
+
+    def _merge_candidates(self, fraction, fold_angle):
+        """Nodes to try, in order: crowded nodes off segments, crowded segment nodes
+        (each by spacing ratio), then folds (by angle)."""
+        tri = self.triangulation
+        P, T = self.nodes, self.triangles
+        area = 0.5 * np.abs((P[T[:, 1], 0] - P[T[:, 0], 0]) * (P[T[:, 2], 1] - P[T[:, 0], 1])
+                            - (P[T[:, 1], 1] - P[T[:, 0], 1]) * (P[T[:, 2], 0] - P[T[:, 0], 0]))
+        share = np.zeros(P.shape[0])
+        np.add.at(share, T.ravel(), np.repeat(area / 3.0, 3))
+        free = ~self._on_wall.any(axis=1)
+        free[tri.hull_edges.ravel()] = False
+        # the reference: the largest reference area of the node and its neighbours (a
+        # node injected into a crowded place got a small one: a cluster of them is
+        # compared with the density the place had)
+        ref = self._ref_area.copy()
+        E = tri.edges
+        np.maximum.at(ref, E[:, 0], self._ref_area[E[:, 1]])
+        np.maximum.at(ref, E[:, 1], self._ref_area[E[:, 0]])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.sqrt(share / ref)
+        on_seg = self.segment_nodes()
+        crowded = np.flatnonzero(free & (ref > 0) & (ratio < fraction))
+        crowded = crowded[np.lexsort((ratio[crowded], on_seg[crowded]))]
+        seg, src = tri.segments, tri.segment_source
+        count = np.bincount(seg.ravel(), minlength=P.shape[0])
+        ends = np.flatnonzero(free & (count == 2))
+        if not ends.size:
+            return crowded
+        length = np.hypot(*(P[seg[:, 0]] - P[seg[:, 1]]).T)
+        short = length < fraction * self._segment_ref[src]
+        fold = []
+        for v in ends.tolist():
+            rows = np.flatnonzero((seg == v).any(axis=1))
+            u = P[seg[rows].ravel()[seg[rows].ravel() != v]] - P[v]
+            cos = (u[0] @ u[1]) / (np.hypot(*u[0]) * np.hypot(*u[1]))
+            ang = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+            if ang < fold_angle or short[rows].all():
+                fold.append((ang, v))
+        fold = [v for _, v in sorted(fold) if v not in set(crowded.tolist())]
+        return np.r_[crowded, np.array(fold, dtype=np.int64)]

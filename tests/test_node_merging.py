@@ -1,0 +1,177 @@
+"""Node removal and merging: stars refilled with conservative remap, segments merged where
+a node ending two of them goes, indices compacted; the merge policy in converging flow; a
+failing removal leaves everything as it was."""
+import numpy as np
+import pytest
+
+from test_evolution_segments import (assert_same_state, check_chain, check_constrained,
+                                     outlined_square, saved_state)
+from skfem_nem import LagrangianMesh
+from skfem_nem.evolution.merging import conservative_fill
+
+A3 = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+
+
+def linear(lm):
+    """A linear field with two components at the ip points of the current mesh."""
+    X = np.einsum("kj,tjd->tkd", A3, lm.nodes[lm.triangles])
+    return np.stack([1 + 2 * X[..., 0] - 3 * X[..., 1], 0.5 * X[..., 0] * 0 + X[..., 1]], -1)
+
+
+def mesh_with_fields(seed=0):
+    nodes, segs, poly, line = outlined_square(300, seed)
+    lm = LagrangianMesh(nodes, segments=segs, node_fields={"x": nodes})
+    lm.ip_fields["lin"] = linear(lm)
+    lm.ip_fields["rand"] = np.random.default_rng(seed).normal(size=(lm.triangles.shape[0], 3, 2))
+    return lm, poly, line
+
+
+def interior_free_nodes(lm, k, seed):
+    free = ~lm.segment_nodes() & ~np.isin(np.arange(lm.nodes.shape[0]),
+                                          lm.triangulation.hull_edges.ravel())
+    return np.random.default_rng(seed).choice(np.flatnonzero(free), k, replace=False)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_remove_nodes_keeps_a_valid_mesh_conserves_and_compacts(seed):
+    lm, poly, line = mesh_with_fields(seed)
+    n0 = lm.nodes.shape[0]
+    x_before = lm.nodes.copy()
+    I_lin, I_rand = lm.ip_integral("lin"), lm.ip_integral("rand")
+    gone = interior_free_nodes(lm, 25, seed)
+    new = lm.remove_nodes(gone)
+    check_constrained(lm)
+    assert lm.nodes.shape[0] == n0 - 25 == lm.node_fields["x"].shape[0]
+    assert (new[gone] == -1).all()
+    kept = np.flatnonzero(new >= 0)
+    np.testing.assert_array_equal(new[kept], np.arange(n0 - 25))
+    np.testing.assert_array_equal(lm.nodes, x_before[kept])
+    np.testing.assert_array_equal(lm.node_fields["x"], x_before[kept])
+    # the integrals to round-off, any field; a linear field kept exactly
+    np.testing.assert_allclose(lm.ip_integral("lin"), I_lin, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(lm.ip_integral("rand"), I_rand, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(lm.ip_fields["lin"], linear(lm), rtol=0, atol=1e-12)
+    # the segments follow the renumbering
+    check_chain(lm, new[poly], closed=True)
+    check_chain(lm, new[line], closed=False)
+
+
+def test_conservative_fill_of_one_triangle_split_differently():
+    """Two old triangles of a square, refilled by the other diagonal: integrals kept."""
+    sq = np.array([[0., 0.], [1., 0.], [1., 1.], [0., 1.]])
+    Xo = sq[[[0, 1, 2], [0, 2, 3]]]
+    Xn = sq[[[0, 1, 3], [1, 2, 3]]]
+    Vo = np.random.default_rng(3).normal(size=(2, 3, 4))
+    out = conservative_fill(Xo, Vo, Xn)
+    area = np.array([0.5, 0.5])
+    before = (area[:, None] * Vo.mean(axis=1)).sum(0)   # vertex mean = integral / area
+    after = (area[:, None] * out.mean(axis=1)).sum(0)   # 3-point rule
+    np.testing.assert_allclose(after, before, rtol=0, atol=1e-14)
+
+
+def test_removing_a_polygon_node_merges_its_segments():
+    lm, poly, line = mesh_with_fields(5)
+    nseg = lm.triangulation.segments.shape[0]
+    v = int(poly[7])
+    a, b, _ = lm.segment_merge(v)
+    assert {a, b} == {int(poly[6]), int(poly[8])}
+    I_rand = lm.ip_integral("rand")
+    new = lm.remove_nodes([v])
+    check_constrained(lm)
+    assert lm.triangulation.segments.shape[0] == nseg - 1
+    chain = check_chain(lm, new[poly[new[poly] >= 0]], closed=True)
+    assert len(chain) == len(poly) - 1
+    np.testing.assert_allclose(lm.ip_integral("rand"), I_rand, rtol=0, atol=1e-13)
+
+
+def blocked_polygon_node(lm, poly):
+    """A polygon node whose segments cannot merge: a node is put just inside the triangle
+    of it and its two neighbours (by rebuilding the mesh with that node)."""
+    nodes = lm.nodes.copy()
+    a, v, b = poly[0], poly[1], poly[2]
+    inside = (nodes[a] + nodes[v] + nodes[b]) / 3
+    return np.r_[nodes, inside[None]], int(v)
+
+
+@pytest.mark.parametrize("which", ["wall", "blocked segment", "hull"])
+def test_a_failing_removal_leaves_the_state_unchanged(which, tmp_path):
+    nodes, segs, poly, _ = outlined_square(300, 6)
+    if which == "blocked segment":
+        nodes, bad = blocked_polygon_node(LagrangianMesh(nodes, segments=segs), poly)
+    lm = LagrangianMesh(nodes, segments=segs, ip_fields={"s": np.arange(3.0)},
+                        node_fields={"x": nodes}, walls=None if which == "hull" else "box")
+    lm.advance(lambda x: 0.1 * np.c_[np.sin(np.pi * x[:, 0]) * (x[:, 1] - .5), 0 * x[:, 1]],
+               0.02, inject=2.0)
+    if which != "blocked segment":
+        bad = int(lm.triangulation.hull_edges[0, 0])
+    else:
+        assert lm.segment_merge(bad) is False
+    good = interior_free_nodes(lm, 3, 6)
+    before = saved_state(lm, tmp_path / "before.npz")
+    with pytest.raises(ValueError, match="cannot be (removed|merged)"):
+        lm.remove_nodes(np.r_[good, bad])   # the good ones are taken out first
+    assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
+    lm.remove_nodes(good)
+    check_constrained(lm)
+
+
+def stagnation(x):
+    """u = (-x, y) about the centre, damped to zero at the walls: nodes converge on x = 0.5
+    (and near the top and bottom walls, where the flow slows down)."""
+    r = x - 0.5
+    damp = 16 * x[:, 0] * (1 - x[:, 0]) * x[:, 1] * (1 - x[:, 1])
+    return np.c_[-r[:, 0], r[:, 1]] * damp[:, None]
+
+
+def test_merging_in_a_converging_flow_happens_and_is_counted():
+    nodes, segs, poly, line = outlined_square(400, 7, centre=(0.5, 0.35))
+    lm = LagrangianMesh(nodes, segments=segs, ip_fields={"one": np.ones(3)})
+    area = lm.ip_integral("one")
+    count = lm.nodes.shape[0]
+    removed = merged = 0
+    for _ in range(30):
+        rep = lm.advance(stagnation, 0.15, inject=2.0, merge=True)
+        count += rep["injected"] - rep["removed"] - rep["merged"]
+        removed += rep["removed"]
+        merged += rep["merged"]
+        poly, line = lm.node_map[poly], lm.node_map[line]
+        poly, line = poly[poly >= 0], line[line >= 0]
+        poly = check_chain(lm, poly, closed=True)
+        line = check_chain(lm, line, closed=False)
+        check_constrained(lm)
+        assert lm.nodes.shape[0] == count
+    assert removed > 0 and merged > 0
+    np.testing.assert_allclose(lm.ip_integral("one"), area, rtol=1e-12)
+
+
+def test_without_merge_nothing_is_removed():
+    nodes, segs, _, _ = outlined_square(300, 8)
+    lm = LagrangianMesh(nodes, segments=segs)
+    for _ in range(10):
+        rep = lm.advance(stagnation, 0.15, inject=2.0)
+        assert rep["removed"] == rep["merged"] == 0
+    with pytest.raises(ValueError, match="merge must be"):
+        lm.advance(stagnation, 0.1, merge=1)
+
+
+def test_a_failing_merge_inside_advance_restores_everything(tmp_path, monkeypatch):
+    nodes, segs, _, _ = outlined_square(400, 9)
+    lm = LagrangianMesh(nodes, segments=segs, ip_fields={"s": np.arange(3.0)})
+    for _ in range(40):
+        rep = lm.advance(stagnation, 0.15, inject=2.0)
+    before = saved_state(lm, tmp_path / "before.npz")
+    calls = []
+
+    def failing(*args, **kwargs):
+        calls.append(1)
+        raise RuntimeError("compaction failed")
+
+    monkeypatch.setattr(lm, "_compact", failing)
+    with pytest.raises(RuntimeError, match="compaction failed"):
+        lm.advance(stagnation, 0.15, inject=2.0, merge=True)
+    assert calls
+    assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
+    monkeypatch.undo()
+    rep = lm.advance(stagnation, 0.15, inject=2.0, merge=True)
+    assert rep["removed"] + rep["merged"] > 0
+    check_constrained(lm)

@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..geometry.constrained import pair_keys
+from ..geometry.delaunay2d import is_segment
 from ..geometry.predicates import orient2d
 
 __all__ = ["NodeRemoval", "conservative_fill", "CLUSTER_FRACTION", "FOLD_ANGLE"]
@@ -211,8 +213,7 @@ class NodeRemoval:
         if rows.size != 2:
             return False
         a, b = (int(seg[r, 0] if seg[r, 1] == v else seg[r, 1]) for r in rows)
-        key = (min(a, b) << 32) | max(a, b)
-        if np.isin(key, tri.segment_keys):
+        if is_segment(tri.segment_keys, a, b):
             return False
         alive = np.ones(tri.npoints, dtype=bool) if alive is None else alive
         if _occupied(tri.nodes, alive, a, v, b):
@@ -240,13 +241,7 @@ class NodeRemoval:
         a, b, s = merge
         seg, src = tri.segments, tri.segment_source
         keep = ~(seg == v).any(axis=1)
-        seg = np.r_[seg[keep], [[min(a, b), max(a, b)]]]
-        src = np.r_[src[keep], s]
-        keys = (seg[:, 0] << 32) | seg[:, 1]
-        order = np.argsort(keys)
-        snap = tri.snapshot()
-        snap["segment_keys"], snap["segment_source"] = keys[order], src[order]
-        tri.restore(snap)
+        tri.set_segments(np.r_[seg[keep], [[a, b]]], np.r_[src[keep], s])
         T0 = tri.triangles.copy()
         tri.recover_segments()
         changed = np.flatnonzero((tri.triangles != T0).any(axis=1))
@@ -278,7 +273,7 @@ class NodeRemoval:
         P.flags.writeable = False
         seg = new[tri.segments]  # the map is increasing: the keys stay sorted
         tri.restore({"nodes": P, "triangles": new[tri.triangles], "neighbours": tri.neighbours,
-                     "segment_keys": (seg[:, 0] << 32) | seg[:, 1],
+                     "segment_keys": pair_keys(seg),
                      "segment_source": tri.segment_source.copy()})
         self.node_fields = {k: f[used].copy() for k, f in self.node_fields.items()}
         self._on_wall = self._on_wall[used].copy()

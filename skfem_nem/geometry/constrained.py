@@ -39,8 +39,9 @@ from numba import njit
 from .delaunay2d import flip_edge, is_segment, lawson, locate_many, segment_key
 from .predicates import orient2d, orient2d_sign
 
-__all__ = ["check_segments", "edge_keys", "flood_regions", "insert_segments", "keys_of",
-           "recover_segments", "segment_through", "segments_of", "split_key"]
+__all__ = ["CrossingSegments", "check_segments", "edge_keys", "flood_regions",
+           "insert_segments", "keys_of", "pair_keys", "recover_segments", "segment_through",
+           "segments_of", "sorted_segments", "split_key", "triangle_edge_keys"]
 
 # codes of the segment insertion kernel
 _DONE = 0
@@ -49,11 +50,38 @@ _CROSSES = 2         # the segment crosses another segment
 _FAILED = 3          # no progress (only on invalid input triangulations)
 
 
-def keys_of(segments: np.ndarray) -> np.ndarray:
-    """Sorted unique keys of (k, 2) segments (see
+class CrossingSegments(ValueError):
+    """Two segments cross: ``first`` and ``second`` are their indices in the given
+    segments (``second`` is -1 if it is not one of them)."""
+
+    def __init__(self, message, first, second):
+        super().__init__(message)
+        self.first, self.second = first, second
+
+
+def pair_keys(pairs) -> np.ndarray:
+    """(k,) keys of (k, 2) node pairs, in their order (see
     :func:`~skfem_nem.geometry.delaunay2d.segment_key`)."""
-    s = np.sort(np.asarray(segments, dtype=np.int64).reshape(-1, 2), axis=1)
-    return np.unique((s[:, 0] << 32) | s[:, 1])
+    s = np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1)
+    return (s[:, 0] << 32) | s[:, 1]
+
+
+def keys_of(segments: np.ndarray) -> np.ndarray:
+    """Sorted unique keys of (k, 2) segments."""
+    return np.unique(pair_keys(segments))
+
+
+def triangle_edge_keys(T) -> np.ndarray:
+    """(3 nt,) keys of the edges of the triangles T (interior edges twice)."""
+    return pair_keys(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]))
+
+
+def sorted_segments(pairs, source):
+    """``(keys, source)`` of the (k, 2) node pairs with their sources, sorted by key (the
+    form :class:`~skfem_nem.geometry.triangulation.Triangulation` keeps them in)."""
+    keys = pair_keys(pairs)
+    order = np.argsort(keys)
+    return keys[order], np.asarray(source, dtype=np.int64)[order]
 
 
 def segments_of(keys: np.ndarray) -> np.ndarray:
@@ -89,8 +117,7 @@ def edge_keys(T, segments, n):
     """Sorted keys of ``segments`` (None: none), each checked to be an edge of T."""
     s = check_segments(segments if segments is not None else [], n)
     keys = keys_of(s)
-    e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
-    missing = np.flatnonzero(~np.isin(keys, (e[:, 0] << 32) | e[:, 1]))
+    missing = np.flatnonzero(~np.isin(keys, triangle_edge_keys(T)))
     if missing.size:
         raise ValueError(f"segment {segments_of(keys[missing[:1]])[0].tolist()} is not an "
                          f"edge of the stored triangles")
@@ -117,9 +144,8 @@ def split_key(keys, source, key, i):
     node i (both from the same source)."""
     a, b = key >> 32, key & 0xFFFFFFFF
     at = int(np.flatnonzero(keys == key)[0])
-    new = np.r_[np.delete(keys, at), keys_of([[a, i], [i, b]])]
-    order = np.argsort(new)
-    return new[order], np.r_[np.delete(source, at), source[at], source[at]][order]
+    return sorted_segments(np.r_[np.delete(segments_of(keys), at, axis=0), [[a, i], [i, b]]],
+                           np.r_[np.delete(source, at), source[at], source[at]])
 
 
 @njit(cache=True)
@@ -328,9 +354,10 @@ def insert_segments(P, T, N, segments):
         if code == _CROSSES:
             c, d = (int(x) for x in out[count])
             j = origin.get(int(segment_key(c, d)), -1)
-            raise ValueError(f"segments[{i}] = {segments[i].tolist()} crosses segments[{j}] = "
-                             f"{segments[j].tolist()}: segments may meet only at their end "
-                             f"nodes (a node on a segment splits it)")
+            raise CrossingSegments(
+                f"segments[{i}] = {segments[i].tolist()} crosses segments[{j}] = "
+                f"{segments[j].tolist()}: segments may meet only at their end nodes (a node "
+                f"on a segment splits it)", i, j)
         if code == _FAILED:
             raise RuntimeError(f"segments[{i}] = {[a, b]} could not be traced through the "
                                f"triangulation")
@@ -346,21 +373,17 @@ def recover_segments(P, T, N, keys, source):
     part, so a missing one is checked against all the others. Returns the new
     ``(keys, source)`` (a node now lying on a segment splits it); ``ValueError``
     naming two segments that would cross."""
-    e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
-    if np.isin(keys, (e[:, 0] << 32) | e[:, 1]).all():
+    if np.isin(keys, triangle_edge_keys(T)).all():
         return keys, source
     source = np.asarray(source, dtype=np.int64)
+    pairs = segments_of(keys)
     try:
-        S, src = insert_segments(P, T, N, segments_of(keys))
-    except ValueError as err:
-        import re
-        m = re.match(r"segments\[(\d+)\] = (\[\d+, \d+\]) crosses segments\[(-?\d+)\] = "
-                     r"(\[\d+, \d+\])", str(err))
-        if m is None:
-            raise
-        i, j = int(m.group(1)), int(m.group(3))
-        raise ValueError(f"segment {m.group(2)} (of given segment {source[i]}) would cross "
-                         f"segment {m.group(4)} (of given segment {source[j]})") from None
+        S, src = insert_segments(P, T, N, pairs)
+    except CrossingSegments as err:
+        i, j = err.first, err.second
+        raise CrossingSegments(
+            f"segment {pairs[i].tolist()} (of given segment {source[i]}) would cross "
+            f"segment {pairs[j].tolist()} (of given segment {source[j]})", i, j) from None
     return S, source[src]
 
 

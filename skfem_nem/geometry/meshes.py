@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial import Delaunay
 from skfem import MeshTet, MeshTri
 
-from .constrained import check_segments, flood_regions
+from .constrained import check_segments, flood_regions, pair_keys
 from .delaunay_nd import delaunay_of
 from .predicates import orient2d
 from .triangulation import Triangulation, unused_nodes, validate_nodes
@@ -246,8 +246,7 @@ def _constrained_mesh(points, segments, holes):
 
 def _segment_facets(mesh, tri, named):
     """Facet indices of the mesh along each name's segments (and their pieces)."""
-    f = np.sort(mesh.facets, axis=0).astype(np.int64)
-    fkey = (f[0] << 32) | f[1]
+    fkey = pair_keys(mesh.facets.T)
     order = np.argsort(fkey)
     first = np.cumsum([0] + [len(s) for s in named.values()])
     out = {}

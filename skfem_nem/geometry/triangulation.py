@@ -23,9 +23,11 @@ import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
 from .constrained import (check_segments, edge_keys, insert_segments, recover_segments,
-                          segment_through, segments_of, split_key)
+                          segment_through, segments_of, sorted_segments, split_key,
+                          triangle_edge_keys)
 from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exact_hull, first_fold,
-                         grow_cavity, insert_vertex, lawson, locate_many, orientations)
+                         grow_cavity, insert_vertex, lawson, locate_many, orientations,
+                         segment_key)
 from .predicates import incircle_sign, orient2d
 
 __all__ = ["Triangulation", "validate_nodes", "unused_nodes"]
@@ -523,10 +525,14 @@ class Triangulation:
     def missing_segments(self) -> np.ndarray:
         """(k, 2) the segments that are not edges of the triangles (none, unless a node
         that ends segments is out of the triangulation: see :meth:`recover_segments`)."""
-        T = self.triangles
-        e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
-        return segments_of(self.segment_keys[~np.isin(self.segment_keys,
-                                                      (e[:, 0] << 32) | e[:, 1])])
+        keys = self.segment_keys
+        return segments_of(keys[~np.isin(keys, triangle_edge_keys(self.triangles))])
+
+    def set_segments(self, segments, source) -> None:
+        """Replace the segments by the (k, 2) node pairs ``segments`` from the given
+        segments ``source`` (k,), without changing the triangles (make them edges with
+        :meth:`recover_segments`)."""
+        self.segment_keys, self.segment_source = sorted_segments(segments, source)
 
     def recover_segments(self) -> None:
         """Make every segment an edge again by exact flips (Sloan's, as when segments are
@@ -715,15 +721,10 @@ class Triangulation:
         P.flags.writeable = False
         self.nodes = P
         self.triangles, self.neighbours = np.vstack([T, rows_t]), np.vstack([N, rows_n])
-        key = (min(b, c) << 32) | max(b, c)
-        at = np.flatnonzero(self.segment_keys == key)
-        if at.size:
-            keys = np.r_[np.delete(self.segment_keys, at), (min(b, i) << 32) | i,
-                         (min(c, i) << 32) | i]
-            src = np.r_[np.delete(self.segment_source, at), self.segment_source[at[0]],
-                        self.segment_source[at[0]]]
-            order = np.argsort(keys)
-            self.segment_keys, self.segment_source = keys[order], src[order]
+        key = int(segment_key(b, c))
+        if np.isin(key, self.segment_keys):
+            self.segment_keys, self.segment_source = split_key(
+                self.segment_keys, self.segment_source, key, i)
         self._changed()
         return i
 

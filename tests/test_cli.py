@@ -48,10 +48,16 @@ def test_interpolate_errors(tmp_path, capsys):
 
 def test_first_run_notice(tmp_path, monkeypatch, capsys):
     from skfem_nem.apps import cli as cli
+    from pathlib import Path
+    package = Path(cli.__file__).resolve().parents[1]
+    for module in cli.FIRST_KERNELS:  # the names follow the package's layout
+        assert (package / f"{module}.py").exists(), module
     assert not cli.kernels_cached(tmp_path)
-    (tmp_path / "coordinates._query_all-453.py311.nbi").write_text("")
-    assert not cli.kernels_cached(tmp_path)
-    (tmp_path / "smoothing._smoothed_rows-245.py311.nbi").write_text("")
+    for k, module in enumerate(cli.FIRST_KERNELS):
+        assert not cli.kernels_cached(tmp_path)
+        folder = tmp_path / module.split("/")[0] / "__pycache__"
+        folder.mkdir(parents=True)
+        (folder / f"{module.split('/')[1]}.kernel-{k}.py311.nbi").write_text("")
     assert cli.kernels_cached(tmp_path)
     # the command says so before the first step when the cache is empty
     monkeypatch.setattr(cli, "kernels_cached", lambda folder=None: False)

@@ -139,16 +139,22 @@ def sinking_plate(args) -> int:
     return 0
 
 
-def kernels_cached(folder=None) -> bool:
-    """Whether numba's on-disk cache holds the package's main kernels (the
-    coordinate queries and the smoothing), i.e. whether this is not the
-    first run after installing (``folder``: where the cache lives, by
-    default the package's ``__pycache__``)."""
+#: modules whose numba kernels every run compiles first (their on-disk cache
+#: tells whether this is the first run after installing), relative to the package
+FIRST_KERNELS = ("coordinates/area2d", "basis/smoothing", "geometry/delaunay2d")
+
+
+def kernels_cached(root=None) -> bool:
+    """Whether numba's on-disk cache holds the kernels of :data:`FIRST_KERNELS`,
+    i.e. whether this is not the first run after installing (``root``: the
+    package folder, by default this package's)."""
     from pathlib import Path
-    if folder is None:
-        folder = Path(__file__).resolve().parent / "__pycache__"
-    folder = Path(folder)
-    return all(any(folder.glob(f"{m}.*.nbi")) for m in ("coordinates", "smoothing"))
+    root = Path(__file__).resolve().parents[1] if root is None else Path(root)
+    for module in FIRST_KERNELS:
+        folder, name = (root / module).parent, (root / module).name
+        if not any((folder / "__pycache__").glob(f"{name}.*.nbi")):
+            return False
+    return True
 
 
 def _restart_config(args, given, stored_config):

@@ -181,3 +181,31 @@ def test_outline_flux_constraint_keeps_region_area():
     assert abs((C @ held.u)[0]) < 1e-12 * abs(vz)         # and is held with it
     assert held.velocity_at_nodes()[idx, 1].mean() == pytest.approx(vz, rel=0.05)
     assert held.info["multipliers"].shape == (1,)
+
+
+@pytest.mark.parametrize("solver", ["schur", "direct", "minres", "schur-amg"])
+def test_constraint_with_a_right_side(solver):
+    """``constraints=(C, c)`` imposes ``C u = c`` (a prescribed flux through an
+    outline, here the region growing at a given rate) with every solver; a
+    malformed pair is refused naming what is wrong."""
+    from skfem_nem.geometry.nodesets import polyline_nodes
+    from skfem_nem.models.stokes import outline_flux
+    sq = [[0.35, 0.45], [0.65, 0.45], [0.65, 0.75], [0.35, 0.75]]
+    line = polyline_nodes(sq, 0.05, closed=True)
+    mesh = delaunay_mesh(box_nodes(300, lines=[np.r_[line, line[:1]]], seed=2))
+    idx = np.array([int(np.argmin(np.hypot(*(mesh.p.T - q).T))) for q in line])
+    sp_ = stokes_spaces(mesh, "nem")
+    X = sp_.quadrature_points
+    f = np.stack([0 * X[0], -1.0 * (np.abs(X[0] - 0.5) < 0.15)])
+    C = outline_flux(sp_, idx)
+    rate = 2e-3
+    s = solve_stokes(sp_, 1.0, f, constraints=(C, [rate]), solver=solver, tol=1e-12)
+    assert (C @ s.u)[0] == pytest.approx(rate, rel=1e-6)
+    s0 = solve_stokes(sp_, 1.0, f, constraints=C, solver=solver, tol=1e-12)
+    assert abs((C @ s0.u)[0]) < 1e-9 * rate
+    with pytest.raises(ValueError, match="right side must be 1 finite"):
+        solve_stokes(sp_, 1.0, f, constraints=(C, [1.0, 2.0]))
+    with pytest.raises(ValueError, match="right side must be 1 finite"):
+        solve_stokes(sp_, 1.0, f, constraints=(C, np.nan))
+    with pytest.raises(ValueError, match="pair"):
+        solve_stokes(sp_, 1.0, f, constraints=(C, [0.0], 1))

@@ -117,6 +117,10 @@ class PlateConfig:
     #: remove nodes the flow crowds together (spacing below a fifth of their reference) and
     #: merge the segments at folds of the outline (docs/evolution.md, "Node removal")
     merge: bool = False
+    #: hold the plate's area at its initial value: each step's outline-flux constraint
+    #: asks for the area the time steps have lost so far to come back in that step
+    #: (off: the flux is zero and the area drifts with the time-step error)
+    keep_area: bool = True
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first bad parameter."""
@@ -134,7 +138,7 @@ class PlateConfig:
             v = getattr(self, k)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"{k} must be a positive integer, got {v!r}")
-        for name in ("segments", "merge"):
+        for name in ("segments", "merge", "keep_area"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         if not isinstance(self.seed, int):
@@ -199,6 +203,8 @@ HELP = {
                 'natural-neighbour functions, stretched segments split',
     'merge': 'remove nodes the flow crowds together and merge the segments at folds of the '
              'outline',
+    'keep_area': "hold the plate's area at its initial value (the outline flux of each step "
+                 "gives back what the time steps lost so far)",
 }
 
 
@@ -379,6 +385,8 @@ class SinkingPlate:
             self.dt_next = meta["dt_next"]
             self.outputs = meta["outputs"]
             self.first_output = meta.get("first_output")
+            # (checkpoints written before the area was stored: the initial rectangle)
+            self.plate_area0 = meta.get("plate_area0", cfg.plate_length * cfg.plate_thickness)
             return
         nodes, outline, interface = initial_nodes(cfg)
         segs = None
@@ -392,6 +400,7 @@ class SinkingPlate:
         lm.ip_fields["plastic_strain"] = np.zeros((nt, 3))
         self.lm = lm
         self.outline = outline
+        self.plate_area0 = abs(_polygon_area_centroid(nodes[outline])[0])
         self.next_output = 0.0
         self.dt_next = cfg.max_dt
         self.outputs = 0
@@ -462,7 +471,7 @@ class SinkingPlate:
         # step, carried (as its logarithm) by the mesh like the stress
         guess = lm.ip_fields.get("log_eta_eff")
         r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
-                     tol=c.picard_tol, constraints=outline_flux(spaces, self.outline),
+                     tol=c.picard_tol, constraints=self._area_constraint(spaces, dt),
                      eta_guess=None if guess is None else np.exp(guess))
         lm.ip_fields["log_eta_eff"] = np.log(r.eta_eff)
         lm.ip_fields["stress"] = to_ip_field(r.tau)
@@ -504,6 +513,17 @@ class SinkingPlate:
                "solve_seconds": t_solve, "step_seconds": _time.perf_counter() - t0}
         self._last = (spaces, r, plate)
         return row
+
+    def _area_constraint(self, spaces, dt: float):
+        """The outline-flux constraint of a step: zero net flux, or with
+        ``keep_area`` the flux that brings the plate's area back to its initial
+        value over the step (the position-level form of the incompressibility
+        of the plate as a whole, which keeps the time-step error from adding up)."""
+        C = outline_flux(spaces, self.outline)
+        if not self.cfg.keep_area:
+            return C
+        deficit = self.plate_area0 - abs(self.plate_area_centroid()[0])
+        return C, [deficit / dt]
 
     def _stable_dt(self, v: np.ndarray) -> float:
         """Largest dt that moves no node by more than ``cfl`` times its local
@@ -552,7 +572,8 @@ class SinkingPlate:
         self.lm.save(self.out / "checkpoint.npz")
         meta = {"config": asdict(self.cfg), "outline": self.outline.tolist(),
                 "next_output": self.next_output, "dt_next": self.dt_next,
-                "outputs": self.outputs, "first_output": self.first_output}
+                "outputs": self.outputs, "first_output": self.first_output,
+                "plate_area0": self.plate_area0}
         atomic_write_text(self.out / "checkpoint.json", json.dumps(meta))
 
     @classmethod

@@ -494,8 +494,9 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         (e.g. the previous step's ``eta_eff``, carried by the evolving mesh);
         clipped to ``[min_viscosity, eta_ve]``. Default ``eta_ve``.
     constraints
-        Extra linear constraints on the velocity, passed to
-        :func:`skfem_nem.models.stokes.solve_stokes` (e.g. zero net flux through a
+        Extra linear constraints on the velocity (a matrix C for ``C u = 0`` or a
+        pair ``(C, c)`` for ``C u = c``), passed to
+        :func:`skfem_nem.models.stokes.solve_stokes` (e.g. the net flux through a
         material outline).
 
     Raises

@@ -575,9 +575,9 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         pressure is otherwise determined only up to a constant).
     constraints
         Optional (k, nu) sparse matrix C of extra linear constraints
-        ``C u = 0`` on the velocity dofs, imposed by Lagrange multipliers
-        (returned in ``info["multipliers"]``); e.g. zero net flux through a
-        material outline (:func:`outline_flux`).
+        ``C u = 0`` on the velocity dofs, or a pair ``(C, c)`` for ``C u = c``,
+        imposed by Lagrange multipliers (returned in ``info["multipliers"]``);
+        e.g. the net flux through a material outline (:func:`outline_flux`).
 
     Returns
     -------
@@ -654,22 +654,40 @@ def _walls_fix_pressure(spaces: StokesSpaces, D: np.ndarray) -> bool:
 
 def _with_constraints(sys_: StokesSystem, A: sp.csr_matrix, constraints, nu: int):
     """``B``, ``g``, ``m``, ``S`` and the pressure preconditioner diagonal, with
-    the rows of the extra constraints ``C u = 0`` appended as multipliers."""
+    the rows of the extra constraints ``C u = c`` appended as multipliers."""
     B = sys_.B.tocsr()
     g = np.zeros(sys_.B.shape[0]) if sys_.g is None else sys_.g
     m, S = sys_.m, sys_.S
     dp = np.asarray(sys_.Mp.sum(axis=1)).ravel()  # lumped 1/eta-weighted mass
     if constraints is None:
         return B, g, m, S, dp
-    C = sp.csr_matrix(constraints)
-    if C.shape[1] != nu:
-        raise ValueError(f"constraints have {C.shape[1]} columns, the velocity {nu} dofs")
+    C, c = _constraint_rows(constraints, nu)
     k = C.shape[0]
     # Jacobi estimate of C A^-1 C^T for the multipliers' preconditioner
     dcc = np.asarray(C.multiply(C) @ (1.0 / A.diagonal())).ravel()
-    return (sp.vstack([B, C]).tocsr(), np.concatenate([g, np.zeros(k)]),
+    return (sp.vstack([B, C]).tocsr(), np.concatenate([g, c]),
             np.concatenate([m, np.zeros(k)]), sp.block_diag([S, sp.csr_matrix((k, k))]).tocsr(),
             np.concatenate([dp, dcc]))
+
+
+def _constraint_rows(constraints, nu: int) -> Tuple[sp.csr_matrix, np.ndarray]:
+    """``(C, c)`` of the extra constraints ``C u = c`` given as a (k, nu) sparse
+    matrix C (then c = 0) or a pair ``(C, c)``; ``ValueError`` naming what is wrong."""
+    if isinstance(constraints, tuple):
+        if len(constraints) != 2:
+            raise ValueError(f"constraints must be a matrix C or a pair (C, c), got a "
+                             f"tuple of {len(constraints)}")
+        C, c = sp.csr_matrix(constraints[0]), np.asarray(constraints[1], dtype=float)
+    else:
+        C = sp.csr_matrix(constraints)
+        c = np.zeros(C.shape[0])
+    if C.shape[1] != nu:
+        raise ValueError(f"constraints have {C.shape[1]} columns, the velocity {nu} dofs")
+    c = c.reshape(-1) if c.ndim else np.full(C.shape[0], float(c))
+    if c.shape != (C.shape[0],) or not np.isfinite(c).all():
+        raise ValueError(f"the constraints' right side must be {C.shape[0]} finite "
+                         f"value(s), got {c.tolist()}")
+    return C, c
 
 
 def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndarray,

@@ -226,6 +226,41 @@ def check_valid_without(tri, v):
     assert used.sum() == tri.npoints - 1 and not used[v]
 
 
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(4, 40), st.integers(3, 9))
+def test_remove_wall_vertex(seed, n, per_side):
+    """A node on a straight stretch of the hull (a wall node between two wall nodes)
+    can be removed: its open fan is refilled, the hull keeps its shape (the same area),
+    the result is the Delaunay triangulation of the other nodes; corners cannot."""
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0, 1, per_side)
+    walls = np.r_[np.c_[s, 0 * s], np.c_[s, 1 + 0 * s], np.c_[0 * s[1:-1], s[1:-1]],
+                  np.c_[1 + 0 * s[1:-1], s[1:-1]]]
+    walls[:, 0] *= 2  # a 2 x 1 box
+    p = np.r_[walls, rng.uniform([0.05, 0.05], [1.95, 0.95], (n, 2))]
+    tri = Triangulation(p)
+    area = 0.5 * tri.orientation().sum()
+    on_wall = np.flatnonzero(((p[:, 0] == 0) | (p[:, 0] == 2)) ^ ((p[:, 1] == 0) | (p[:, 1] == 1)))
+    corners = np.flatnonzero(((p[:, 0] == 0) | (p[:, 0] == 2)) & ((p[:, 1] == 0) | (p[:, 1] == 1)))
+    for c in corners:
+        assert not tri.removable(int(c))
+        with pytest.raises(ValueError, match=f"node {c} is a corner"):
+            tri.remove_vertex(int(c))
+    v = int(rng.choice(on_wall))
+    assert tri.removable(v)
+    fan, nt = tri.fan(v), tri.ntriangles
+    label = np.arange(nt)
+    slots, moves = tri.remove_vertex(v)
+    for src, dst in moves:
+        label[dst] = label[src]
+    assert tri.ntriangles == nt - 1 and slots.size == fan.size - 1
+    untouched = np.setdiff1d(np.arange(tri.ntriangles), slots)
+    assert np.isin(label[:tri.ntriangles][untouched], fan, invert=True).all()
+    check_valid_without(tri, v)
+    assert 0.5 * tri.orientation().sum() == pytest.approx(area, rel=1e-14)
+    assert len(tri.hull_edges) == 4 * (per_side - 1) - 1
+
+
 def test_star_of_hull_node_raises():
     tri = Triangulation(np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0.4, 0.5]]))
     with pytest.raises(ValueError, match="node 0 is on the hull"):

@@ -169,11 +169,12 @@ class NodeRemoval:
     the snapshot of linear ip fields and the segment recovery used here)."""
 
     def remove_nodes(self, idx) -> np.ndarray:
-        """Take the interior nodes ``idx`` out of the mesh for good (see the module docs):
+        """Take the nodes ``idx`` (interior, or on a wall but not at a corner) out of the
+        mesh for good (see the module docs):
         stars refilled with (constrained) Delaunay triangles, ip fields remapped
         conservatively, a node ending two segments has them merged into one, and every
         per-node array compacted. Returns the map old -> new node index (-1: removed).
-        ``ValueError`` for a wall or hull node, or a segment node whose segments cannot
+        ``ValueError`` for a corner of the hull, or a segment node whose segments cannot
         be merged; on any error the mesh is left exactly as it was."""
         idx = np.unique(np.asarray(idx, dtype=np.int64).reshape(-1))
         n = self.triangulation.npoints
@@ -183,8 +184,9 @@ class NodeRemoval:
         try:
             alive = np.ones(n, dtype=bool)
             for v in idx.tolist():
-                if self._on_wall[v].any():
-                    raise ValueError(f"node {v} is on a wall and cannot be removed")
+                if self._on_wall[v].all() or not self.triangulation.removable(v):
+                    raise ValueError(f"node {v} is a corner of the hull and cannot be "
+                                     f"removed")
                 merge = self.segment_merge(v, alive)
                 if merge is False:
                     raise ValueError(f"node {v} ends segments that cannot be merged into one "
@@ -226,8 +228,8 @@ class NodeRemoval:
         tri = self.triangulation
         try:
             star = tri.star(v)
-        except ValueError:
-            raise ValueError(f"node {v} is on the hull and cannot be removed") from None
+        except ValueError:  # a wall node between two of its wall: its open fan
+            star = tri.fan(v)
         X, vals = self._snapshot(star)
         slots, moves = tri.remove_vertex(v, star)
         for k, F in self.ip_fields.items():
@@ -302,8 +304,9 @@ class NodeRemoval:
     def merge_nodes(self, fraction: float = CLUSTER_FRACTION,
                     fold_angle: float = FOLD_ANGLE) -> dict:
         """Remove crowded nodes and folds (what ``advance(..., merge=True)`` runs after
-        injection): a node off the walls and the hull whose spacing (square root of its
-        share of the triangle areas) fell below ``fraction`` of its reference spacing;
+        injection): a node off the hull, or on a wall but not at a corner, whose spacing
+        (square root of its share of the triangle areas) fell below ``fraction`` of its
+        reference spacing;
         and a node ending two segments that meet at less than ``fold_angle`` degrees or
         are both shorter than ``fraction`` of their reference length, by merging them.
         Nodes off segments go first, the most crowded first; no two neighbours go in
@@ -354,6 +357,9 @@ class NodeRemoval:
         np.add.at(share, T.ravel(), np.repeat(area / 3.0, 3))
         free = ~self._on_wall.any(axis=1)
         free[tri.hull_edges.ravel()] = False
+        # a node on one wall (not a corner) compares with its own reference: its
+        # neighbours off the wall have whole areas where it has half of one
+        wall = self._on_wall.sum(axis=1) == 1
         # the reference: the largest reference area of the node and its neighbours (a
         # node injected into a crowded place got a small one: a cluster of them is
         # compared with the density the place had)
@@ -361,10 +367,13 @@ class NodeRemoval:
         E = tri.edges
         np.maximum.at(ref, E[:, 0], self._ref_area[E[:, 1]])
         np.maximum.at(ref, E[:, 1], self._ref_area[E[:, 0]])
+        ref[wall] = self._ref_area[wall]
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.sqrt(share / ref)
         on_seg = self.segment_nodes()
-        crowded = np.flatnonzero(free & (ref > 0) & (ratio < fraction))
+        crowded = np.flatnonzero((free | wall) & (ref > 0) & (ratio < fraction))
+        crowded = np.array([v for v in crowded.tolist() if free[v] or tri.removable(v)],
+                           dtype=np.int64)
         crowded = crowded[np.lexsort((ratio[crowded], on_seg[crowded]))]
         seg, src = tri.segments, tri.segment_source
         count = np.bincount(seg.ravel(), minlength=P.shape[0])

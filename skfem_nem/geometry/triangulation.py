@@ -29,6 +29,7 @@ from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exac
                          grow_cavity, insert_vertex, lawson, locate_many, orientations,
                          segment_key)
 from .predicates import incircle_sign, orient2d
+from .stars import delaunay_ears, delete_rows, fan_of, link_star, star_of
 
 __all__ = ["Triangulation", "validate_nodes", "unused_nodes"]
 
@@ -547,104 +548,73 @@ class Triangulation:
 
     def star(self, v: int) -> np.ndarray:
         """The triangles around the interior node v, counter-clockwise (``ValueError``
-        if v is on the hull: its star is not closed)."""
-        T, N = self.triangles, self.neighbours
-        t0 = int(np.flatnonzero((T == v).any(axis=1))[0])
-        star, t = [], t0
-        while True:
-            star.append(t)
-            j = int(np.flatnonzero(T[t] == v)[0])
-            t = int(N[t, (j + 1) % 3])
-            if t < 0:
-                raise ValueError(f"node {v} is on the hull: its star is not closed")
-            if t == t0:
-                return np.array(star, dtype=np.int64)
+        if v is on the hull: its star is not closed; see :meth:`fan`)."""
+        star, closed = star_of(self.triangles, self.neighbours, v, self._first_with(v))
+        if not closed:
+            raise ValueError(f"node {v} is on the hull: its star is not closed")
+        return star
+
+    def fan(self, v: int) -> np.ndarray:
+        """The triangles around the hull node v, counter-clockwise from the hull edge
+        before v to the one after it."""
+        return fan_of(self.triangles, self.neighbours, v, self._first_with(v))
+
+    def _first_with(self, v: int) -> int:
+        hit = np.flatnonzero((self.triangles == v).any(axis=1))
+        if not hit.size:
+            raise ValueError(f"node {v} is in no triangle")
+        return int(hit[0])
+
+    def removable(self, v: int) -> bool:
+        """Whether :meth:`remove_vertex` can take node v out: an interior node, or a
+        hull node exactly between its two hull neighbours on a straight line (a wall
+        node that is not a corner), so that the hull stays the same."""
+        star, closed = star_of(self.triangles, self.neighbours, v, self._first_with(v))
+        if closed:
+            return True
+        fan = self.fan(v)
+        T, P = self.triangles, self.nodes
+        a = int(T[fan[0], (np.flatnonzero(T[fan[0]] == v)[0] + 1) % 3])
+        b = int(T[fan[-1], (np.flatnonzero(T[fan[-1]] == v)[0] + 2) % 3])
+        if orient2d(*P[a], *P[v], *P[b]) != 0:
+            return False
+        return bool(np.dot(P[a] - P[v], P[b] - P[v]) < 0)
 
     def remove_vertex(self, v: int, star=None):
-        """Take the interior node v out of the triangulation (it stays in
-        :attr:`nodes`, in no triangle) and fill its star with Delaunay triangles
-        (ear clipping with the exact in-circle test).
+        """Take node v out of the triangulation (it stays in :attr:`nodes`, in no
+        triangle) and fill the polygon its triangles leave with Delaunay triangles
+        (:mod:`~skfem_nem.geometry.stars`). v is interior, or on the hull exactly
+        between its two hull neighbours (:meth:`removable`; ``ValueError`` otherwise).
 
-        ``star``: :meth:`star` of v if the caller has it already. Returns
-        ``(slots, moves)``: the triangles that now cover the old star, and the
-        row moves ``(src, dst)`` made, in order, to close the gaps of the two triangles
+        ``star``: :meth:`star` (or :meth:`fan`) of v if the caller has it already.
+        Returns ``(slots, moves)``: the triangles that now cover the old star, and the
+        row moves ``(src, dst)`` made, in order, to close the gaps of the triangles
         that disappear; apply the same moves to data stored per triangle, then cut it
         to :attr:`ntriangles` rows.
         """
-        star = self.star(v) if star is None else star
-        at = [int(np.flatnonzero(self.triangles[t] == v)[0]) for t in star]
-        link = [int(self.triangles[t, (j + 1) % 3]) for t, j in zip(star, at)]
-        outer = [int(self.neighbours[t, j]) for t, j in zip(star, at)]
-        m = len(link)
-        slots = star[:m - 2]
-        for s_, tri_v in zip(slots, self._ears(v, link)):
-            self.triangles[s_] = tri_v
-        self._link_star(slots, link, outer)
-        moves = self._delete(sorted(star[m - 2:].tolist(), reverse=True))
+        if not self.removable(v):
+            raise ValueError(f"node {v} is a corner of the hull: it cannot be removed")
+        if star is None:
+            closed = star_of(self.triangles, self.neighbours, v, self._first_with(v))[1]
+            star = self.star(v) if closed else self.fan(v)
+        T, N = self.triangles, self.neighbours
+        at = [int(np.flatnonzero(T[t] == v)[0]) for t in star]
+        link = [int(T[t, (j + 1) % 3]) for t, j in zip(star, at)]
+        outer = [int(N[t, j]) for t, j in zip(star, at)]
+        if N[star[-1], (at[-1] + 1) % 3] < 0:  # a fan: its last node, the hull edge back
+            link.append(int(T[star[-1], (at[-1] + 2) % 3]))
+            outer.append(-1)
+        slots = star[:len(link) - 2]
+        for s_, tri_v in zip(slots, delaunay_ears(self.nodes, link, v)):
+            T[s_] = tri_v
+        link_star(T, N, slots, link, outer)
+        dead = sorted(star[len(link) - 2:].tolist(), reverse=True)
+        self.triangles, self.neighbours, moves = delete_rows(T, N, dead)
         final = slots.copy()
         for src, dst in moves:
             final[final == src] = dst
         self._changed()
         return final, moves
-
-    def _ears(self, v, link):
-        """Delaunay triangles filling the polygon ``link`` (counter-clockwise)."""
-        P = self.nodes
-        poly, new = list(range(len(link))), []
-        while len(poly) > 3:
-            for idx in range(len(poly)):
-                i0, i1, i2 = poly[idx - 1], poly[idx], poly[(idx + 1) % len(poly)]
-                p, q, r = link[i0], link[i1], link[i2]
-                if orient2d(*P[p], *P[q], *P[r]) <= 0:
-                    continue
-                if any(incircle_sign(*P[p], *P[q], *P[r], *P[link[s]]) > 0
-                       for s in poly if s not in (i0, i1, i2)):
-                    continue
-                new.append((p, q, r))
-                poly.pop(idx)
-                break
-            else:
-                raise RuntimeError(f"no Delaunay ear in the star of node {v}")
-        new.append(tuple(link[i] for i in poly))
-        return new
-
-    def _link_star(self, slots, link, outer):
-        """Neighbours of the triangles ``slots`` that refill a star with boundary
-        ``link`` whose outer neighbours are ``outer``."""
-        T, N, m = self.triangles, self.neighbours, len(link)
-        polyedge = {(link[i], link[(i + 1) % m]): outer[i] for i in range(m)}
-        diag = {}
-        for s_ in slots:
-            for k in range(3):
-                e1, e2 = int(T[s_, (k + 1) % 3]), int(T[s_, (k + 2) % 3])
-                if (e1, e2) in polyedge:
-                    nb = polyedge[(e1, e2)]
-                    N[s_, k] = nb
-                    if nb >= 0:
-                        N[nb, (T[nb] != e1) & (T[nb] != e2)] = s_
-                elif (min(e1, e2), max(e1, e2)) in diag:
-                    o, ko = diag[(min(e1, e2), max(e1, e2))]
-                    N[s_, k], N[o, ko] = o, s_
-                else:
-                    diag[(min(e1, e2), max(e1, e2))] = (s_, k)
-
-    def _delete(self, dead):
-        """Remove the triangle rows ``dead`` (descending), moving the last rows in;
-        returns the moves ``(src, dst)``."""
-        T, N = self.triangles, self.neighbours
-        nt, moves = T.shape[0], []
-        for d in dead:
-            last = nt - 1
-            if d != last:
-                T[d], N[d] = T[last], N[last]
-                for nb in N[d]:
-                    if nb >= 0:
-                        N[nb][N[nb] == last] = d
-                moves.append((last, d))
-            nt -= 1
-        self.triangles = np.ascontiguousarray(T[:nt])
-        self.neighbours = np.ascontiguousarray(N[:nt])
-        return moves
 
     def reinsert_vertex(self, v: int, cavity=None):
         """Put node v (in :attr:`nodes` but in no triangle, see :meth:`remove_vertex`)

@@ -304,3 +304,34 @@ def test_constrained_sinking_block(interfaces):
             assert (abs(r["C-NEM"] / r["reference"] - 1)
                     < 0.35 * abs(r["NEM"] / r["reference"] - 1)), r
     assert "| reference (" in interfaces.block_table(interfaces.block)
+
+
+# --------------------------------------------------------------------------
+# robustness: the sinking plate over its parameter space
+# --------------------------------------------------------------------------
+
+def test_robustness_study_rows_table_and_resume(tmp_path, capsys):
+    """Two short runs in one process: a row each with what the docs table reports, the
+    table printed; run again, the finished rows are read back, not redone; a run that
+    stops is a row with its reason."""
+    bench = load_benchmark("robustness")
+    args = ["--nodes", "300", "--seeds", "0", "--plate-density", "1.5", "3",
+            "--yield-stress", "0.3", "--eta-lower", "1", "--end-time", "6", "--jobs", "1",
+            "--out", str(tmp_path)]
+    rows = bench.main(args)
+    assert len(rows) == 2 and all(r["completed"] for r in rows)
+    assert {r["plate_density"] for r in rows} == {1.5, 3.0}
+    for r in rows:
+        assert r["t_reached"] == pytest.approx(6.0) and r["steps"] >= 2
+        assert 0 <= r["max_area_deviation"] < 1e-2 and r["outline_crossings"] == 0
+        assert r["min_angle"] > 0 and r["final_nodes"] > 300
+    out = capsys.readouterr().out
+    assert "| 300 | 0 | 3 | 0.3 | 1 | True | 6 |" in out
+    assert "2 of 2 runs completed" in out
+    again = bench.main(args)
+    assert "[1/" not in capsys.readouterr().out            # nothing was run again
+    assert [str(r["completed"]) for r in again] == ["True", "True"]
+    # a run that cannot go on is reported, not raised
+    stopped = bench._safe_run({"nodes": 300, "seed": 0, "plate_density": 1.5,
+                               "yield_stress": 0.3, "eta_lower": -1.0}, 6.0, str(tmp_path))
+    assert stopped["completed"] is False and "eta_lower" in stopped["stop"]

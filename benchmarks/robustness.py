@@ -1,0 +1,174 @@
+"""Robustness of the sinking-plate run over its parameter space.
+
+Runs the sinking plate (``skfem_nem.apps.sinking_plate``) to ``end_time`` for every
+combination of node count, seed, plate density, yield stress and lower-layer
+viscosity given (the default grid: nodes 300, 1000, 3000; seeds 0-4; plate density
+1.5 and 3; yield stress 0.05 and 0.3; lower-layer viscosity 1 and 100: 120 runs), all
+other parameters at their defaults, and reports for each run whether it completed, the
+time reached, the largest plate-area deviation, outline crossings, the smallest angle,
+the final node count, injections, removals and merges, retried steps and the wall
+time. A run that stops (the mesh cannot continue, a solver fails) is reported with its
+reason, never aborts the study. Each run writes its outputs in its own folder under
+``--out``; the rows go to ``robustness.csv`` there as runs finish (a study can be
+resumed: finished runs are read back, not redone) and the markdown table is printed.
+
+    python benchmarks/robustness.py [--nodes 300 1000 3000] [--seeds 0 1 2 3 4]
+        [--plate-density 1.5 3] [--yield-stress 0.05 0.3] [--eta-lower 1 100]
+        [--jobs 2] [--end-time 1000] [--out out/robustness]
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import itertools
+import time
+import traceback
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+
+COLUMNS = ["nodes", "seed", "plate_density", "yield_stress", "eta_lower", "completed",
+           "t_reached", "steps", "max_area_deviation", "outline_crossings", "min_angle",
+           "final_nodes", "injected", "removed", "merged", "retries", "seconds", "stop"]
+GRID = {"nodes": [300, 1000, 3000], "seeds": [0, 1, 2, 3, 4], "plate_density": [1.5, 3.0],
+        "yield_stress": [0.05, 0.3], "eta_lower": [1.0, 100.0]}
+
+
+def settings(args):
+    """The grid of runs: dicts of the varied parameters."""
+    for n, s, d, y, e in itertools.product(args.nodes, args.seeds, args.plate_density,
+                                           args.yield_stress, args.eta_lower):
+        yield {"nodes": int(n), "seed": int(s), "plate_density": float(d),
+               "yield_stress": float(y), "eta_lower": float(e)}
+
+
+def name_of(setting) -> str:
+    return "n{nodes}-s{seed}-d{plate_density:g}-y{yield_stress:g}-e{eta_lower:g}".format(
+        **setting)
+
+
+def run_one(setting, end_time: float, out: str) -> dict:
+    """One run; returns its row (a stopped run is a row too)."""
+    import warnings
+
+    from skfem_nem.apps.output import read_csv_columns
+    from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate
+
+    cfg = PlateConfig(end_time=end_time, output_interval=end_time, checkpoint_every=50,
+                      **setting)
+    folder = Path(out) / name_of(setting)
+    t0 = time.perf_counter()
+    sim = SinkingPlate(cfg, folder)
+    area0, _ = sim.plate_area_centroid()
+    stop = ""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sim.run(progress=False)
+    except Exception as err:  # the study records why a run stopped and goes on
+        stop = (str(err).splitlines() or [type(err).__name__])[0][:160]
+        sim.checkpoint()
+    seconds = time.perf_counter() - t0
+    d = read_csv_columns(folder / "diagnostics.csv")
+    row = dict(setting)
+    row.update(completed=not stop, t_reached=float(sim.lm.time), steps=len(d["time"]),
+               max_area_deviation=float(np.abs(d["plate_area"] / area0 - 1).max()),
+               outline_crossings=int(d["outline_crossings"].max()),
+               min_angle=float(d["min_angle"].min()), final_nodes=int(d["nodes"][-1]),
+               injected=int(d["injected"].sum()), removed=int(d["removed"].sum()),
+               merged=int(d["merged"].sum()), retries=int(d["retries"].sum()),
+               seconds=round(seconds, 1), stop=stop)
+    return row
+
+
+def _safe_run(setting, end_time, out):
+    try:
+        return run_one(setting, end_time, out)
+    except Exception:  # a failure before the first step: still a row
+        row = dict(setting, completed=False, stop=traceback.format_exc().splitlines()[-1])
+        return {k: row.get(k, "") for k in COLUMNS}
+
+
+def read_done(path: Path) -> dict:
+    """Rows of the runs already in ``path`` (resuming a study), by name."""
+    if not path.exists():
+        return {}
+    with open(path) as fh:
+        rows = list(csv.DictReader(fh))
+    return {name_of({"nodes": int(r["nodes"]), "seed": int(r["seed"]),
+                     "plate_density": float(r["plate_density"]),
+                     "yield_stress": float(r["yield_stress"]),
+                     "eta_lower": float(r["eta_lower"])}): r for r in rows}
+
+
+def table(rows) -> str:
+    """The markdown table of the rows."""
+    head = ["nodes", "seed", "density", "yield", "eta_lower", "completed", "t", "steps",
+            "area dev.", "crossings", "min angle", "nodes at end", "injected", "removed",
+            "merged", "retries", "s", "stop"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        def f(k, fmt="{}"):
+            v = r.get(k, "")
+            try:
+                return fmt.format(float(v)) if fmt != "{}" else str(v)
+            except ValueError:
+                return str(v)
+        lines.append("| " + " | ".join([
+            f("nodes"), f("seed"), f("plate_density", "{:g}"), f("yield_stress", "{:g}"),
+            f("eta_lower", "{:g}"), f("completed"), f("t_reached", "{:.5g}"), f("steps"),
+            f("max_area_deviation", "{:.1e}"), f("outline_crossings"),
+            f("min_angle", "{:.2g}"), f("final_nodes"), f("injected"), f("removed"),
+            f("merged"), f("retries"), f("seconds", "{:.0f}"), f("stop") or "-"]) + " |")
+    return "\n".join(lines)
+
+
+def summary(rows) -> str:
+    done = [r for r in rows if str(r["completed"]) == "True"]
+    dev = [float(r["max_area_deviation"]) for r in rows if r.get("max_area_deviation", "")
+           != ""]
+    return (f"{len(done)} of {len(rows)} runs completed; largest plate-area deviation "
+            f"{max(dev) if dev else float('nan'):.2e}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--nodes", type=int, nargs="+", default=GRID["nodes"])
+    ap.add_argument("--seeds", type=int, nargs="+", default=GRID["seeds"])
+    ap.add_argument("--plate-density", type=float, nargs="+", default=GRID["plate_density"])
+    ap.add_argument("--yield-stress", type=float, nargs="+", default=GRID["yield_stress"])
+    ap.add_argument("--eta-lower", type=float, nargs="+", default=GRID["eta_lower"])
+    ap.add_argument("--end-time", type=float, default=1000.0)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--out", default="out/robustness")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "robustness.csv"
+    done = read_done(log)
+    todo = [s for s in settings(args) if name_of(s) not in done]
+    rows = [done[name_of(s)] for s in settings(args) if name_of(s) in done]
+    new_file = not log.exists()
+    with open(log, "a", newline="") as fh, ProcessPoolExecutor(args.jobs) as pool:
+        w = csv.DictWriter(fh, fieldnames=COLUMNS)
+        if new_file:
+            w.writeheader()
+        futures = [pool.submit(_safe_run, s, args.end_time, str(out)) for s in todo]
+        for k, fut in enumerate(as_completed(futures), 1):
+            row = fut.result()
+            w.writerow({c: row.get(c, "") for c in COLUMNS})
+            fh.flush()
+            rows.append(row)
+            print(f"[{k}/{len(todo)}] {name_of(row)}: completed {row['completed']}, "
+                  f"t = {row.get('t_reached', '')}", flush=True)
+    rows.sort(key=lambda r: tuple(float(r[k]) for k in COLUMNS[:5]))
+    print()
+    print(table(rows))
+    print()
+    print(summary(rows))
+    return rows
+
+
+if __name__ == "__main__":
+    main()

@@ -303,3 +303,19 @@ def test_from_arrays_checks_shapes():
     bad[0, 0] = 99
     with pytest.raises(ValueError, match="out of range"):
         Triangulation.from_arrays(tri.nodes, bad, tri.neighbours)
+
+
+def test_arrays_are_c_ordered_whatever_the_input_layout():
+    """The kernels are compiled once per array layout: a mesh's transposed arrays
+    (Fortran order) must not give the triangulation another layout than nodes given
+    row by row, or every kernel compiles twice on a first run."""
+    from skfem import MeshTri
+    m = MeshTri().refined(2)
+    P, T = m.p.T, m.t.T
+    assert P.flags.f_contiguous and not P.flags.c_contiguous
+    for tri in (Triangulation(P), Triangulation(P, T),
+                Triangulation.from_arrays(P, T, Triangulation(P, T).neighbours)):
+        for a in (tri.nodes, tri.triangles, tri.neighbours):
+            assert a.flags.c_contiguous
+        tri.move_nodes(np.asfortranarray(tri.nodes + 0.0))
+        assert tri.nodes.flags.c_contiguous

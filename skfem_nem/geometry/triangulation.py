@@ -45,7 +45,7 @@ def validate_nodes(nodes, dim: int = 2, name: str = "nodes") -> np.ndarray:
     fewer than ``dim + 1`` nodes and duplicate nodes. The caller's array is
     never modified.
     """
-    p = np.array(nodes, dtype=np.float64, copy=True)
+    p = np.array(nodes, dtype=np.float64, copy=True, order="C")
     if p.ndim != 2 or p.shape[1] != dim:
         raise ValueError(f"{name} must have shape (n, {dim}), got {np.shape(nodes)}")
     bad = np.flatnonzero(~np.isfinite(p).all(axis=1))
@@ -135,7 +135,7 @@ class Triangulation:
         if triangles is None:
             T, N = self._qhull(p)
         else:
-            T = np.array(triangles, dtype=np.int64, copy=True)
+            T = np.array(triangles, dtype=np.int64, copy=True, order="C")
             if T.ndim != 2 or T.shape[1] != 3:
                 raise ValueError(f"triangles must have shape (nt, 3), got {np.shape(triangles)}")
             if T.size and (T.min() < 0 or T.max() >= p.shape[0]):
@@ -471,7 +471,7 @@ class Triangulation:
         """Give the nodes the positions x (n, 2), keeping the triangles (a Lagrangian
         step). The triangles may then fail the in-circle test (repair with
         :meth:`make_delaunay`) or invert (see :meth:`orientation`). Copied; read-only."""
-        x = np.array(x, dtype=np.float64, copy=True)
+        x = np.array(x, dtype=np.float64, copy=True, order="C")
         if x.shape != self.nodes.shape:
             raise ValueError(f"moved nodes must have shape {self.nodes.shape}, got {x.shape}")
         x.flags.writeable = False
@@ -500,7 +500,7 @@ class Triangulation:
         their shapes and index ranges are checked, nothing is flipped. ``segments``:
         its constrained edges (k, 2), which must be edges; ``segment_source``: their
         :attr:`segment_source` in the order of :attr:`segments` (default 0..k-1)."""
-        p = np.array(nodes, dtype=np.float64, copy=True)
+        p = np.array(nodes, dtype=np.float64, copy=True, order="C")
         T = np.ascontiguousarray(triangles, dtype=np.int64).copy()
         N = np.ascontiguousarray(neighbours, dtype=np.int64).copy()
         if p.ndim != 2 or p.shape[1] != 2 or T.ndim != 2 or T.shape[1] != 3 or N.shape != T.shape:

@@ -34,11 +34,12 @@ from skfem import MeshTet, MeshTri
 from skfem.assembly.basis import AbstractBasis, FacetBasis
 from skfem.element import DiscreteField, Element, ElementTetP1, ElementTriP1, ElementVector
 
-from . import assembly
+from . import assembly, plotting
 from .assembly import stencil_position
 from ..coordinates import natural_neighbour_coordinates
 from ..geometry.meshes import adopt, outside_domain
 from .elements import element_for, gauss_rule, integration_scheme
+from .plotting import DEFAULT_NREFS, refined_values, visuals_call
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
 __all__ = ["NaturalNeighbourBasis", "NaturalNeighbourFacetBasis"]
@@ -228,6 +229,7 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         on their pattern; the stencils follow. Forms on the basis are
         assembled from these from now on (:mod:`skfem_nem.basis.assembly`)."""
         assembly.install()
+        plotting.install(NaturalNeighbourBasis, NaturalNeighbourFacetBasis)
         # values_matrix: (ne * nq, N) CSR of the functions' values at the points;
         # gradient_entries: (dim, nnz) their gradients on that same sparsity pattern
         self.values_matrix, self.gradient_entries = Phi, G
@@ -603,28 +605,27 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
                                          [np.zeros(0, np.int64)]))
         return np.sort(self.dofs.nodal_dofs[:, nodes].ravel())
 
-    def refinterp(self, y: ndarray, nrefs: int = 2):
-        """A refined MeshTri and the values of y at its nodes (for plotting; 2D)."""
-        if not isinstance(self.mesh, MeshTri):
-            raise NotImplementedError("refinterp draws triangles; on tetrahedra use probes "
-                                      "on a slice (see examples/ex06_poisson_3d.py)")
-        ref = MeshTri.init_refdom().refined(nrefs)
-        x = self.mapping.F(ref.p)  # (2, ne, npts)
-        ne, npt = x.shape[1], x.shape[2]
-        pts = x.transpose(1, 2, 0).reshape(-1, 2)
-        vals = self.probes(pts.T) @ y
-        t = (ref.t[:, None, :] + npt * np.arange(ne)[None, :, None]).reshape(3, -1)
-        return MeshTri(pts.T.copy(), t, sort_t=False), vals
+    def refinterp(self, y: ndarray, nrefs: int = DEFAULT_NREFS, Nrefs: Optional[int] = None):
+        """A refined MeshTri and the values of y at its nodes (for plotting; 2D): the
+        natural-neighbour field itself, component-major for a vector basis
+        (:func:`~skfem_nem.basis.plotting.refined_values`). ``Nrefs`` is scikit-fem's
+        older name of ``nrefs``."""
+        return refined_values(self, y, nrefs if Nrefs is None else Nrefs)
 
-    def plot(self, y, ax=None, nrefs: int = 2, colorbar: bool = True, **kwargs):
-        """Plot a scalar dof vector as the natural-neighbour field it defines."""
-        from skfem.visuals.matplotlib import plot
-        if isinstance(self.elem, ElementVector):
-            raise NotImplementedError("plot one component: basis.split(y)")
-        M, v = self.refinterp(np.asarray(y), nrefs)
-        if ax is not None:
-            kwargs["ax"] = ax
-        return plot(M, v, shading="gouraud", colorbar=colorbar, **kwargs)
+    def plot(self, x, visuals: str = "matplotlib", **kwargs):
+        """scikit-fem's ``plot`` of the dof vector ``x``: the natural-neighbour field on
+        refined triangles (``nrefs``, default 2; Gouraud shading unless ``shading`` is
+        given), with the keywords of scikit-fem's ``MeshTri`` plot (``ax``, ``colorbar``,
+        ``vmin``, ``levels``, ...); arrows for a 2D vector basis, as scikit-fem."""
+        return visuals_call(self, "plot", visuals, x, **kwargs)
+
+    def plot3(self, x, visuals: str = "matplotlib", **kwargs):
+        """scikit-fem's ``plot3``: the surface of a scalar field on refined triangles."""
+        return visuals_call(self, "plot3", visuals, x, **kwargs)
+
+    def draw(self, visuals: str = "matplotlib", **kwargs):
+        """scikit-fem's ``draw`` of a basis: the outline of its triangles."""
+        return visuals_call(self, "draw", visuals, **kwargs)
 
 
 class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):

@@ -166,3 +166,221 @@ def test_facet_basis_plot_names_the_alternative(mesh):
     fb = NaturalNeighbourFacetBasis(mesh)
     with pytest.raises(NotImplementedError, match="NaturalNeighbourBasis"):
         skplot.plot(fb, np.zeros(fb.N))
+
+
+# --------------------------------------------------------------------------
+# facet projection
+# --------------------------------------------------------------------------
+
+def test_facet_project_equals_p1_on_the_boundary(mesh):
+    # on hull facets natural-neighbour functions are the linear 1D hats of the facet's
+    # nodes, so the boundary L2 projection is P1's to round-off
+    def f(x):
+        return np.exp(x[0]) * np.cos(2 * x[1])
+
+    fb = NaturalNeighbourFacetBasis(mesh)
+    p1 = FacetBasis(mesh, ElementTriP1())
+    u = fb.project(f)
+    np.testing.assert_allclose(u, p1.project(f), atol=ROUNDOFF)
+    boundary = np.unique(mesh.facets[:, mesh.boundary_facets()])
+    assert np.all(u[np.setdiff1d(np.arange(mesh.nvertices), boundary)] == 0.0)
+    # facets=: a subset of the basis' facets, the others' dofs zero, as scikit-fem
+    left = mesh.facets_satisfying(lambda x: x[0] == 0)
+    ul = fb.project(f, facets=left)
+    np.testing.assert_allclose(ul, p1.project(f, facets=left), atol=ROUNDOFF)
+    assert np.count_nonzero(ul) == np.unique(mesh.facets[:, left]).size
+    # a number, an array at the quadrature points, and a facet basis on some facets
+    np.testing.assert_allclose(fb.project(2.0)[boundary], 2.0, atol=ROUNDOFF)
+    np.testing.assert_allclose(fb.project(f(fb.global_coordinates())), u, atol=ROUNDOFF)
+    fl = NaturalNeighbourFacetBasis(mesh, facets=left)
+    np.testing.assert_allclose(fl.project(f),
+                               FacetBasis(mesh, ElementTriP1(), facets=left).project(f),
+                               atol=ROUNDOFF)
+    with pytest.raises(ValueError, match="facet .* is not one of the basis' facets"):
+        fl.project(f, facets=mesh.boundary_facets())
+
+
+def test_vector_facet_project(mesh):
+    fb = NaturalNeighbourFacetBasis(mesh, ElementVector(ElementNaturalNeighbour()))
+    p1 = FacetBasis(mesh, ElementVector(ElementTriP1()))
+
+    def f(x):
+        return np.array([x[0] * x[1], np.sin(x[0])])
+
+    np.testing.assert_allclose(fb.project(f), p1.project(f), atol=ROUNDOFF)
+    # components as a tuple, too
+    np.testing.assert_allclose(fb.project(lambda x: tuple(f(x))), p1.project(f), atol=ROUNDOFF)
+    with pytest.raises(ValueError, match="shape"):
+        fb.project(lambda x: x[0])
+
+
+# --------------------------------------------------------------------------
+# subdomain bases
+# --------------------------------------------------------------------------
+
+@BilinearForm
+def laplace(u, v, w):
+    return dot(grad(u), grad(v))
+
+
+@BilinearForm
+def mass(u, v, w):
+    return u * v
+
+
+@Functional
+def area(w):
+    return 1.0 + 0.0 * w.x[0]
+
+
+def test_subdomain_integrals_equal_p1(mesh):
+    left = mesh.elements_satisfying(lambda x: x[0] < 0.5)
+    sb = NaturalNeighbourBasis(mesh, elements=left)
+    p1 = Basis(mesh, ElementTriP1(), elements=left)
+    assert sb.N == mesh.nvertices and sb.nelems == left.size
+    np.testing.assert_array_equal(sb.tind, left)
+    np.testing.assert_allclose(sb.dx, p1.dx, atol=ROUNDOFF)
+    assert area.assemble(sb) == pytest.approx(0.5, abs=ROUNDOFF)
+    # a linear field: NEM reproduces it, so its energy and mass over the triangles are P1's
+    lin = 2 * mesh.p[0] - 3 * mesh.p[1] + 1
+    for form in (laplace, mass):
+        A, A1 = form.assemble(sb), form.assemble(p1)
+        assert lin @ A @ lin == pytest.approx(lin @ A1 @ lin, rel=ROUNDOFF)
+    A = laplace.assemble(sb)
+    np.testing.assert_allclose(A @ np.ones(sb.N), 0.0, atol=ROUNDOFF)
+    # rows of nodes far from the subdomain are empty
+    far = np.flatnonzero(mesh.p[0] > 0.75)
+    assert abs(A[far]).sum() == 0.0
+    # the two halves add up to the whole mesh
+    sr = NaturalNeighbourBasis(mesh, elements=lambda x: x[0] >= 0.5)
+    whole = NaturalNeighbourBasis(mesh)
+    u = field(*mesh.p)
+    assert u @ (laplace.assemble(sb) + laplace.assemble(sr)) @ u == pytest.approx(
+        u @ laplace.assemble(whole) @ u, rel=ROUNDOFF)
+
+
+def test_subdomain_selectors(mesh):
+    left = mesh.elements_satisfying(lambda x: x[0] < 0.5)
+    mask = np.zeros(mesh.nelements, bool)
+    mask[left] = True
+    named = mesh.with_subdomains({"left": lambda x: x[0] < 0.5})
+    for sel, m in ((lambda x: x[0] < 0.5, mesh), (mask, mesh), (list(left[::-1]), mesh),
+                   ("left", named), (["left"], named)):
+        b = NaturalNeighbourBasis(m, elements=sel)
+        np.testing.assert_array_equal(b.tind, left)
+    b = NaturalNeighbourBasis(mesh, elements=left)
+    np.testing.assert_array_equal(b.with_elements(mask).tind, left)
+    assert b.with_elements().tind is None
+    with pytest.raises(ValueError, match=r"element indices must lie in \[0, 128\)"):
+        NaturalNeighbourBasis(mesh, elements=[0, 128])
+    with pytest.raises(ValueError, match="mask must have 128 entries"):
+        NaturalNeighbourBasis(mesh, elements=mask[:-1])
+    with pytest.raises(ValueError, match="no such subdomain"):
+        NaturalNeighbourBasis(mesh, elements="right")
+    with pytest.raises(ValueError, match="selects no element"):
+        NaturalNeighbourBasis(mesh, elements=lambda x: x[0] > 2)
+
+
+def test_subdomain_project_and_plot(mesh):
+    sb = NaturalNeighbourBasis(mesh, elements=lambda x: x[0] < 0.5)
+    p1 = Basis(mesh, ElementTriP1(), elements=sb.tind)
+    lin = lambda x: 1 + x[0] - 2 * x[1]    # noqa: E731
+    u, u1 = sb.project(lin), p1.project(lin)
+    # a linear field is in both spaces: both projections reproduce it on the subdomain
+    inside = np.unique(mesh.t[:, sb.tind])
+    np.testing.assert_allclose(u[inside], lin(mesh.p[:, inside]), atol=1e-10)
+    np.testing.assert_allclose(u1[inside], lin(mesh.p[:, inside]), atol=1e-10)
+    ax = sb.plot(u, nrefs=1)
+    tri = tripcolor(ax)._triangulation
+    assert tri.triangles.shape[0] == 4 * sb.nelems and tri.x.max() <= 0.5 + ROUNDOFF
+    (line,) = sb.draw().lines
+    xy = np.asarray(line.get_xydata(), dtype=float)
+    assert np.nanmax(xy[:, 0]) == pytest.approx(0.5)
+
+
+# --------------------------------------------------------------------------
+# companion bases
+# --------------------------------------------------------------------------
+
+def test_with_element_companions_share_the_quadrature(mesh, basis):
+    sb = NaturalNeighbourBasis(mesh, elements=lambda x: x[1] < 0.5)
+    gauss = NaturalNeighbourBasis(mesh, npoints=6)
+    for nn in (basis, sb, gauss):
+        for e in (ElementTriP0(), ElementTriP1(), ElementVector(ElementTriP1()),
+                  ElementVector(ElementTriP0())):
+            c = nn.with_element(e)
+            assert isinstance(c, CellBasis) and c.elem is e
+            np.testing.assert_array_equal(c.X, nn.X)
+            np.testing.assert_array_equal(c.W, nn.W)
+            np.testing.assert_array_equal(c.dx, nn.dx)
+            np.testing.assert_array_equal(np.asarray(c.global_coordinates()),
+                                          np.asarray(nn.global_coordinates()))
+            assert c.nelems == nn.nelems
+    # natural-neighbour elements keep giving natural-neighbour bases
+    v = basis.with_element(ElementVector(ElementNaturalNeighbour()))
+    assert isinstance(v, NaturalNeighbourBasis) and v.N == 2 * mesh.nvertices
+    s = sb.with_element(ElementNaturalNeighbour())
+    np.testing.assert_array_equal(s.tind, sb.tind)
+    from skfem import ElementTetP1
+    with pytest.raises(ValueError, match="ElementTetP1"):
+        basis.with_element(ElementTetP1())
+
+
+def test_p0_conductivity_through_with_element(mesh, basis):
+    # k = 1 left of x = 1/2, 10 right of it: a P0 field and a Python-coded coefficient
+    p0 = basis.with_element(ElementTriP0())
+    k = p0.zeros() + 1.0
+    k[mesh.elements_satisfying(lambda x: x[0] > 0.5)] = 10.0
+
+    @BilinearForm
+    def conduction_p0(u, v, w):
+        return w["k"] * dot(grad(u), grad(v))
+
+    @BilinearForm
+    def conduction_coded(u, v, w):
+        return np.where(w.x[0] > 0.5, 10.0, 1.0) * dot(grad(u), grad(v))
+
+    A0 = conduction_p0.assemble(basis, k=p0.interpolate(k))
+    A1 = conduction_coded.assemble(basis)
+    assert abs(A0 - A1).max() < ROUNDOFF * abs(A1).max()
+    # the same with P1 on the same quadrature
+    p1 = Basis(mesh, ElementTriP1(), quadrature=basis.quadrature)
+    q0 = p1.with_element(ElementTriP0())
+    B0 = conduction_p0.assemble(p1, k=q0.interpolate(k))
+    B1 = conduction_coded.assemble(p1)
+    assert abs(B0 - B1).max() < ROUNDOFF * abs(B1).max()
+    # and the solutions of the two routes agree
+    b = LinearForm(lambda v, w: v).assemble(basis)
+    D = basis.get_dofs()
+    np.testing.assert_allclose(solve(*condense(A0, b, D=D)), solve(*condense(A1, b, D=D)),
+                               atol=ROUNDOFF)
+
+
+def test_projection_onto_companions(mesh, basis):
+    f = lambda x: np.sin(3 * x[0]) * x[1]    # noqa: E731
+    p0 = basis.with_element(ElementTriP0())
+    ref = Basis(mesh, ElementTriP0(), quadrature=basis.quadrature)
+    np.testing.assert_allclose(p0.project(f), ref.project(f), atol=ROUNDOFF)
+    # a P0 projection of the NEM solution's gradient: the element means of the
+    # smoothed gradient
+    u = field(*mesh.p)
+    gx = p0.project(basis.interpolate(u).grad[0])
+    g = basis.interpolate(u).grad[0]
+    np.testing.assert_allclose(gx, (g * basis.dx).sum(1) / basis.dx.sum(1), atol=1e-12)
+    # mixed mass matrix (P1 companion trial, NEM test) applied to a linear field equals
+    # the NEM mass matrix applied to it
+    c1 = basis.with_element(ElementTriP1())
+    lin = 1 + mesh.p[0] + mesh.p[1]
+    np.testing.assert_allclose(mass.assemble(c1, basis) @ lin, mass.assemble(basis) @ lin,
+                               atol=ROUNDOFF)
+
+
+def test_inherent_limits_name_the_alternative(mesh, basis):
+    with pytest.raises(TypeError, match=r"Basis\(mesh, element\).*with_element"):
+        NaturalNeighbourBasis(mesh, ElementVector(ElementTriP1()))
+    with pytest.raises(AttributeError, match="stencil_nodes"):
+        basis.element_dofs
+    with pytest.raises(NotImplementedError, match="NaturalNeighbourBasis"):
+        Basis(mesh, ElementNaturalNeighbour())
+    with pytest.raises(NotImplementedError, match="probes"):
+        NaturalNeighbourFacetBasis(mesh).trace(np.zeros(mesh.nvertices), lambda p: p)

@@ -40,7 +40,7 @@ from .elements import element_for, gauss_rule, integration_scheme
 from .companions import companion_basis, is_natural_neighbour, refuse_keywords
 from .plotting import DEFAULT_NREFS, refined_values, visuals_call
 from .projection import (l2_project, normalize_elements, normalize_facets, positions_in,
-                         projection_dofs, stencil_dofs)
+                         projection_dofs, stencil_dofs, value_dofs)
 from .stencils import fill_group, stencil_union
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
@@ -647,15 +647,15 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
     def project(self, interp, facets=None, dtype=None) -> ndarray:
         """L2 projection of ``interp`` (callable of x, DiscreteField, array or tuple of
         components at the facet quadrature points, or a number) on the basis' facets, as
-        scikit-fem's ``FacetBasis.project``: the dofs kept are those of the stencils of
-        the facets (of ``facets``, a subset of the basis' facets, if given) whose
-        functions are non-zero on them; the others are zero. On boundary facets those are the facets' own nodes;
+        scikit-fem's ``FacetBasis.project``: the dofs kept are those of the functions
+        that are non-zero on the facets (on ``facets``, a subset of the basis' facets, if
+        given); the others are zero. On boundary facets those are the facets' own nodes;
         the facets must determine their functions (interior facets whose stencils overlap
         may not)."""
         pos = np.arange(self.nelems)
         if facets is not None:
             pos = positions_in(self.find, normalize_facets(self.mesh, facets), "facet")
-        return l2_project(self, interp, projection_dofs(self, pos), dtype)
+        return l2_project(self, interp, value_dofs(self, pos), dtype)
 
     def with_element(self, elem: Element):
         """The same facets and quadrature with another element: natural-neighbour, or a

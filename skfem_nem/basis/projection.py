@@ -122,7 +122,7 @@ def _values(basis, interp):
     if callable(interp):
         interp = interp(basis.global_coordinates())
     if isinstance(interp, (tuple, list)):
-        interp = np.stack([np.asarray(_values(basis, c)) for c in interp])
+        interp = np.stack([np.asarray(c) + np.zeros(basis.dx.shape) for c in interp])
     f = np.asarray(interp)
     if np.iscomplexobj(f):
         raise ValueError("natural-neighbour projections are real; project the real and "

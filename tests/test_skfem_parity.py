@@ -384,3 +384,143 @@ def test_inherent_limits_name_the_alternative(mesh, basis):
         Basis(mesh, ElementNaturalNeighbour())
     with pytest.raises(NotImplementedError, match="probes"):
         NaturalNeighbourFacetBasis(mesh).trace(np.zeros(mesh.nvertices), lambda p: p)
+
+
+# --------------------------------------------------------------------------
+# no silently ignored keyword: every keyword of scikit-fem's signatures
+# --------------------------------------------------------------------------
+
+def _keywords(cls):
+    """(method, keyword) of every public method of a scikit-fem basis class whose
+    parameter has a default, and ("__init__", keyword) of its constructor."""
+    out = set()
+    for name in dir(cls):
+        fn = getattr(cls, name)
+        if (name.startswith("_") and name != "__init__") or not inspect.isfunction(fn):
+            continue
+        for p in list(inspect.signature(fn).parameters.values())[1:]:
+            if p.default is not p.empty and p.kind is p.POSITIONAL_OR_KEYWORD:
+                out.add((name, p.name))
+    return out
+
+
+def _cell_checks(mesh, basis):
+    """For each keyword: a call with a non-default value and a check of its effect, or
+    the error that must name it."""
+    from skfem import ElementTriP0 as P0
+    from skfem.assembly import Dofs
+    from skfem.quadrature import get_quadrature
+    from skfem.refdom import RefTri
+    u = field(*mesh.p)
+    left = mesh.elements_satisfying(lambda x: x[0] < 0.5)
+    X3, W3 = get_quadrature(RefTri, 3)
+    p = basis.project(lambda x: x[0], elements=left)
+    refuse = {"mapping": mesh.mapping(), "dofs": Dofs(mesh, ElementTriP1())}
+    return {
+        ("__init__", "intorder"): lambda: NaturalNeighbourBasis(mesh, intorder=3).X.shape[1] == 4,
+        ("__init__", "quadrature"): lambda: np.array_equal(
+            NaturalNeighbourBasis(mesh, quadrature=(X3, W3)).X, X3),
+        ("__init__", "elements"): lambda: NaturalNeighbourBasis(mesh, elements=left).nelems
+        == left.size,
+        ("__init__", "disable_doflocs"): lambda: not hasattr(NaturalNeighbourBasis(
+            mesh, disable_doflocs=True), "doflocs") and hasattr(basis, "doflocs"),
+        ("__init__", "mapping"): lambda: _raises(
+            lambda: NaturalNeighbourBasis(mesh, mapping=refuse["mapping"]), "mapping"),
+        ("__init__", "dofs"): lambda: _raises(
+            lambda: NaturalNeighbourBasis(mesh, dofs=refuse["dofs"]), "dofs"),
+        ("project", "elements"): lambda: np.all(
+            p[np.setdiff1d(np.arange(basis.N), basis.stencil_dofs(left))] == 0),
+        ("project", "dtype"): lambda: basis.project(1.0, dtype=np.float32).dtype == np.float32
+        and _raises(lambda: basis.project(1.0, dtype=np.complex128), "dtype"),
+        ("refinterp", "nrefs"): lambda: basis.refinterp(u, nrefs=1)[0].nelements
+        == 4 * mesh.nelements,
+        ("refinterp", "Nrefs"): lambda: basis.refinterp(u, Nrefs=0)[0].nelements
+        == mesh.nelements,
+        ("plot", "visuals"): lambda: _raises(lambda: basis.plot(u, visuals="nothing"),
+                                             "visuals"),
+        ("plot3", "visuals"): lambda: _raises(lambda: basis.plot3(u, visuals="nothing"),
+                                              "visuals"),
+        ("draw", "visuals"): lambda: _raises(lambda: basis.draw(visuals="nothing"), "visuals"),
+        ("with_elements", "elements"): lambda: basis.with_elements(left).nelems == left.size,
+        ("boundary", "facets"): lambda: basis.boundary(facets=[0]).nelems == 1,
+        ("boundary", "intorder"): lambda: basis.boundary(intorder=5).X.shape[1] == 3,
+        ("boundary", "quadrature"): lambda: basis.boundary(
+            quadrature=(np.array([[0.5]]), np.array([1.0]))).X.shape[1] == 1,
+        ("get_dofs", "facets"): lambda: basis.get_dofs(facets=[0]).flatten().size == 2,
+        ("get_dofs", "elements"): lambda: basis.get_dofs(elements=[0]).flatten().size == 3,
+        ("get_dofs", "nodes"): lambda: np.array_equal(basis.get_dofs(nodes=np.array([4])).flatten(),
+                                                      [4]),
+        ("get_dofs", "skip"): lambda: basis.get_dofs(skip=["u"]).flatten().size == 0,
+        ("zeros", "dtype"): lambda: basis.zeros(dtype=np.int32).dtype == np.int32,
+        ("ones", "dtype"): lambda: basis.ones(dtype=np.int32).dtype == np.int32,
+        ("zero_w", "dtype"): lambda: basis.zero_w(dtype=np.int32).dtype == np.int32,
+        ("with_element", "elem"): lambda: isinstance(basis.with_element(P0()), CellBasis),
+    }
+
+
+def _raises(call, name):
+    try:
+        call()
+    except (TypeError, ValueError, NotImplementedError) as err:
+        return name in str(err)
+    return False
+
+
+def test_every_cell_basis_keyword_is_supported_or_named(mesh, basis):
+    checks = _cell_checks(mesh, basis)
+    missing = _keywords(CellBasis) - set(checks)
+    assert not missing, f"scikit-fem keywords without a check: {sorted(missing)}"
+    failed = [k for k, check in checks.items() if not check()]
+    assert not failed, f"keywords ignored or errors not naming them: {failed}"
+
+
+def _sides_differ(mesh):
+    """side=1 takes the smoothed gradients from the cell on the other side of the facets."""
+    inner = np.flatnonzero(mesh.f2t[1] >= 0)
+    u = field(*mesh.p) ** 2
+    g0, g1 = (NaturalNeighbourFacetBasis(mesh, facets=inner, side=s).interpolate(u).grad
+              for s in (0, 1))
+    return not np.allclose(g0, g1)
+
+
+def test_every_facet_basis_keyword_is_supported_or_named(mesh):
+    fb = NaturalNeighbourFacetBasis(mesh)
+    left = mesh.facets_satisfying(lambda x: x[0] == 0)
+    from skfem.assembly import Dofs
+    checks = {
+        ("__init__", "intorder"): lambda: NaturalNeighbourFacetBasis(
+            mesh, intorder=5).X.shape[1] == 3,
+        ("__init__", "quadrature"): lambda: NaturalNeighbourFacetBasis(
+            mesh, quadrature=(np.array([[0.5]]), np.array([1.0]))).X.shape[1] == 1,
+        ("__init__", "facets"): lambda: NaturalNeighbourFacetBasis(
+            mesh, facets=left).nelems == left.size,
+        ("__init__", "side"): lambda: _sides_differ(mesh),
+        ("__init__", "disable_doflocs"): lambda: not hasattr(NaturalNeighbourFacetBasis(
+            mesh, disable_doflocs=True), "doflocs") and hasattr(fb, "doflocs"),
+        ("__init__", "mapping"): lambda: _raises(
+            lambda: NaturalNeighbourFacetBasis(mesh, mapping=mesh.mapping()), "mapping"),
+        ("__init__", "dofs"): lambda: _raises(
+            lambda: NaturalNeighbourFacetBasis(mesh, dofs=Dofs(mesh, ElementTriP1())), "dofs"),
+        ("project", "facets"): lambda: np.count_nonzero(fb.project(1.0, facets=left)) == 9,
+        ("project", "dtype"): lambda: _raises(lambda: fb.project(1.0, dtype=complex),
+                                              "dtype"),
+        ("trace", "target_elem"): lambda: _raises(
+            lambda: fb.trace(np.zeros(fb.N), lambda p: p, target_elem=ElementTriP1()),
+            "probes"),
+        ("plot", "visuals"): lambda: _raises(lambda: fb.plot(np.zeros(fb.N)),
+                                             "NaturalNeighbourBasis"),
+        ("plot3", "visuals"): lambda: _raises(lambda: fb.plot3(np.zeros(fb.N)),
+                                              "NaturalNeighbourBasis"),
+        ("draw", "visuals"): lambda: _raises(lambda: fb.draw(), "NaturalNeighbourBasis"),
+        ("get_dofs", "facets"): lambda: fb.get_dofs(facets=left).flatten().size == 9,
+        ("get_dofs", "elements"): lambda: fb.get_dofs(elements=[0]).flatten().size == 3,
+        ("get_dofs", "nodes"): lambda: fb.get_dofs(nodes=np.array([4])).flatten().size == 1,
+        ("get_dofs", "skip"): lambda: fb.get_dofs(skip=["u"]).flatten().size == 0,
+        ("zeros", "dtype"): lambda: fb.zeros(dtype=np.int32).dtype == np.int32,
+        ("ones", "dtype"): lambda: fb.ones(dtype=np.int32).dtype == np.int32,
+        ("zero_w", "dtype"): lambda: fb.zero_w(dtype=np.int32).dtype == np.int32,
+    }
+    missing = _keywords(FacetBasis) - set(checks)
+    assert not missing, f"scikit-fem keywords without a check: {sorted(missing)}"
+    failed = [k for k, check in checks.items() if not check()]
+    assert not failed, f"keywords ignored or errors not naming them: {failed}"

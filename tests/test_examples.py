@@ -346,3 +346,83 @@ def test_ex13_interface_exact_and_notch(tmp_path):
     marks = [line for line in fig.axes[1].lines if line.get_marker() in ("o", "x")]
     assert [len(m.get_xdata()) for m in marks] == [len(seen), len(plain)]
     plt.close(fig)
+
+
+# --------------------------------------------------------------------------
+# ex14-ex18: scikit-fem's problems on triangles, NEM against P1 and P2
+# --------------------------------------------------------------------------
+
+def _legend_texts(ax):
+    return [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def test_ex14_point_source(tmp_path):
+    ex = load("ex14_point_source")
+    e = ex.errors
+    # measured: NEM 4.5e-4, P1 1.0e-3, P2 6.0e-4 (about as many dofs)
+    assert e["NEM"] < 6e-4 and e["NEM"] < 0.6 * e["P1"] and e["NEM"] < e["P2"]
+    assert abs(ex.dofs["P2"] - ex.dofs["NEM"]) < 0.1 * ex.dofs["NEM"]
+    fig = ex.visualize(tmp_path / "ex14.png")
+    ax = fig.axes
+    tp = [c for c in ax[0].collections if c.get_array() is not None][0]
+    assert tp.get_clim()[1] == 0.6 and np.asarray(tp.get_array()).max() > 0.6
+    for line, name in zip(ax[1].lines, ex.cases):
+        assert np.abs(line.get_ydata()).max() < 5e-3
+        assert f"{e[name]:.2e}" in line.get_label()
+
+
+def test_ex15_subdomains(tmp_path):
+    ex = load("ex15_subdomains")
+    r = ex.results
+    # the P0 field through with_element gives the coded coefficient's matrix exactly
+    # where no triangle straddles the interface (and not on the plain mesh: 0.11)
+    assert r["NEM, interface as segments"]["coded vs P0"] < 1e-14
+    assert r["P1"]["coded vs P0"] < 1e-14
+    assert r["NEM, plain"]["coded vs P0"] > 0.01
+    # measured: plain NEM 1.4e-3, constrained NEM 6.7e-4, P1 7.0e-4
+    assert r["NEM, interface as segments"]["L2"] < 0.6 * r["NEM, plain"]["L2"]
+    assert r["NEM, interface as segments"]["L2"] < r["P1"]["L2"] < 1e-3
+    fig = ex.visualize(tmp_path / "ex15.png")
+    ax = fig.axes
+    assert len(ax[1].lines) == 4                     # three errors and the interface
+    assert "inside the dashed circle" in ax[0].get_title()
+
+
+def test_ex16_integral_condition(tmp_path):
+    ex = load("ex16_integral_condition")
+    r = ex.results
+    for name in r:
+        assert abs(r[name]["boundary mean"]) < 1e-13   # the condition holds
+        assert abs(r[name]["multiplier"]) < 1e-2       # compatible data: no correction
+    # measured: NEM 1.2e-3, P1 2.25e-3, P2 3.2e-4
+    assert r["NEM"]["L2"] < 0.6 * r["P1"]["L2"] and r["P2"]["L2"] < r["NEM"]["L2"]
+    fig = ex.visualize(tmp_path / "ex16.png")
+    ax = fig.axes
+    assert len(ax[0].collections) >= 2               # the field and its contour lines
+    labels = _legend_texts(ax[1])
+    assert all(f"{r[n]['L2']:.2e}" in t for n, t in zip(r, labels))
+
+
+def test_ex17_heat(tmp_path):
+    ex = load("ex17_heat")
+    e = ex.errors
+    # measured: NEM 1.6e-4, P1 4.3e-4, P2 2.7e-5
+    assert e["NEM"] < 0.5 * e["P1"] and e["P2"] < e["NEM"] < 3e-4
+    fig = ex.visualize(tmp_path / "ex17.png")
+    ax = fig.axes
+    tp = [c for c in ax[0].collections if c.get_array() is not None][0]
+    v = np.asarray(tp.get_array())
+    assert v.max() == pytest.approx(ex.EULER_DECAY, rel=0.01) and v.min() > -1e-3
+    assert len(ax[1].lines) == 3
+
+
+def test_ex18_elastic_modes(tmp_path):
+    ex = load("ex18_elastic_modes")
+    e = ex.errors
+    # measured (modes 1-4): NEM 1.3e-3..2.4e-3, P1 6.6e-4..1.4e-2, P2 2e-4..9e-4
+    assert np.all(e["NEM"] < 3e-3) and np.all(e["NEM"] < e["P1"])
+    assert e["NEM"][0] < 0.2 * e["P1"][0]
+    fig = ex.visualize(tmp_path / "ex18.png")
+    ax = fig.axes
+    np.testing.assert_allclose(bar_heights(ax[1]), np.concatenate(list(e.values())))
+    assert f"{ex.results['NEM'][0][0]:.4f}" in ax[0].get_title()

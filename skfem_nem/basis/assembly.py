@@ -85,25 +85,36 @@ def _partner(basis, nn, idx, key):
     if _is_nn(basis):
         return basis.restricted(idx, key)
     if isinstance(basis, CellBasis):
-        if basis.tind is not None or basis.nelems != nn.nelems:
+        if not _same_elements(basis, nn):
             raise ValueError("a CellBasis mixed with a natural-neighbour basis must live "
-                             "on all elements of the same mesh")
+                             "on the same elements of the same mesh: build it with "
+                             "nn_basis.with_element(element)")
         if basis.X.shape[-1] != nn.X.shape[-1] or not np.allclose(basis.X, nn.X):
             raise ValueError("quadrature mismatch: build the CellBasis with "
-                             "quadrature=nn_basis.quadrature")
+                             "quadrature=nn_basis.quadrature (or nn_basis.with_element)")
         cache = nn.__dict__.setdefault("_partners", {})
         k = (id(basis), key)
         if k not in cache:
-            cache[k] = (basis, basis.with_elements(idx))
+            cache[k] = (basis, basis.with_elements(idx if nn.tind is None else nn.tind[idx]))
         return cache[k][1]
     raise TypeError(f"cannot mix {type(basis).__name__} with a natural-neighbour basis")
+
+
+def _same_elements(a, b) -> bool:
+    """Do two bases integrate over the same elements of one mesh, in one order?"""
+    if a.mesh is not b.mesh or a.nelems != b.nelems:
+        return False
+    if a.tind is None or b.tind is None:
+        return a.tind is None and b.tind is None
+    return bool(np.array_equal(a.tind, b.tind))
 
 
 def _pairs(ubasis, vbasis):
     """Yield (element indices, u group, v group) covering all elements."""
     nn = ubasis if _is_nn(ubasis) else vbasis
     if _is_nn(ubasis) and _is_nn(vbasis) and ubasis is not vbasis:
-        if ubasis.nelems != vbasis.nelems:
+        if ubasis.nelems != vbasis.nelems or (
+                not hasattr(ubasis, "find") and not _same_elements(ubasis, vbasis)):
             raise ValueError("trial and test natural-neighbour bases live on different "
                              "element sets")
         key = ubasis.stencil_sizes.astype(np.int64) * 100000 + vbasis.stencil_sizes
@@ -476,6 +487,7 @@ def _shares_functions(u, v) -> bool:
     if u is v:
         return True
     return (type(u) is type(v) and u.mesh is v.mesh and u.nelems == v.nelems
+            and (hasattr(u, "find") or _same_elements(u, v))
             and u.coordinates == v.coordinates and u.method == v.method
             and u.X.shape == v.X.shape and np.array_equal(u.X, v.X)
             and np.array_equal(u.dx, v.dx)

@@ -68,8 +68,12 @@ def element_for(mesh, elem, who):
     vec = isinstance(elem, ElementVector)
     base = elem.elem if vec else elem
     if not isinstance(base, ElementNaturalNeighbour):
+        name = type(base).__name__ + ("" if base is elem else " in ElementVector")
         raise TypeError(f"{who} needs ElementNaturalNeighbour() or "
-                        f"ElementVector(ElementNaturalNeighbour()), got {type(elem).__name__}")
+                        f"ElementVector(ElementNaturalNeighbour()), got {name}: for "
+                        f"{type(base).__name__} functions use scikit-fem's Basis(mesh, "
+                        f"element), or nn_basis.with_element(element) for a companion on "
+                        f"the same quadrature points")
     want = ElementTetNaturalNeighbour if isinstance(mesh, MeshTet) else ElementNaturalNeighbour
     if type(base) is not want:
         base = want()

@@ -28,71 +28,23 @@ from __future__ import annotations
 from typing import Optional, Tuple
 
 import numpy as np
-from numba import njit
 from numpy import ndarray
 from skfem import MeshTet, MeshTri
 from skfem.assembly.basis import AbstractBasis, FacetBasis
 from skfem.element import DiscreteField, Element, ElementTetP1, ElementTriP1, ElementVector
 
-from . import assembly
-from .assembly import stencil_position
+from . import assembly, plotting
 from ..coordinates import natural_neighbour_coordinates
 from ..geometry.meshes import adopt, outside_domain
 from .elements import element_for, gauss_rule, integration_scheme
+from .companions import companion_basis, is_natural_neighbour, refuse_keywords
+from .plotting import DEFAULT_NREFS, refined_values, visuals_call
+from .projection import (l2_project, normalize_elements, normalize_facets, positions_in,
+                         projection_dofs, stencil_dofs, value_dofs)
+from .stencils import fill_group, stencil_union
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
 __all__ = ["NaturalNeighbourBasis", "NaturalNeighbourFacetBasis"]
-
-
-# ---------------------------------------------------------------------------
-# stencils and groups
-# ---------------------------------------------------------------------------
-
-@njit(cache=True)
-def _stencils(indptr, indices, nq, ne):
-    """Union of the column indices of rows e*nq .. e*nq+nq-1 of a CSR matrix.
-
-    Returns (ptr, sten): element e's stencil is sten[ptr[e]:ptr[e+1]], sorted.
-    """
-    ptr = np.zeros(ne + 1, np.int64)
-    sten = np.empty(indptr[ne * nq], np.int64)
-    pos = 0
-    for e in range(ne):
-        start = pos
-        for r in range(e * nq, e * nq + nq):
-            for k in range(indptr[r], indptr[r + 1]):
-                c = indices[k]
-                # insert c into the sorted run sten[start:pos] if absent
-                j = pos
-                while j > start and sten[j - 1] > c:
-                    j -= 1
-                if j > start and sten[j - 1] == c:
-                    continue
-                for m in range(pos, j, -1):
-                    sten[m] = sten[m - 1]
-                sten[j] = c
-                pos += 1
-        ptr[e + 1] = pos
-    return ptr, sten[:pos]
-
-
-@njit(cache=True)
-def _fill(elems, ptr, sten, indptr, indices, data, grads, nq, V, G):
-    """Dense values V (S, ne_g, nq) and gradients G (dim, S, ne_g, nq) of a group
-    of equal-size stencils; ``grads`` is a tuple of dim arrays on the pattern
-    of (indptr, indices)."""
-    dim = len(grads)
-    for k in range(elems.shape[0]):
-        e = elems[k]
-        s0 = ptr[e]
-        S = ptr[e + 1] - s0
-        for q in range(nq):
-            r = e * nq + q
-            for kk in range(indptr[r], indptr[r + 1]):
-                lo = stencil_position(sten, s0, S, indices[kk])
-                V[lo, k, q] = data[kk]
-                for c in range(dim):
-                    G[c, lo, k, q] = grads[c][kk]
 
 
 class _GroupBasis(AbstractBasis, assembly.StencilGroup):
@@ -228,12 +180,13 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         on their pattern; the stencils follow. Forms on the basis are
         assembled from these from now on (:mod:`skfem_nem.basis.assembly`)."""
         assembly.install()
+        plotting.install(NaturalNeighbourBasis, NaturalNeighbourFacetBasis)
         # values_matrix: (ne * nq, N) CSR of the functions' values at the points;
         # gradient_entries: (dim, nnz) their gradients on that same sparsity pattern
         self.values_matrix, self.gradient_entries = Phi, G
         self._D = [type(Phi)((G[k], Phi.indices, Phi.indptr), shape=Phi.shape)
                    for k in range(G.shape[0])]
-        ptr, sten = _stencils(Phi.indptr.astype(np.int64), Phi.indices.astype(np.int64), nq, ne)
+        ptr, sten = stencil_union(Phi.indptr.astype(np.int64), Phi.indices.astype(np.int64), nq, ne)
         self.stencil_ptr, self.stencil_nodes = ptr, sten
         self.stencil_sizes = np.diff(ptr)
         self._groups = None
@@ -259,7 +212,7 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         V = np.zeros((S, elems.size, nq))
         G = np.zeros((len(self._D), S, elems.size, nq))
         Phi = self.values_matrix
-        _fill(elems, ptr, sten, Phi.indptr, Phi.indices, Phi.data,
+        fill_group(elems, ptr, sten, Phi.indptr, Phi.indices, Phi.data,
               tuple(Dk.data for Dk in self._D), nq, V, G)
         stencils = sten[ptr[elems][None, :] + np.arange(S)[:, None]]
         return self._group(elems, stencils, V, G)
@@ -459,7 +412,9 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
                  intorder: Optional[int] = None,
                  quadrature: Optional[Tuple[ndarray, ndarray]] = None,
                  npoints: Optional[int] = None, coordinates: str = "sibson",
-                 method: Optional[str] = None, integration: Optional[str] = None):
+                 method: Optional[str] = None, integration: Optional[str] = None,
+                 elements=None, mapping=None, dofs=None, disable_doflocs: bool = False):
+        refuse_keywords("NaturalNeighbourBasis", mapping=mapping, dofs=dofs)
         elem = element_for(mesh, elem, "NaturalNeighbourBasis")
         self.method = _check_method(mesh, coordinates, method)
         self.integration = integration_scheme(integration, npoints, intorder, quadrature)
@@ -471,19 +426,24 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
             rule = gauss_rule(npoints, intorder, quadrature, mesh.refdom)
         with np.errstate(divide="ignore", invalid="ignore"):
             # (flat cells have no inverse mapping; only F and detDF are used)
-            super().__init__(mesh, elem, None, None, rule, mesh.refdom)
-            self.tind = None
-            self.nelems = mesh.nelements
-            self.dx = np.abs(self.mapping.detDF(self.X)) * np.broadcast_to(
+            super().__init__(mesh, elem, None, None, rule, mesh.refdom,
+                             disable_doflocs=disable_doflocs)
+            # a subdomain basis: sorted element indices (the smoothing cells are
+            # numbered in this order)
+            self.tind = None if elements is None else normalize_elements(mesh, elements)
+            self.nelems = mesh.nelements if self.tind is None else self.tind.size
+            if self.nelems == 0:
+                raise ValueError(f"elements={elements!r} selects no element")
+            self.dx = np.abs(self.mapping.detDF(self.X, tind=self.tind)) * np.broadcast_to(
                 self.W, (self.nelems, self.W.shape[-1]))
-            x = self.mapping.F(self.X)
-            elems = np.arange(self.nelems)
+            x = self.mapping.F(self.X, tind=self.tind)
+            elems = np.arange(self.nelems) if self.tind is None else self.tind
             if self.integration == "smoothed":
                 nq = self.X.shape[1]
                 # 2D: point q of a triangle lies in the cell of its vertex q;
                 # 3D: one cell per tetrahedron
                 cell_of = (np.arange(self.nelems * nq) if mesh.dim() == 2
-                           else np.repeat(elems, nq))
+                           else np.repeat(np.arange(self.nelems), nq))
                 self._build_smoothed(x, elems, cell_of)
             else:
                 self._build(x, elems)
@@ -491,20 +451,47 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
     def global_coordinates(self) -> DiscreteField:
         # cached here: scikit-fem's own cache attributes differ between versions
         if self.__dict__.get("_x_field") is None:
-            self._x_field = DiscreteField(self.mapping.F(self.X))
+            self._x_field = DiscreteField(self.mapping.F(self.X, tind=self.tind))
         return self._x_field
 
     def mesh_parameters(self) -> DiscreteField:
         if self.__dict__.get("_h_field") is None:
             self._h_field = DiscreteField(
-                np.abs(self.mapping.detDF(self.X)) ** (1.0 / self.mesh.dim()))
+                np.abs(self.mapping.detDF(self.X, tind=self.tind)) ** (1.0 / self.mesh.dim()))
         return self._h_field
 
-    def with_element(self, elem: Element) -> "NaturalNeighbourBasis":
-        """The same mesh and integration with another (natural-neighbour) element."""
+    def with_element(self, elem: Element):
+        """The same mesh, elements and quadrature with another element: a natural-neighbour
+        element gives a natural-neighbour basis; a scikit-fem element (``ElementTriP0()``,
+        ``ElementTriP1()``, their ``ElementVector``, ...) an ordinary ``CellBasis`` at the
+        very same quadrature points, for piecewise coefficients and projections that combine
+        with forms on this basis."""
+        if not is_natural_neighbour(elem):
+            return companion_basis(self, elem)
+        return type(self)(self.mesh, elem, **self.construction_keywords())
+
+    def with_elements(self, elements=None) -> "NaturalNeighbourBasis":
+        """The same element and integration on a subset of the mesh's elements (or all)."""
+        return type(self)(self.mesh, self.elem, **{**self.construction_keywords(),
+                                                   "elements": elements})
+
+    def construction_keywords(self) -> dict:
+        """The keywords that rebuild this basis (coordinates, method, integration, rule,
+        elements) with another element."""
         rule = {"quadrature": self.quadrature} if self.integration == "gauss" else {}
-        return type(self)(self.mesh, elem, coordinates=self.coordinates, method=self.method,
-                          integration=self.integration, **rule)
+        return {"coordinates": self.coordinates, "method": self.method,
+                "integration": self.integration, "elements": self.tind, **rule}
+
+    def boundary(self, facets=None, intorder: Optional[int] = None, quadrature=None):
+        """The :class:`NaturalNeighbourFacetBasis` of ``facets`` (default the boundary),
+        with this basis' element, coordinates and integration scheme."""
+        if self.tind is not None:
+            raise NotImplementedError("the boundary of a subdomain basis: build "
+                                      "NaturalNeighbourFacetBasis(mesh, facets=...) with the "
+                                      "subdomain's boundary facets")
+        return NaturalNeighbourFacetBasis(
+            self.mesh, self.elem, facets=facets, intorder=intorder, quadrature=quadrature,
+            coordinates=self.coordinates, method=self.method, integration=self.integration)
 
     def split_bases(self):
         if isinstance(self.elem, ElementVector):
@@ -558,73 +545,56 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         return self.probes(np.asarray(x, dtype=float)[:, None]).toarray()[0]
 
     def project(self, interp, elements=None, dtype=None) -> ndarray:
-        """L2 projection of ``interp`` (callable of x, DiscreteField or array
-        at the quadrature points) onto the basis; returns a dof vector.
+        """L2 projection of ``interp`` (callable of x, DiscreteField, array or tuple of
+        components at the quadrature points, or a number) onto the basis; returns a dof
+        vector.
 
-        ``elements`` (indices, a boolean mask or a callable of the midpoints, as
-        in scikit-fem) projects on those triangles' functions only: the dofs of
-        the nodes in their stencils; the other dofs are zero. ``dtype``: real
-        projections only (``None`` or a float type)."""
-        from skfem.assembly import BilinearForm, LinearForm
-        from skfem.helpers import inner
-        from skfem.utils import condense, solve
-        if dtype is not None and not np.issubdtype(np.dtype(dtype), np.floating):
-            raise ValueError(f"project(dtype={np.dtype(dtype)}): natural-neighbour "
-                             f"projections are real")
-        if callable(interp):
-            interp = interp(self.global_coordinates())
-        if isinstance(interp, tuple):
-            interp = np.stack([np.asarray(c) for c in interp])
-        f = np.asarray(interp, dtype=float) + np.zeros(self.dx.shape)
-        M = BilinearForm(lambda u, v, w: inner(u, v)).assemble(self)
-        b = LinearForm(lambda v, w: inner(w["f"], v)).assemble(self, f=DiscreteField(f))
-        if elements is None:
-            return solve(M, b)
-        return solve(*condense(M, b, I=self.stencil_dofs(elements)))
+        ``elements`` (indices, a boolean mask, a callable of the midpoints or a subdomain
+        name, as in scikit-fem) projects on those triangles' functions only: the dofs of
+        the nodes in their stencils; the other dofs are zero. A subdomain basis projects on
+        the functions that are non-zero on its own triangles. ``dtype``: real projections
+        only (``None`` or a float type)."""
+        keep = None
+        if elements is not None or self.tind is not None:
+            pos = (np.arange(self.nelems) if elements is None
+                   else self.element_positions(elements))
+            keep = projection_dofs(self, pos)
+        return l2_project(self, interp, keep, dtype)
 
     def stencil_dofs(self, elements) -> ndarray:
-        """The dofs of the functions that are non-zero on ``elements`` (indices,
-        a boolean mask over the triangles, or a callable of their midpoints):
-        the nodes of their stencils, every component of a vector basis."""
-        if callable(elements):
-            elements = self.mesh.elements_satisfying(elements)
-        e = np.asarray(elements)
-        if e.dtype == bool:
-            if e.shape != (self.mesh.nelements,):
-                raise ValueError(f"an element mask must have {self.mesh.nelements} entries, "
-                                 f"got shape {e.shape}")
-            e = np.flatnonzero(e)
-        e = e.astype(np.int64).ravel()
-        if e.size and (e.min() < 0 or e.max() >= self.mesh.nelements):
-            raise ValueError(f"element indices must lie in [0, {self.mesh.nelements}), "
-                             f"got {int(e.min())}..{int(e.max())}")
-        ptr, sten = self.stencil_ptr, self.stencil_nodes
-        nodes = np.unique(np.concatenate([sten[ptr[k]:ptr[k + 1]] for k in e] or
-                                         [np.zeros(0, np.int64)]))
-        return np.sort(self.dofs.nodal_dofs[:, nodes].ravel())
+        """The dofs of the functions that are non-zero on ``elements`` (indices, a boolean
+        mask over the mesh's triangles, a callable of their midpoints or a subdomain name;
+        of a subdomain basis' own triangles): the nodes of their stencils, every component
+        of a vector basis."""
+        return stencil_dofs(self, self.element_positions(elements))
 
-    def refinterp(self, y: ndarray, nrefs: int = 2):
-        """A refined MeshTri and the values of y at its nodes (for plotting; 2D)."""
-        if not isinstance(self.mesh, MeshTri):
-            raise NotImplementedError("refinterp draws triangles; on tetrahedra use probes "
-                                      "on a slice (see examples/ex06_poisson_3d.py)")
-        ref = MeshTri.init_refdom().refined(nrefs)
-        x = self.mapping.F(ref.p)  # (2, ne, npts)
-        ne, npt = x.shape[1], x.shape[2]
-        pts = x.transpose(1, 2, 0).reshape(-1, 2)
-        vals = self.probes(pts.T) @ y
-        t = (ref.t[:, None, :] + npt * np.arange(ne)[None, :, None]).reshape(3, -1)
-        return MeshTri(pts.T.copy(), t, sort_t=False), vals
+    def element_positions(self, elements) -> ndarray:
+        """Positions on the basis' element axis of the mesh's ``elements`` (anything
+        ``elements=`` accepts); for a subdomain basis they must be among its own."""
+        e = normalize_elements(self.mesh, elements)
+        return e if self.tind is None else positions_in(self.tind, e, "element")
 
-    def plot(self, y, ax=None, nrefs: int = 2, colorbar: bool = True, **kwargs):
-        """Plot a scalar dof vector as the natural-neighbour field it defines."""
-        from skfem.visuals.matplotlib import plot
-        if isinstance(self.elem, ElementVector):
-            raise NotImplementedError("plot one component: basis.split(y)")
-        M, v = self.refinterp(np.asarray(y), nrefs)
-        if ax is not None:
-            kwargs["ax"] = ax
-        return plot(M, v, shading="gouraud", colorbar=colorbar, **kwargs)
+    def refinterp(self, y: ndarray, nrefs: int = DEFAULT_NREFS, Nrefs: Optional[int] = None):
+        """A refined MeshTri and the values of y at its nodes (for plotting; 2D): the
+        natural-neighbour field itself, component-major for a vector basis
+        (:func:`~skfem_nem.basis.plotting.refined_values`). ``Nrefs`` is scikit-fem's
+        older name of ``nrefs``."""
+        return refined_values(self, y, nrefs if Nrefs is None else Nrefs)
+
+    def plot(self, x, visuals: str = "matplotlib", **kwargs):
+        """scikit-fem's ``plot`` of the dof vector ``x``: the natural-neighbour field on
+        refined triangles (``nrefs``, default 2; Gouraud shading unless ``shading`` is
+        given), with the keywords of scikit-fem's ``MeshTri`` plot (``ax``, ``colorbar``,
+        ``vmin``, ``levels``, ...); arrows for a 2D vector basis, as scikit-fem."""
+        return visuals_call(self, "plot", visuals, x, **kwargs)
+
+    def plot3(self, x, visuals: str = "matplotlib", **kwargs):
+        """scikit-fem's ``plot3``: the surface of a scalar field on refined triangles."""
+        return visuals_call(self, "plot3", visuals, x, **kwargs)
+
+    def draw(self, visuals: str = "matplotlib", **kwargs):
+        """scikit-fem's ``draw`` of a basis: the outline of its triangles."""
+        return visuals_call(self, "draw", visuals, **kwargs)
 
 
 class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
@@ -647,7 +617,9 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
     def __init__(self, mesh: MeshTri | MeshTet, elem: Optional[Element] = None, facets=None,
                  intorder: Optional[int] = None, quadrature=None, coordinates: str = "sibson",
                  side: int = 0, method: Optional[str] = None,
-                 integration: str = "smoothed"):
+                 integration: str = "smoothed", mapping=None, dofs=None,
+                 disable_doflocs: bool = False):
+        refuse_keywords("NaturalNeighbourFacetBasis", mapping=mapping, dofs=dofs)
         elem = element_for(mesh, elem, "NaturalNeighbourFacetBasis")
         self.method = _check_method(mesh, coordinates, method)
         # (the facet rule serves both schemes: values and smoothed gradients)
@@ -659,7 +631,8 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
                           quadrature=quadrature, side=side)
         self._geom = geom
         AbstractBasis.__init__(self, mesh, elem, geom.mapping, None, geom.quadrature,
-                               mesh.refdom.brefdom)
+                               mesh.refdom.brefdom, disable_doflocs=disable_doflocs)
+        self.side = side
         self.find = geom.find
         self.tind = None
         self.nelems = geom.nelems
@@ -670,6 +643,35 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
             self._build(x, geom.tind)
         else:
             self._build_smoothed(x, geom.tind, self._cells_of(x, geom.tind))
+
+    def project(self, interp, facets=None, dtype=None) -> ndarray:
+        """L2 projection of ``interp`` (callable of x, DiscreteField, array or tuple of
+        components at the facet quadrature points, or a number) on the basis' facets, as
+        scikit-fem's ``FacetBasis.project``: the dofs kept are those of the functions
+        that are non-zero on the facets (on ``facets``, a subset of the basis' facets, if
+        given); the others are zero. On boundary facets those are the facets' own nodes;
+        the facets must determine their functions (interior facets whose stencils overlap
+        may not)."""
+        pos = np.arange(self.nelems)
+        if facets is not None:
+            pos = positions_in(self.find, normalize_facets(self.mesh, facets), "facet")
+        return l2_project(self, interp, value_dofs(self, pos), dtype)
+
+    def with_element(self, elem: Element):
+        """The same facets and quadrature with another element: natural-neighbour, or a
+        scikit-fem element (an ordinary ``FacetBasis`` at the same points)."""
+        if not is_natural_neighbour(elem):
+            return companion_basis(self, elem)
+        rule = {} if self.quadrature is None else {"quadrature": self.quadrature}
+        return type(self)(self.mesh, elem, facets=self.find, coordinates=self.coordinates,
+                          side=self.side, method=self.method, integration=self.integration,
+                          **rule)
+
+    def trace(self, *args, **kwargs):
+        raise NotImplementedError(
+            "trace() builds a P1/P0 basis on the facets from per-element dofs, which "
+            "natural-neighbour functions do not have: evaluate the field on the facets with "
+            "NaturalNeighbourBasis(mesh).probes(x) at the points x = basis.global_coordinates()")
 
     def _cells_of(self, x, tind):
         """The smoothing cell of each facet point (dim, nf, nq), numbered as

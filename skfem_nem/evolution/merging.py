@@ -34,8 +34,11 @@ __all__ = ["NodeRemoval", "conservative_fill", "CLUSTER_FRACTION", "FOLD_ANGLE"]
 #: a node where an area doubled (spacing x 1.4); nodes are removed only where the flow has
 #: squeezed them 5-fold in length (25-fold in area), far from the injection threshold, so
 #: the two rules never undo each other's work, while the clusters that set the time step
-#: (spacing a hundredth of the reference) go. The same fraction of a segment's reference
-#: length marks a segment node whose two segments were both squeezed short.
+#: (spacing a hundredth of the reference) go. A wall node whose neighbour on the wall came
+#: closer than this fraction of its reference spacing goes too: where a strained flow
+#: brings two wall nodes together, their areas need not shrink. The same fraction of a
+#: segment's reference length marks a segment node whose two segments were both squeezed
+#: short.
 CLUSTER_FRACTION = 0.2
 #: an outline (segment polyline) node where its two segments meet at an angle below this
 #: (degrees) is a fold about to close: merging its segments blunts the fold before the
@@ -306,7 +309,8 @@ class NodeRemoval:
         """Remove crowded nodes and folds (what ``advance(..., merge=True)`` runs after
         injection): a node off the hull, or on a wall but not at a corner, whose spacing
         (square root of its share of the triangle areas) fell below ``fraction`` of its
-        reference spacing;
+        reference spacing (for a wall node: or whose neighbour on the wall came closer
+        than that);
         and a node ending two segments that meet at less than ``fold_angle`` degrees or
         are both shorter than ``fraction`` of their reference length, by merging them.
         Nodes off segments go first, the most crowded first; no two neighbours go in
@@ -368,8 +372,17 @@ class NodeRemoval:
         np.maximum.at(ref, E[:, 0], self._ref_area[E[:, 1]])
         np.maximum.at(ref, E[:, 1], self._ref_area[E[:, 0]])
         ref[wall] = self._ref_area[wall]
+        # a wall node also by its nearest neighbour on the wall: two wall nodes can
+        # converge while their shares stay large (a strained flow keeps areas), and unlike
+        # interior nodes they cannot be relocated past each other
+        H = tri.hull_edges
+        length = np.hypot(*(P[H[:, 0]] - P[H[:, 1]]).T)
+        nearest = np.full(P.shape[0], np.inf)
+        np.minimum.at(nearest, H[:, 0], length)
+        np.minimum.at(nearest, H[:, 1], length)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.sqrt(share / ref)
+            ratio[wall] = np.minimum(ratio[wall], nearest[wall] / np.sqrt(ref[wall]))
         on_seg = self.segment_nodes()
         crowded = np.flatnonzero((free | wall) & (ref > 0) & (ratio < fraction))
         crowded = np.array([v for v in crowded.tolist() if free[v] or tri.removable(v)],

@@ -4,8 +4,9 @@ failing removal leaves everything as it was."""
 import numpy as np
 import pytest
 
-from test_evolution_segments import (assert_same_state, check_chain, check_constrained,
-                                     outlined_square, saved_state)
+from test_evolution_segments import (LINE_Y, assert_same_state, check_chain,
+                                     check_constrained, outlined_square, saved_state)
+from helpers import edge_set
 from skfem_nem import LagrangianMesh
 from skfem_nem.evolution.merging import conservative_fill
 
@@ -208,3 +209,45 @@ def test_wall_nodes_crowded_by_the_flow_are_removed():
         assert 0.5 * lm.triangulation.orientation().sum() == pytest.approx(1.0, rel=1e-13)
     # measured: 1.3e-3 with merging (17 top nodes -> 7), 3.6e-4 without
     assert spacing[True] > 1e-3 > 2 * spacing[False]
+
+
+def test_released_segments_are_no_longer_kept(tmp_path):
+    """Released segments stop being edges that flips keep: the mesh is Delaunay across
+    them (flipped with the remap: integrals kept), their nodes stay, the others stay
+    segments; bad rows are refused and a failure leaves the mesh as it was."""
+    nodes, segs, poly, line = outlined_square(300, 5)
+    lm = LagrangianMesh(nodes, segments=segs, ip_fields={"one": np.ones(3)})
+    for _ in range(4):  # a wavy line: its segments are no longer Delaunay edges
+        lm.advance(lambda x: np.c_[0 * x[:, 0], 0.6 * np.sin(10 * np.pi * x[:, 0])
+                                   * np.exp(-((x[:, 1] - LINE_Y) / 0.05) ** 2)], 0.05, tol=1e-6)
+    area = lm.ip_integral("one")
+    tri = lm.triangulation
+    kept = edge_set(tri.triangles)
+    n, k = lm.nodes.shape[0], tri.segments.shape[0]
+    rows = np.flatnonzero(tri.segment_source >= poly.size)      # the polyline's
+    with pytest.raises(ValueError, match="segment rows must lie in"):
+        lm.release_segments([k])
+    saved = saved_state(lm, tmp_path / "before.npz")
+    calls = []
+
+    def failing(*args, **kwargs):
+        calls.append(1)
+        raise RuntimeError("flips failed")
+
+    original = tri.make_delaunay
+    tri.make_delaunay = failing
+    with pytest.raises(RuntimeError, match="flips failed"):
+        lm.release_segments(rows)
+    assert calls
+    del tri.make_delaunay
+    assert tri.make_delaunay == original
+    assert_same_state(saved_state(lm, tmp_path / "after.npz"), saved)
+    assert lm.release_segments(rows) == rows.size
+    assert tri.segments.shape[0] == k - rows.size and lm.nodes.shape[0] == n
+    assert (tri.segment_source < poly.size).all()
+    check_constrained(lm)
+    check_chain(lm, poly, closed=True)
+    np.testing.assert_allclose(lm.ip_integral("one"), area, rtol=1e-13)
+    # the mesh the polygon alone gives (random nodes: unique), not the one with the line
+    alone = LagrangianMesh(lm.nodes, segments=segs[:poly.size]).triangulation
+    assert edge_set(tri.triangles) == edge_set(alone.triangles) != kept

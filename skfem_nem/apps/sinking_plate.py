@@ -279,6 +279,37 @@ def _config_from(data: Dict) -> PlateConfig:
 # geometry helpers
 # ---------------------------------------------------------------------------
 
+#: an interface segment closer to the plate's outline than this fraction of the outline's
+#: node spacing is released (``SinkingPlate._release_film``): a film thinner than a
+#: quarter of the spacing has no node inside and closes within a few steps
+FILM_FRACTION = 0.25
+
+
+def _point_segment_distance(x, a, b):
+    """(k, m) distances of the points x (k, 2) to the segments a-b (m, 2)."""
+    d = b - a
+    L2 = np.maximum((d * d).sum(axis=1), 1e-300)
+    w = x[:, None, :] - a[None]
+    t = np.clip((w * d[None]).sum(axis=2) / L2, 0.0, 1.0)
+    return np.hypot(*(w - t[..., None] * d[None]).transpose(2, 0, 1))
+
+
+def segment_distances(a, b, c, d) -> np.ndarray:
+    """(k,) distance of each segment a-b (k, 2 each) to the nearest of the segments c-d
+    (m, 2 each): for segments that do not cross, the least of the distances of each
+    end point to the other segment (0 for a crossing pair)."""
+    dist = np.minimum(_point_segment_distance(a, c, d), _point_segment_distance(b, c, d))
+    dist = np.minimum(dist, _point_segment_distance(c, a, b).T)
+    dist = np.minimum(dist, _point_segment_distance(d, a, b).T)
+
+    def orient(p, q, r):
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
+                       - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+
+    A, B, C, D = a[:, None], b[:, None], c[None], d[None]
+    cross = (orient(A, B, C) * orient(A, B, D) < 0) & (orient(C, D, A) * orient(C, D, B) < 0)
+    return np.where(cross, 0.0, dist).min(axis=1)
+
 def _polygon_area_centroid(P):
     x, y = P[:, 0], P[:, 1]
     xn, yn = np.roll(x, -1), np.roll(y, -1)
@@ -387,6 +418,9 @@ class SinkingPlate:
             self.first_output = meta.get("first_output")
             # (checkpoints written before the area was stored: the initial rectangle)
             self.plate_area0 = meta.get("plate_area0", cfg.plate_length * cfg.plate_thickness)
+            self.outline_segments = meta.get("outline_segments")
+            if self.outline_segments is None:  # (older checkpoints) the drawn outline
+                self.outline_segments = len(initial_nodes(cfg)[1])
             return
         nodes, outline, interface = initial_nodes(cfg)
         segs = None
@@ -401,6 +435,8 @@ class SinkingPlate:
         self.lm = lm
         self.outline = outline
         self.plate_area0 = abs(_polygon_area_centroid(nodes[outline])[0])
+        # given segments 0 .. outline_segments - 1 are the outline's, then the interface's
+        self.outline_segments = len(outline)
         self.next_output = 0.0
         self.dt_next = cfg.max_dt
         self.outputs = 0
@@ -487,9 +523,11 @@ class SinkingPlate:
         # removed nodes leave the outline (node_map: this step's old -> new indices)
         self.outline = lm.node_map[self.outline]
         self.outline = self.outline[self.outline >= 0]
+        released = 0
         if lm.triangulation.segment_keys.size:
             # nodes injected on the outline's segments take their places in it
             self.outline = lm.polyline(self.outline, closed=True)
+            released = self._release_film()
         # the next step's dt from this step's velocity
         self.dt_next = self._stable_dt(v)
         A, cen = self.plate_area_centroid()
@@ -507,6 +545,7 @@ class SinkingPlate:
                "flips": rep["flips"], "injected": rep["injected"],
                "relocated": rep["relocated"], "substeps": rep["substeps"],
                "segments_split": rep["segments_split"], "outline_nodes": len(self.outline),
+               "segments_released": released,
                "removed": rep["removed"], "merged": rep["merged"],
                "nodes": lm.nodes.shape[0], "min_angle": rep["min_angle"],
                "picard_iterations": r.iterations, "solver_iterations": r.solution.iterations,
@@ -524,6 +563,23 @@ class SinkingPlate:
             return C
         deficit = self.plate_area0 - abs(self.plate_area_centroid()[0])
         return C, [deficit / dt]
+
+    def _release_film(self) -> int:
+        """Release the interface segments the plate has come closer to than
+        :data:`FILM_FRACTION` of the outline's node spacing: there the film of upper fluid
+        between plate and interface is squeezed thinner than the mesh resolves, and the
+        interface, kept as edges, would be pushed through the plate's outline within a
+        step. Released, its nodes are ordinary fluid nodes (their initial height still
+        sets their viscosity); returns how many segments were released."""
+        tri, P = self.lm.triangulation, self.lm.nodes
+        rows = np.flatnonzero(tri.segment_source >= self.outline_segments)
+        if not rows.size:
+            return 0
+        seg = tri.segments[rows]
+        o = self.outline
+        gap = segment_distances(P[seg[:, 0]], P[seg[:, 1]], P[o], P[np.roll(o, -1)])
+        h = FILM_FRACTION * self.cfg.outline_spacing * self.cfg.plate_thickness
+        return self.lm.release_segments(rows[gap < h])
 
     def _stable_dt(self, v: np.ndarray) -> float:
         """Largest dt that moves no node by more than ``cfl`` times its local
@@ -573,7 +629,7 @@ class SinkingPlate:
         meta = {"config": asdict(self.cfg), "outline": self.outline.tolist(),
                 "next_output": self.next_output, "dt_next": self.dt_next,
                 "outputs": self.outputs, "first_output": self.first_output,
-                "plate_area0": self.plate_area0}
+                "plate_area0": self.plate_area0, "outline_segments": self.outline_segments}
         atomic_write_text(self.out / "checkpoint.json", json.dumps(meta))
 
     @classmethod

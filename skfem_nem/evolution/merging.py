@@ -303,6 +303,31 @@ class NodeRemoval:
                 return path
         return None
 
+    def release_segments(self, rows) -> int:
+        """Stop keeping the segments ``rows`` (indices into ``triangulation.segments``) as
+        edges: their nodes stay, the mesh becomes Delaunay across them by flips (with the
+        remap of the ip fields). Where two material lines meet (a film between them
+        squeezed to nothing) the line that ends there is released. Returns how many
+        segments were released; on any error the mesh is left exactly as it was."""
+        tri = self.triangulation
+        rows = np.unique(np.asarray(rows, dtype=np.int64).reshape(-1))
+        k = tri.segments.shape[0]
+        if rows.size and (rows[0] < 0 or rows[-1] >= k):
+            raise ValueError(f"segment rows must lie in [0, {k}), got {rows.tolist()}")
+        if not rows.size:
+            return 0
+        state = self._state()
+        try:
+            keep = np.ones(k, dtype=bool)
+            keep[rows] = False
+            tri.set_segments(tri.segments[keep], tri.segment_source[keep])
+            tri.make_delaunay(on_flips=self._on_flips)
+        except BaseException:
+            self._restore(state)
+            raise
+        self._invalidate()
+        return int(rows.size)
+
     # -- the policy ----------------------------------------------------------------
     def merge_nodes(self, fraction: float = CLUSTER_FRACTION,
                     fold_angle: float = FOLD_ANGLE) -> dict:

@@ -251,3 +251,27 @@ def test_released_segments_are_no_longer_kept(tmp_path):
     # the mesh the polygon alone gives (random nodes: unique), not the one with the line
     alone = LagrangianMesh(lm.nodes, segments=segs[:poly.size]).triangulation
     assert edge_set(tri.triangles) == edge_set(alone.triangles) != kept
+
+
+def test_shift_nodes_moves_flips_or_refuses(tmp_path):
+    """Small shifts move the nodes and flips restore the constrained Delaunay property
+    (integrals kept); a shift that inverts a triangle, of a wall node, or non-finite,
+    is refused with the mesh as it was."""
+    nodes, segs, poly, _ = outlined_square(300, 6)
+    lm = LagrangianMesh(nodes, segments=segs, ip_fields={"one": np.ones(3)})
+    area = lm.ip_integral("one")
+    centre = lm.nodes[poly].mean(axis=0)
+    out = 0.004 * (lm.nodes[poly] - centre)          # the polygon grows by 0.4%
+    saved = saved_state(lm, tmp_path / "before.npz")
+    wall = int(np.flatnonzero(lm.nodes[:, 1] == 0.0)[1])
+    for idx, dx, word in (([wall], [[0.01, 0]], f"node {wall} is on a wall"),
+                          (poly, 50 * out, "would invert triangle"),
+                          (poly[:1], [[np.nan, 0]], "finite")):
+        with pytest.raises(ValueError, match=word):
+            lm.shift_nodes(idx, dx)
+        assert_same_state(saved_state(lm, tmp_path / "after.npz"), saved)
+    x = lm.nodes.copy()
+    lm.shift_nodes(poly, out)
+    np.testing.assert_array_equal(lm.nodes[poly], x[poly] + out)
+    check_constrained(lm)
+    np.testing.assert_allclose(lm.ip_integral("one"), area, rtol=1e-13)

@@ -221,22 +221,24 @@ def test_command_line_short_run(tmp_path):
     meta = json.loads((out / "checkpoint.json").read_text())
     assert meta["config"]["nodes"] == 400
     assert (out / "plate.pvd").exists() and (out / "fig6.png").exists()
-    assert meta["config"]["segments"] is False
-    sim = SinkingPlate.restart(out)
-    assert sim.lm.triangulation.segment_keys.size == 0
-    # the default node set: no line of nodes on the interface
-    assert not np.any(sim.lm.node_fields["z0"] == sim.cfg.interface_z)
-
-
-def test_command_line_with_segments(tmp_path):
-    out = tmp_path / "segments"
-    assert main(["sinking-plate", "-o", str(out), "--nodes", "300", "--end-time", "2",
-                 "--max-dt", "2", "--quiet", "--segments"]) == 0
-    meta = json.loads((out / "checkpoint.json").read_text())
-    assert meta["config"]["segments"] is True
+    # the default: outline and interface as segments, merging, the area kept
+    cfg = meta["config"]
+    assert cfg["segments"] is True and cfg["merge"] is True and cfg["keep_area"] is True
     sim = SinkingPlate.restart(out)
     assert sim.lm.triangulation.segment_keys.size > 0
     assert np.count_nonzero(sim.lm.node_fields["z0"] == sim.cfg.interface_z) > 100
+
+
+def test_command_line_without_segments(tmp_path):
+    out = tmp_path / "plain"
+    assert main(["sinking-plate", "-o", str(out), "--nodes", "300", "--end-time", "2",
+                 "--max-dt", "2", "--quiet", "--no-segments", "--no-merge"]) == 0
+    meta = json.loads((out / "checkpoint.json").read_text())
+    assert meta["config"]["segments"] is False and meta["config"]["merge"] is False
+    sim = SinkingPlate.restart(out)
+    assert sim.lm.triangulation.segment_keys.size == 0
+    # no line of nodes on the interface
+    assert not np.any(sim.lm.node_fields["z0"] == sim.cfg.interface_z)
 
 
 def test_command_line_with_segments_and_merging(tmp_path):

@@ -109,14 +109,14 @@ class PlateConfig:
     picard_tol: float = 1e-3
     #: write a checkpoint every this many steps
     checkpoint_every: int = 10
-    #: keep the plate outline and the layer interface as segments (constrained mesh); off
-    #: by default: alone, the full run stops where a horn of the outline folds (t = 762);
-    #: with ``merge`` it reaches t = 1000 but the plate area drifts by 0.6%
-    #: (docs/sinking_plate.md, "Segments")
-    segments: bool = False
-    #: remove nodes the flow crowds together (spacing below a fifth of their reference) and
-    #: merge the segments at folds of the outline (docs/evolution.md, "Node removal")
-    merge: bool = False
+    #: keep the plate outline and the layer interface as segments (constrained mesh: no
+    #: triangle straddles them, the velocity may kink there, the outline cannot cross
+    #: itself; interface segments the plate comes too close to are released)
+    segments: bool = True
+    #: remove nodes the flow crowds together (spacing below a fifth of their reference;
+    #: wall nodes too) and merge the segments at folds of the outline (docs/evolution.md,
+    #: "Node removal")
+    merge: bool = True
     #: hold the plate's area at its initial value: each step's outline-flux constraint
     #: asks for the area the time steps have lost so far to come back in that step
     #: (off: the flux is zero and the area drifts with the time-step error)
@@ -204,7 +204,8 @@ HELP = {
     'merge': 'remove nodes the flow crowds together and merge the segments at folds of the '
              'outline',
     'keep_area': "hold the plate's area at its initial value (the outline flux of each step "
-                 "gives back what the time steps lost so far)",
+                 "gives back what the time steps lost so far, and a least-squares shift of "
+                 "the outline what merges at its folds cut off)",
 }
 
 
@@ -528,6 +529,8 @@ class SinkingPlate:
             # nodes injected on the outline's segments take their places in it
             self.outline = lm.polyline(self.outline, closed=True)
             released = self._release_film()
+        if rep["merged"] and c.keep_area:
+            self._give_back_area()
         # the next step's dt from this step's velocity
         self.dt_next = self._stable_dt(v)
         A, cen = self.plate_area_centroid()
@@ -563,6 +566,23 @@ class SinkingPlate:
             return C
         deficit = self.plate_area0 - abs(self.plate_area_centroid()[0])
         return C, [deficit / dt]
+
+    def _give_back_area(self) -> None:
+        """Give the plate back the area that merges at folds of its outline cut off this
+        step: the outline nodes move by the smallest displacement (least squares) that
+        restores the initial area to first order, s * grad A(x) with
+        s = (A0 - A) / |grad A|^2 (the position form of the area constraint; a fraction
+        of the node spacing: 7e-5 for a loss of 1.6e-3 of the area). Skipped if a
+        triangle would invert (the next step's outline flux gives the area back then)."""
+        P = self.plate_polygon
+        A = _polygon_area_centroid(P)[0]
+        grad = 0.5 * np.sign(A) * np.c_[np.roll(P[:, 1], -1) - np.roll(P[:, 1], 1),
+                                        np.roll(P[:, 0], 1) - np.roll(P[:, 0], -1)]
+        step = (self.plate_area0 - abs(A)) / (grad * grad).sum()
+        try:
+            self.lm.shift_nodes(self.outline, step * grad)
+        except ValueError:
+            pass
 
     def _release_film(self) -> int:
         """Release the interface segments the plate has come closer to than

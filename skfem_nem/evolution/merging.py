@@ -328,6 +328,37 @@ class NodeRemoval:
         self._invalidate()
         return int(rows.size)
 
+    def shift_nodes(self, idx, dx) -> None:
+        """Move the nodes ``idx`` by the small displacements ``dx`` (k, 2): a geometric
+        correction between steps (not a flow step: the clock does not move), e.g. to give
+        back to a material polygon the area a merge at one of its folds cut off. Refused
+        with ``ValueError``, the mesh left as it was, for a wall node or if a triangle
+        would invert; else flips with the remap restore the (constrained) Delaunay
+        property."""
+        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+        dx = np.asarray(dx, dtype=float).reshape(idx.size, 2)
+        tri = self.triangulation
+        if idx.size and (idx.min() < 0 or idx.max() >= tri.npoints):
+            raise ValueError(f"node indices must lie in [0, {tri.npoints}), got {idx.tolist()}")
+        if self._on_wall[idx].any():
+            raise ValueError(f"node {int(idx[self._on_wall[idx].any(axis=1)][0])} is on a "
+                             f"wall and cannot be shifted")
+        if not np.isfinite(dx).all():
+            raise ValueError("the shifts must be finite")
+        state = self._state()
+        try:
+            x = np.array(self.nodes)
+            x[idx] += dx
+            self._set_positions(x)
+            bad = np.flatnonzero(tri.orientation() <= 0)
+            if bad.size:
+                raise ValueError(f"shifting the nodes would invert triangle {int(bad[0])}")
+            tri.make_delaunay(on_flips=self._on_flips)
+        except BaseException:
+            self._restore(state)
+            raise
+        self._invalidate()
+
     # -- the policy ----------------------------------------------------------------
     def merge_nodes(self, fraction: float = CLUSTER_FRACTION,
                     fold_angle: float = FOLD_ANGLE) -> dict:

@@ -392,3 +392,34 @@ def test_keep_area_holds_the_plate_area(tmp_path):
     assert held.max() < 0.3 * drifting.max()      # measured 8.1e-6
     assert held[-1] < 0.1 * drifting[-1]          # measured 8.4e-7
     assert runs[True][1] == pytest.approx(runs[False][1], rel=1e-4)
+
+
+def test_interface_segments_under_the_plate_are_released(tmp_path):
+    """A plate started just above the layer interface (a film of 0.005, below a quarter of
+    the outline's spacing 0.025): the interface segments under it are released at the
+    first step (counted in the CSV), those farther away stay segments, and the outline
+    stays a closed chain of segments."""
+    from skfem_nem.apps.sinking_plate import FILM_FRACTION, segment_distances
+    cfg = PlateConfig(nodes=300, plate_z=0.805, end_time=4.0, max_dt=2.0,
+                      output_interval=100.0, checkpoint_every=100)
+    sim = SinkingPlate(cfg, tmp_path)
+    sim.run(progress=False)
+    d = read_csv_columns(tmp_path / "diagnostics.csv")
+    assert d["segments_released"][0] > 0
+    tri, P, o = sim.lm.triangulation, sim.lm.nodes, sim.outline
+    iface = tri.segments[tri.segment_source >= sim.outline_segments]
+    gap = segment_distances(P[iface[:, 0]], P[iface[:, 1]], P[o], P[np.roll(o, -1)])
+    h = FILM_FRACTION * cfg.outline_spacing * cfg.plate_thickness
+    assert gap.min() >= h and iface.shape[0] > 100
+    keys = (np.minimum(o, np.roll(o, -1)) << 32) | np.maximum(o, np.roll(o, -1))
+    assert np.isin(keys, tri.segment_keys).all()
+
+
+def test_segment_distances():
+    from skfem_nem.apps.sinking_plate import segment_distances
+    a, b = np.array([[0, 0.], [0, 0], [0.5, -1]]), np.array([[1, 0.], [1, 1], [0.5, 0.5]])
+    c, d = np.array([[0, 1.], [2, 0]]), np.array([[1, 1.], [3, 0]])
+    # apart (1), touching at an end (0), and crossing nothing but 0.5 below the first
+    np.testing.assert_allclose(segment_distances(a, b, c, d), [1.0, 0.0, 0.5])
+    cross = segment_distances(np.array([[0.5, 0.5]]), np.array([[0.5, 1.5]]), c, d)
+    assert cross[0] == 0.0

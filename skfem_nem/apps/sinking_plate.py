@@ -20,7 +20,11 @@ plate's stress history rotated (Jaumann)
 and updated by return mapping, nodes moved by the iterative
 predictor-corrector, the triangulation repaired by Lawson flips with the
 stress remapped on every flip, and nodes injected where the mesh thins. No
-regridding.
+regridding. By default the outline and a line of nodes on the layer interface
+are segments (a constrained mesh and constrained natural neighbours), nodes the
+flow crowds together are removed and folds of the outline merged, and the
+plate's area is held: each step's outline flux gives back what the time steps
+lost, a least-squares shift of the outline what a merge cut off.
 
 Outputs (in the output folder): ``plate_NNNNN.vtu`` per output step and
 ``plate.pvd`` (ParaView), ``diagnostics.csv`` (one row per step),

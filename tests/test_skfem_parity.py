@@ -595,9 +595,9 @@ def test_facet_project_on_an_interface_gives_the_nodal_values():
 def test_unused_nodes_and_elementwise_quadrature_name_the_alternative():
     m = MeshTri().refined(2)
     extra = MeshTri(np.c_[m.p, [[2.0], [2.0]]], m.t)
-    with pytest.raises(ValueError, match=r"node 25 .* belongs to no cell.*remove_unused_nodes"):
+    with pytest.raises(ValueError, match=r"node 25 .* belongs to no triangle.*remove_unused_nodes"):
         NaturalNeighbourBasis(extra)
-    with pytest.raises(ValueError, match=r"belongs to no cell"):
+    with pytest.raises(ValueError, match=r"belongs to no triangle"):
         NaturalNeighbourFacetBasis(extra)
     X = np.full((2, m.nelements, 3), 1 / 3)
     W = np.full((m.nelements, 3), 1 / 6)

@@ -77,8 +77,9 @@ def check_used_nodes(mesh, who):
     used[mesh.t.ravel()] = True
     if not used.all():
         bad = np.flatnonzero(~used)
+        cell = "triangle" if mesh.dim() == 2 else "tetrahedron"
         raise ValueError(
             f"{who}: mesh node {int(bad[0])} at {mesh.p[:, bad[0]].tolist()} belongs to no "
-            f"cell ({bad.size} such node(s)), so no natural-neighbour function is defined "
+            f"{cell} ({bad.size} such node(s)), so no natural-neighbour function is defined "
             f"there; drop them with mesh.remove_unused_nodes() (the domain stays the same, "
             f"the nodes are renumbered)")

@@ -426,3 +426,30 @@ def test_ex18_elastic_modes(tmp_path):
     ax = fig.axes
     np.testing.assert_allclose(bar_heights(ax[1]), np.concatenate(list(e.values())))
     assert f"{ex.results['NEM'][0][0]:.4f}" in ax[0].get_title()
+
+
+def test_ex19_adaptive_lshape(tmp_path):
+    ex = load("ex19_adaptive_lshape")
+    a, u = ex.results["adaptive"], ex.results["uniform"]
+    # NEM and P1 on the same meshes: measured NEM / P1 0.38-0.56 (0.40 on the last)
+    assert np.all(a["NEM"] < 0.6 * a["P1"]) and a["NEM"][-1] < 0.45 * a["P1"][-1]
+    assert np.all(u["NEM"] < 0.6 * u["P1"])
+    # the singularity: uniform refinement at dofs^(-1/3), adaptive near the optimal -1/2
+    # (measured NEM -0.34 and -0.53, P1 -0.34 and -0.54)
+    for name in ("NEM", "P1"):
+        assert -0.40 < ex.rate(u, name) < -0.28
+        assert ex.rate(a, name) < -0.45
+    # about as many nodes: the adaptive error is a quarter of the uniform one (0.26)
+    assert a["dofs"][-1] <= u["dofs"][-1] and a["NEM"][-1] < 0.35 * u["NEM"][-1]
+    # refinement went to the corner: the smallest triangles touch it
+    m = ex.adaptive[-1]
+    e1, e2 = m.p[:, m.t[1]] - m.p[:, m.t[0]], m.p[:, m.t[2]] - m.p[:, m.t[0]]
+    area = np.abs(e1[0] * e2[1] - e1[1] * e2[0])
+    near = np.hypot(*m.p[:, m.t[:, np.argmin(area)]].mean(axis=1))
+    assert near < 0.05
+    fig = ex.visualize(tmp_path / "ex19.png")
+    ax = fig.axes
+    assert f"{m.nvertices} nodes" in ax[0].get_title()
+    labels = _legend_texts(ax[1])
+    assert len(ax[1].lines) == 4
+    assert f"rate {ex.rate(a, 'NEM'):.2f}" in labels[0]

@@ -524,3 +524,116 @@ def test_every_facet_basis_keyword_is_supported_or_named(mesh):
     assert not missing, f"scikit-fem keywords without a check: {sorted(missing)}"
     failed = [k for k, check in checks.items() if not check()]
     assert not failed, f"keywords ignored or errors not naming them: {failed}"
+
+
+# --------------------------------------------------------------------------
+# meshes as scikit-fem's examples build them: boundary nodes on the hull only to
+# round-off, interfaces inside the mesh, meshes with nodes of other cells
+# --------------------------------------------------------------------------
+
+def quarter_annulus():
+    """A tensor mesh in (r, theta) mapped to the quarter annulus 1 < r < 2: its straight
+    sides are straight only to round-off, its inner arc is concave, and it is not Delaunay."""
+    m = MeshTri.init_tensor(np.linspace(1, 2, 11), np.linspace(0, np.pi / 2, 24)).with_boundaries(
+        {"ground": lambda x: x[1] == 0.0, "positive": lambda x: x[1] == np.pi / 2})
+    return m.translated(m.p[0] * np.stack([np.cos(m.p[1]), np.sin(m.p[1])]) - m.p).refined()
+
+
+def test_facet_basis_on_a_side_straight_to_round_off():
+    # the facet points of the side x = 0 (nodes at x = 0 or a few 1e-16) are inside
+    m = quarter_annulus()
+    for name in ("ground", "positive"):
+        fb = NaturalNeighbourFacetBasis(m, facets=name)
+        p1 = FacetBasis(m, ElementTriP1(), facets=name)
+        np.testing.assert_allclose(fb.project(lambda x: x[0] + 2 * x[1]),
+                                   p1.project(lambda x: x[0] + 2 * x[1]), atol=1e-12)
+    # Laplace with u = 2 theta / pi: the flux through the two ports balances, as P1's
+    basis = NaturalNeighbourBasis(m)
+    u = basis.zeros()
+    u[basis.get_dofs("positive")] = 1.0
+    A = BilinearForm(lambda u, v, w: dot(grad(u), grad(v))).assemble(basis)
+    u = solve(*condense(A, x=u, D=basis.get_dofs({"positive", "ground"})))
+    flux = Functional(lambda w: dot(w.n, grad(w["u"])))
+    current = [flux.assemble(NaturalNeighbourFacetBasis(m, facets=n), u=u)
+               for n in ("ground", "positive")]
+    exact = 2 * np.log(2) / np.pi
+    assert abs(current[0] + exact) < 0.02 and abs(current[1] - exact) < 0.02
+
+
+def test_plot_and_probes_on_boundary_points_of_a_refined_disk():
+    # refining a disk puts the new boundary nodes on the chords, to round-off; the
+    # plotting mesh's boundary points are inside the domain
+    m = MeshTri.init_circle(2).refined()
+    basis = NaturalNeighbourBasis(m)
+    u = basis.project(lambda x: x[0] * x[1])
+    ax = skplot.plot(basis, u)
+    tp = tripcolor(ax)
+    assert np.isfinite(tp.get_array()).all()
+    M, v = basis.refinterp(u, nrefs=2)
+    np.testing.assert_allclose(v, M.p[0] * M.p[1], atol=0.05)
+    b = m.facets[:, m.boundary_facets()]
+    mid = m.p[:, b].mean(axis=1)
+    np.testing.assert_allclose(basis.probes(mid) @ u, mid[0] * mid[1], atol=0.05)
+    with pytest.raises(ValueError, match="outside"):
+        basis.probes(np.array([[1.5], [0.0]]))
+
+
+def test_facet_project_on_an_interface_gives_the_nodal_values():
+    # interior facets (the surface of a conductor inside the mesh): functions of nodes off
+    # the facets are non-zero there too; the facets' nodes get P1's values
+    m = MeshTri().refined(3)
+    inner = m.facets_satisfying(lambda x: np.isclose(x[0], 0.5))
+    assert inner.size == 8 and np.all(m.f2t[1, inner] >= 0)      # interior facets
+    fb = NaturalNeighbourFacetBasis(m, facets=inner)
+    p1 = FacetBasis(m, ElementTriP1(), facets=inner)
+    np.testing.assert_allclose(fb.project(0.5), p1.project(0.5), atol=1e-12)
+    nodes = np.unique(m.facets[:, inner])
+    np.testing.assert_allclose(fb.project(0.5)[nodes], 0.5, atol=1e-12)
+    assert np.count_nonzero(fb.project(0.5)) == nodes.size
+
+
+def test_unused_nodes_and_elementwise_quadrature_name_the_alternative():
+    m = MeshTri().refined(2)
+    extra = MeshTri(np.c_[m.p, [[2.0], [2.0]]], m.t)
+    with pytest.raises(ValueError, match=r"node 25 .* belongs to no triangle.*remove_unused_nodes"):
+        NaturalNeighbourBasis(extra)
+    with pytest.raises(ValueError, match=r"belongs to no triangle"):
+        NaturalNeighbourFacetBasis(extra)
+    X = np.full((2, m.nelements, 3), 1 / 3)
+    W = np.full((m.nelements, 3), 1 / 6)
+    with pytest.raises(ValueError, match=r"rule per element.*interpolator"):
+        NaturalNeighbourBasis(m, quadrature=(X, W))
+
+
+def test_nonlinear_form_assembles_over_the_groups():
+    # skfem.autodiff (JAX) linearises an energy; on a natural-neighbour basis it is assembled
+    # group by group. The minimal-surface Jacobian and residual equal the ones of
+    # hand-written forms.
+    pytest.importorskip("jax")
+    import jax.numpy as jnp
+    from skfem.autodiff import NonlinearForm
+    from skfem.autodiff.helpers import dot as jdot
+    from skfem.autodiff.helpers import grad as jgrad
+
+    @NonlinearForm(hessian=True)
+    def energy(u, _):
+        return jnp.sqrt(1.0 + jdot(jgrad(u), jgrad(u)))
+
+    m = MeshTri().refined(3)
+    basis = NaturalNeighbourBasis(m)
+    x = np.sin(np.pi * m.p[0]) * m.p[1]
+    J, F = energy.assemble(basis, x=x)
+
+    @BilinearForm
+    def jacobian(u, v, w):
+        g = grad(w["x"])
+        q = 1 + dot(g, g)
+        return dot(grad(u), grad(v)) / np.sqrt(q) - dot(grad(u), g) * dot(g, grad(v)) / q ** 1.5
+
+    @LinearForm
+    def residual(v, w):
+        g = grad(w["x"])
+        return -dot(g, grad(v)) / np.sqrt(1 + dot(g, g))
+
+    np.testing.assert_allclose(J.toarray(), jacobian.assemble(basis, x=x).toarray(), atol=1e-10)
+    np.testing.assert_allclose(F, residual.assemble(basis, x=x), atol=1e-10)

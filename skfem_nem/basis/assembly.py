@@ -709,8 +709,11 @@ def _whole_linear(form, v, kwargs):
 def restore_scikit_fem_assembly() -> bool:
     """Put scikit-fem's own ``BilinearForm._assemble`` and
     ``LinearForm._assemble`` back (the next natural-neighbour basis built
-    installs the wrappers again). Returns whether they were installed."""
+    installs the wrappers again), and ``NonlinearForm``'s if wrapped
+    (:mod:`skfem_nem.basis.nonlinear`). Returns whether they were installed."""
     global _INSTALLED
+    from . import nonlinear
+    nonlinear.restore()
     if not _INSTALLED:
         return False
     BilinearForm._assemble, LinearForm._assemble = _SCIKIT_FEM

@@ -104,7 +104,15 @@ def gauss_rule(npoints=None, intorder=None, quadrature=None, refdom=RefTri):
     ``quadrature``; default order 2 (the 3-point rule on triangles)."""
     if quadrature is not None:
         X, W = quadrature
-        return np.asarray(X, dtype=float), np.asarray(W, dtype=float)
+        X, W = np.asarray(X, dtype=float), np.asarray(W, dtype=float)
+        if X.ndim != 2 or W.ndim != 1:
+            raise ValueError(
+                f"quadrature=(X, W) must be one rule on the reference cell, X (dim, nq) and W "
+                f"(nq,); got X {X.shape}, W {W.shape}: a rule per element (as "
+                f"skfem.supermeshing.elementwise_quadrature gives) is not supported. To "
+                f"carry a natural-neighbour field y to another mesh, project its values: "
+                f"other_basis.project(nem_basis.interpolator(y))")
+        return X, W
     if npoints is not None:
         if refdom is not RefTri:
             raise ValueError("npoints chooses a triangle rule; on tetrahedra pass intorder "

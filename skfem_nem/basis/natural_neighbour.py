@@ -33,14 +33,15 @@ from skfem import MeshTet, MeshTri
 from skfem.assembly.basis import AbstractBasis, FacetBasis
 from skfem.element import DiscreteField, Element, ElementTetP1, ElementTriP1, ElementVector
 
-from . import assembly, plotting
+from . import assembly, nonlinear, plotting
 from ..coordinates import natural_neighbour_coordinates
-from ..geometry.meshes import adopt, outside_domain
+from ..geometry.meshes import adopt
+from .domain import check_used_nodes, into_domain
 from .elements import element_for, gauss_rule, integration_scheme
 from .companions import companion_basis, is_natural_neighbour, refuse_keywords
 from .plotting import DEFAULT_NREFS, refined_values, visuals_call
-from .projection import (l2_project, normalize_elements, normalize_facets, positions_in,
-                         projection_dofs, stencil_dofs, value_dofs)
+from .projection import (field_values, l2_project, normalize_elements, normalize_facets,
+                         positions_in, projection_dofs, stencil_dofs)
 from .stencils import fill_group, stencil_union
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
@@ -138,11 +139,26 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
     def _coordinates(self, pts, gradient=False, hint=None, undefined="nan"):
         """Coordinates (and gradients) at the (m, dim) points pts."""
         kw = {}
-        if self.method == "area" and hint is not None:
+        if self.method == "area" and hint is not None and self._hints_valid():
             kw["hint"] = hint
+        if self.mesh.dim() == 2:
+            # points on the boundary that round-off put a few ulps outside the domain
+            pts, _ = into_domain(self.mesh, pts)
         return natural_neighbour_coordinates(
             self.triangulation, pts, gradient=gradient, kind=self.coordinates,
             undefined=undefined, method=self.method, **kw)
+
+    def _hints_valid(self) -> bool:
+        """Are the mesh's triangles those of the triangulation, one for one (so that a
+        mesh triangle is a valid start of the point location)? Not for a mesh that is
+        not Delaunay (refined, smoothed, imported), whose nodes were triangulated anew."""
+        ok = self.__dict__.get("_hints_ok")
+        if ok is None:
+            T = getattr(self.triangulation, "triangles", None)
+            ok = T is not None and T.shape == self.mesh.t.T.shape and bool(
+                np.array_equal(np.sort(T, axis=1), np.sort(self.mesh.t.T, axis=1)))
+            self._hints_ok = ok
+        return ok
 
     def _build(self, x, hint):
         """Coordinates at the (dim, ne, nq) points x and their stencil groups."""
@@ -180,6 +196,7 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         on their pattern; the stencils follow. Forms on the basis are
         assembled from these from now on (:mod:`skfem_nem.basis.assembly`)."""
         assembly.install()
+        nonlinear.install()
         plotting.install(NaturalNeighbourBasis, NaturalNeighbourFacetBasis)
         # values_matrix: (ne * nq, N) CSR of the functions' values at the points;
         # gradient_entries: (dim, nnz) their gradients on that same sparsity pattern
@@ -255,7 +272,8 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
     def Nbfun(self):
         raise AttributeError(
             "a natural-neighbour basis has no single number of local functions; its "
-            "groups do (basis.groups[k].Nbfun)")
+            "groups do (basis.groups[k].Nbfun); for skfem.autodiff's NonlinearForm, import "
+            "skfem.autodiff before building the basis")
 
     @Nbfun.setter
     def Nbfun(self, value):
@@ -416,6 +434,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
                  elements=None, mapping=None, dofs=None, disable_doflocs: bool = False):
         refuse_keywords("NaturalNeighbourBasis", mapping=mapping, dofs=dofs)
         elem = element_for(mesh, elem, "NaturalNeighbourBasis")
+        check_used_nodes(mesh, "NaturalNeighbourBasis")
         self.method = _check_method(mesh, coordinates, method)
         self.integration = integration_scheme(integration, npoints, intorder, quadrature)
         self.triangulation = adopt(mesh, self.method)
@@ -511,7 +530,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         if x.ndim != 2 or x.shape[0] != self.mesh.dim():
             raise ValueError(f"points must have shape ({self.mesh.dim()}, m), got {x.shape}")
         if self.mesh.dim() == 2:
-            out = outside_domain(self.mesh, x.T)
+            _, out = into_domain(self.mesh, x.T)
             if out.size:
                 raise ValueError(f"point {out[0]} at {x[:, out[0]].tolist()} is outside the "
                                  f"domain of the mesh ({out.size} such point(s))")
@@ -621,6 +640,7 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
                  disable_doflocs: bool = False):
         refuse_keywords("NaturalNeighbourFacetBasis", mapping=mapping, dofs=dofs)
         elem = element_for(mesh, elem, "NaturalNeighbourFacetBasis")
+        check_used_nodes(mesh, "NaturalNeighbourFacetBasis")
         self.method = _check_method(mesh, coordinates, method)
         # (the facet rule serves both schemes: values and smoothed gradients)
         self.integration = integration = integration_scheme(integration)
@@ -647,15 +667,32 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
     def project(self, interp, facets=None, dtype=None) -> ndarray:
         """L2 projection of ``interp`` (callable of x, DiscreteField, array or tuple of
         components at the facet quadrature points, or a number) on the basis' facets, as
-        scikit-fem's ``FacetBasis.project``: the dofs kept are those of the functions
-        that are non-zero on the facets (on ``facets``, a subset of the basis' facets, if
-        given); the others are zero. On boundary facets those are the facets' own nodes;
-        the facets must determine their functions (interior facets whose stencils overlap
-        may not)."""
+        scikit-fem's ``FacetBasis.project``: the dofs of the facets' own nodes (of
+        ``facets``, a subset of the basis' facets, if given) are the L2 projection of
+        ``interp`` onto the linear hats of those nodes along the facets; the other dofs
+        are zero.
+
+        On boundary facets the natural-neighbour functions are those hats (their values
+        on a boundary facet are the facet's linear 1D weights), so this is the projection
+        onto the basis' own traces, and equals P1's. On interior facets (an interface,
+        the surface of a conductor) functions of nodes off the facets are non-zero too and
+        the traces of all of them are linearly dependent; the facets' nodal values are
+        then the ones P1 would give, which is what Dirichlet conditions need."""
         pos = np.arange(self.nelems)
         if facets is not None:
             pos = positions_in(self.find, normalize_facets(self.mesh, facets), "facet")
-        return l2_project(self, interp, value_dofs(self, pos), dtype)
+        if dtype is not None and not np.issubdtype(np.dtype(dtype), np.floating):
+            raise ValueError(f"project(dtype={np.dtype(dtype)}): natural-neighbour "
+                             f"projections are real")
+        f = field_values(self, interp)
+        p1 = ElementTetP1() if isinstance(self.mesh, MeshTet) else ElementTriP1()
+        if isinstance(self.elem, ElementVector):
+            p1 = ElementVector(p1, self.elem.dim)
+        trace = companion_basis(self, p1)
+        y = trace.project(DiscreteField(f), facets=self.find[pos])
+        out = np.zeros(self.N)
+        out[self.dofs.nodal_dofs] = y[trace.nodal_dofs]
+        return out if dtype is None else out.astype(dtype)
 
     def with_element(self, elem: Element):
         """The same facets and quadrature with another element: natural-neighbour, or a

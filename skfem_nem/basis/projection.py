@@ -18,7 +18,7 @@ import numpy as np
 from skfem.element import DiscreteField
 
 __all__ = ["normalize_elements", "normalize_facets", "positions_in", "stencil_dofs",
-           "value_dofs", "projection_dofs", "l2_project"]
+           "value_dofs", "projection_dofs", "field_values", "l2_project"]
 
 
 def _checked(idx, n, what):
@@ -116,7 +116,7 @@ def projection_dofs(basis, positions) -> np.ndarray:
                           value_dofs(basis, np.arange(basis.nelems)))
 
 
-def _values(basis, interp):
+def field_values(basis, interp):
     """``interp`` (callable of the global quadrature points, DiscreteField, array, tuple or
     list of components, or a number) as an array (..., nelems, nq)."""
     if callable(interp):
@@ -145,7 +145,7 @@ def l2_project(basis, interp, keep=None, dtype=None) -> np.ndarray:
     if dtype is not None and not np.issubdtype(np.dtype(dtype), np.floating):
         raise ValueError(f"project(dtype={np.dtype(dtype)}): natural-neighbour "
                          f"projections are real")
-    f = _values(basis, interp)
+    f = field_values(basis, interp)
     M = BilinearForm(lambda u, v, w: inner(u, v)).assemble(basis)
     b = LinearForm(lambda v, w: inner(w["f"], v)).assemble(basis, f=DiscreteField(f))
     x = solve(M, b) if keep is None else solve(*condense(M, b, I=keep))

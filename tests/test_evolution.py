@@ -285,3 +285,23 @@ def test_more_than_eight_substeps():
     r = lm.advance(jitter(2), 1.0, max_substeps=12)
     assert r["substeps"] == 12
     check_mesh(lm, lm.triangulation.npoints)
+
+
+def test_predictor_overshooting_a_wall_sees_the_velocity_on_the_wall():
+    """Flow towards the bottom wall, v = (0, -k y): with k dt = 1.5 the Euler predictor
+    puts the nodes near the wall below it, the trapezoidal corrector brings them back
+    inside (y (1 - k dt / 2) / (1 + k dt / 2)). A velocity defined only inside the box
+    (as a natural-neighbour interpolant is) is evaluated on the wall for the overshoot."""
+    p = np.r_[square_nodes(200, 10, 1)]
+    lm = LagrangianMesh(p)
+    k, dt = 1.5, 1.0
+
+    def inside_only(x):
+        if (x < 0).any() or (x > 1).any():
+            raise ValueError("outside the box")
+        return np.c_[0 * x[:, 0], -k * x[:, 1]]
+
+    y0 = lm.nodes[:, 1].copy()
+    lm.advance(inside_only, dt, tol=1e-13, maxiter=120)
+    interior = (y0 > 0) & (y0 < 1) & (lm.nodes[:, 0] > 0) & (lm.nodes[:, 0] < 1)
+    np.testing.assert_allclose(lm.nodes[interior, 1], y0[interior] * 0.25 / 1.75, rtol=1e-9)

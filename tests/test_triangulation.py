@@ -319,3 +319,24 @@ def test_arrays_are_c_ordered_whatever_the_input_layout():
             assert a.flags.c_contiguous
         tri.move_nodes(np.asfortranarray(tri.nodes + 0.0))
         assert tri.nodes.flags.c_contiguous
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(4, 30))
+def test_batch_queries_on_a_side_straight_to_round_off(seed, k):
+    """Nodes of a side x = 0 computed as r cos(pi / 2) (as a mapped mesh has them: on a
+    line to round-off only, so the hull has reflex vertices by an ulp): points between
+    the side's nodes, in one sorted batch, get the coordinates they get when queried
+    alone (a walk from the previous point stopped at a hull edge they are beyond by an
+    ulp, and the retry walked from there again), and those reproduce y along the side."""
+    from skfem_nem import sibson_coordinates
+    rng = np.random.default_rng(seed)
+    y = np.sort(rng.uniform(1, 2, k))
+    side = np.c_[y * np.cos(np.pi / 2), y]
+    p = np.r_[side, [[1, 1], [1, 2.1], [0.5, 0.9]], rng.uniform([0.1, 1.1], [0.9, 1.9], (20, 2))]
+    tri = Triangulation(p)
+    q = 0.5 * (side[1:] + side[:-1])
+    batch = sibson_coordinates(tri, q).toarray()
+    alone = np.vstack([sibson_coordinates(tri, x[None]).toarray() for x in q])
+    np.testing.assert_allclose(batch, alone, atol=1e-12)
+    np.testing.assert_allclose(batch @ p[:, 1], q[:, 1], atol=1e-12)

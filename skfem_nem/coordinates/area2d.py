@@ -326,7 +326,7 @@ def _query_block(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad
 
     ``start`` (m,): the triangle each walk starts from, or empty: then the
     bucket grid ``grid`` (nc * nc,) over the box ``glo`` (2,) + ``gspan`` (2,)
-    gives one (see :meth:`Triangulation.seed_grid`); consecutive queries also
+    gives one (see :meth:`Triangulation.seed_grid`) and consecutive queries also
     try the previous query's triangle. ``CC``: :attr:`Triangulation.circumcircles`.
     ``general``: find cavities with :func:`grow_cavity` (any triangulation)
     instead of the traversal :func:`conflict_cycle` (Delaunay
@@ -391,8 +391,10 @@ def _query_block(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad
         if t0 < 0:
             t0 = 0
         # start the walk from the seed or from the previous query's
-        # triangle, whichever is nearer (sorted queries walk ~1 step)
-        if prev >= 0:
+        # triangle, whichever is nearer (sorted queries walk ~1 step); a given
+        # start is kept (on a hull convex only to round-off, a walk from
+        # elsewhere may stop at a hull edge the point is beyond by an ulp)
+        if prev >= 0 and not start.shape[0]:
             a = T[t0, 0]
             b = T[prev, 0]
             da = (P[a, 0] - qx) ** 2 + (P[a, 1] - qy) ** 2
@@ -558,9 +560,11 @@ _ROOM = 12
 _BLOCK = 1024
 
 
-def _snap_to_hull(tri, q, rows, hull_tol):
+def _snap_to_hull(tri, q, rows, hull_tol, tri_out):
     """Move the points q[rows] that are outside the hull by round-off onto the
-    nearest hull edge, in place; returns the rows that were moved."""
+    nearest hull edge, in place, with ``tri_out`` their triangles (where a walk
+    from any triangle finds them: on a hull convex only to round-off, the walk
+    from the hull edge they were outside of need not); returns the rows moved."""
     if not rows.size or hull_tol <= 0:
         return rows[:0]
     P = tri.nodes
@@ -581,7 +585,9 @@ def _snap_to_hull(tri, q, rows, hull_tol):
         x = proj[k]
         inward = np.array([-ab[k, 1], ab[k, 0]]) / np.sqrt(L2[k])
         for _ in range(8):
-            if tri.locate(x[None])[0] >= 0:
+            t = tri.locate(x[None])[0]
+            if t >= 0:
+                tri_out[r] = t
                 break
             x = x + inward * np.spacing(np.abs(x).max() + 1e-300)
         q[r] = x
@@ -651,7 +657,7 @@ def _rows_with_retries(tri, q, start, ikind, gradient, chunk, status, tri_out, h
     more room. Fills ``status`` and ``tri_out``."""
     rows = _run(tri, q, start, ikind, gradient, False, _CAP, _ROOM, chunk, status, tri_out)
     # points outside by round-off only: move them onto the hull and redo
-    redo = _snap_to_hull(tri, q, np.flatnonzero(status == OUTSIDE), hull_tol)
+    redo = _snap_to_hull(tri, q, np.flatnonzero(status == OUTSIDE), hull_tol, tri_out)
     # rare: more natural neighbours than the buffers hold (co-circular
     # clusters, or a block of queries with more than _ROOM on average), or a
     # cavity that is not a tree (a triangulation that is not Delaunay): redo

@@ -116,7 +116,13 @@ class LagrangianStep:
     """
 
     def _velocity(self, velocity, x):
-        return evaluate_velocity(velocity, x, self._on_wall if self.walls == "box" else None)
+        if self.walls != "box":
+            return evaluate_velocity(velocity, x)
+        # the velocity is defined in the box: a predictor that overshoots a wall (a node
+        # pressed towards it) is evaluated on the wall; the positions themselves are
+        # checked by keep_in_box
+        lo, hi = self._box
+        return evaluate_velocity(velocity, np.clip(x, lo, hi), self._on_wall)
 
     def step_transaction(self, velocity, dt, tol, maxiter, max_substeps=1, inject=None,
                          **options) -> dict:

@@ -369,10 +369,12 @@ class NodeRemoval:
         than that);
         and a node ending two segments that meet at less than ``fold_angle`` degrees or
         are both shorter than ``fraction`` of their reference length, by merging them.
-        Nodes off segments go first, the most crowded first; no two neighbours go in
-        one call (a cluster keeps one node); a segment node goes only if its segments
-        can merge (:meth:`segment_merge`). Returns ``{"removed": nodes off segments
-        removed, "merged": segment nodes removed, "node_map": old -> new index}``."""
+        Folds go first, the sharpest first (one about to close cannot wait for the next
+        step, in which it may close through itself), then nodes off segments, the most
+        crowded first; no two neighbours go in one call (a cluster keeps one node); a
+        segment node goes only if its segments can merge (:meth:`segment_merge`). Returns
+        ``{"removed": nodes off segments removed, "merged": segment nodes removed,
+        "node_map": old -> new index}``."""
         order = self._merge_candidates(fraction, fold_angle)
         if not order.size:
             return {"removed": 0, "merged": 0, "node_map": np.arange(self.triangulation.npoints)}
@@ -407,8 +409,9 @@ class NodeRemoval:
         return {"removed": removed, "merged": merged, "node_map": new}
 
     def _merge_candidates(self, fraction, fold_angle):
-        """Nodes to try, in order: crowded nodes off segments, crowded segment nodes
-        (each by spacing ratio), then folds (by angle)."""
+        """Nodes to try, in order: folds (by angle: one about to close cannot wait for
+        the next step), then crowded nodes off segments and crowded segment nodes (each
+        by spacing ratio)."""
         tri = self.triangulation
         P, T = self.nodes, self.triangles
         area = 0.5 * np.abs((P[T[:, 1], 0] - P[T[:, 0], 0]) * (P[T[:, 2], 1] - P[T[:, 0], 1])
@@ -459,5 +462,5 @@ class NodeRemoval:
             ang = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
             if ang < fold_angle or short[rows].all():
                 fold.append((ang, v))
-        fold = [v for _, v in sorted(fold) if v not in set(crowded.tolist())]
-        return np.r_[crowded, np.array(fold, dtype=np.int64)]
+        fold = np.array([v for _, v in sorted(fold)], dtype=np.int64)
+        return np.r_[fold, crowded[~np.isin(crowded, fold)]]

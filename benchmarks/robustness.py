@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import csv
 import itertools
+import multiprocessing
 import time
 import traceback
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -90,6 +91,21 @@ def _safe_run(setting, end_time, out):
         return {k: row.get(k, "") for k in COLUMNS}
 
 
+def _results(todo, args):
+    """The rows of the runs ``todo`` as they finish: in this process for one job, else
+    in fresh (spawned) processes: forking a process whose numba threads are running
+    is not safe."""
+    if args.jobs == 1:
+        for s in todo:
+            yield _safe_run(s, args.end_time, args.out)
+        return
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(args.jobs, mp_context=ctx) as pool:
+        futures = [pool.submit(_safe_run, s, args.end_time, args.out) for s in todo]
+        for fut in as_completed(futures):
+            yield fut.result()
+
+
 def read_done(path: Path) -> dict:
     """Rows of the runs already in ``path`` (resuming a study), by name."""
     if not path.exists():
@@ -150,13 +166,11 @@ def main(argv=None):
     todo = [s for s in settings(args) if name_of(s) not in done]
     rows = [done[name_of(s)] for s in settings(args) if name_of(s) in done]
     new_file = not log.exists()
-    with open(log, "a", newline="") as fh, ProcessPoolExecutor(args.jobs) as pool:
+    with open(log, "a", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=COLUMNS)
         if new_file:
             w.writeheader()
-        futures = [pool.submit(_safe_run, s, args.end_time, str(out)) for s in todo]
-        for k, fut in enumerate(as_completed(futures), 1):
-            row = fut.result()
+        for k, row in enumerate(_results(todo, args), 1):
             w.writerow({c: row.get(c, "") for c in COLUMNS})
             fh.flush()
             rows.append(row)

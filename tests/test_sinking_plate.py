@@ -399,7 +399,8 @@ def test_interface_segments_under_the_plate_are_released(tmp_path):
     the outline's spacing 0.025): the interface segments under it are released at the
     first step (counted in the CSV), those farther away stay segments, and the outline
     stays a closed chain of segments."""
-    from skfem_nem.apps.sinking_plate import FILM_FRACTION, segment_distances
+    from skfem_nem.apps.sinking_plate import FILM_FRACTION
+    from skfem_nem.geometry.polylines import segment_distances
     cfg = PlateConfig(nodes=300, plate_z=0.805, end_time=4.0, max_dt=2.0,
                       output_interval=100.0, checkpoint_every=100)
     sim = SinkingPlate(cfg, tmp_path)
@@ -416,7 +417,7 @@ def test_interface_segments_under_the_plate_are_released(tmp_path):
 
 
 def test_segment_distances():
-    from skfem_nem.apps.sinking_plate import segment_distances
+    from skfem_nem.geometry.polylines import segment_distances
     a, b = np.array([[0, 0.], [0, 0], [0.5, -1]]), np.array([[1, 0.], [1, 1], [0.5, 0.5]])
     c, d = np.array([[0, 1.], [2, 0]]), np.array([[1, 1.], [3, 0]])
     # apart (1), touching at an end (0), and crossing nothing but 0.5 below the first

@@ -424,3 +424,22 @@ def test_segment_distances():
     np.testing.assert_allclose(segment_distances(a, b, c, d), [1.0, 0.0, 0.5])
     cross = segment_distances(np.array([[0.5, 0.5]]), np.array([[0.5, 1.5]]), c, d)
     assert cross[0] == 0.0
+
+
+def test_time_step_anticipates_a_wall(tmp_path):
+    """A node moving towards a wall moves at most WALL_FRACTION of its distance to it
+    per step; moving away, or along the wall, only its spacing limits the step."""
+    from skfem_nem.apps.sinking_plate import WALL_FRACTION
+    sim = SinkingPlate(PlateConfig(nodes=300, max_dt=1e9, cfl=1.0), tmp_path)
+    P = sim.lm.nodes
+    sim.lm.node_map = np.arange(P.shape[0])
+    inner = np.flatnonzero((P[:, 1] > 0.01) & (P[:, 1] < 0.99) & (P[:, 0] > 0.01)
+                           & (P[:, 0] < 9.99))
+    k = inner[np.argmin(P[inner, 1])]                  # the interior node nearest the bottom
+    v = np.zeros_like(P)
+    v[k] = [0.0, -1e-3]
+    away = sim._stable_dt(-v)                          # the spacing's limit only
+    assert WALL_FRACTION * P[k, 1] / 1e-3 < away
+    assert sim._stable_dt(v) == pytest.approx(WALL_FRACTION * P[k, 1] / 1e-3, rel=1e-12)
+    v[k] = [1e-3, 0.0]
+    assert sim._stable_dt(v) == pytest.approx(away, rel=1e-12)

@@ -289,6 +289,9 @@ def _config_from(data: Dict) -> PlateConfig:
 #: node spacing is released (``SinkingPlate._release_film``): a film thinner than a
 #: quarter of the spacing has no node inside and closes within a few steps
 FILM_FRACTION = 0.25
+#: a node approaching a wall moves at most this fraction of its distance to it per step
+#: (the distance shrinks geometrically, the step stays bounded: no collision in a step)
+WALL_FRACTION = 0.5
 
 
 def _polygon_area_centroid(P):
@@ -584,14 +587,20 @@ class SinkingPlate:
     def _stable_dt(self, v: np.ndarray) -> float:
         """Largest dt that moves no node by more than ``cfl`` times its local
         spacing (the square root of its share of the triangle areas; slivers do not limit
-        the step: flips repair them, and inverting moves are substepped)."""
+        the step: flips repair them, and inverting moves are substepped), nor by more
+        than :data:`WALL_FRACTION` of its distance to a wall it approaches (a node pressed
+        towards a wall by a plate would otherwise pass it within a step)."""
         c = self.cfg
         new = self.lm.node_map[:v.shape[0]]  # the nodes of v still in the mesh, now
         h = node_spacing(self.lm.nodes, self.lm.triangles)[new[new >= 0]]
-        speed = np.hypot(v[new >= 0, 0], v[new >= 0, 1])
-        with np.errstate(divide="ignore"):
-            lim = c.cfl * h / speed
-        return float(min(c.max_dt, lim.min()))
+        v = v[new >= 0]
+        x = self.lm.nodes[new[new >= 0]]
+        gap = np.c_[x, c.width - x[:, 0], c.height - x[:, 1]]      # left, bottom, right, top
+        approach = np.c_[-v, v]                                        # speed towards each
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lim = c.cfl * h / np.hypot(v[:, 0], v[:, 1])
+            wall = np.where((gap > 0) & (approach > 0), WALL_FRACTION * gap / approach, np.inf)
+        return float(min(c.max_dt, lim.min(), wall.min()))
 
     # -- outputs ----------------------------------------------------------------
     def write_output(self, spaces=None, r=None, plate=None) -> str:

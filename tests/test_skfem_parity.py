@@ -20,6 +20,7 @@ from skfem_nem import ElementNaturalNeighbour, NaturalNeighbourBasis, NaturalNei
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from helpers import laplace, mass
 
 #: round-off of sums over a few hundred quadrature points
 ROUNDOFF = 1e-12
@@ -218,14 +219,6 @@ def test_vector_facet_project(mesh):
 # subdomain bases
 # --------------------------------------------------------------------------
 
-@BilinearForm
-def laplace(u, v, w):
-    return dot(grad(u), grad(v))
-
-
-@BilinearForm
-def mass(u, v, w):
-    return u * v
 
 
 @Functional

@@ -246,9 +246,18 @@ class Triangulation:
         d = Delaunay(p[kept] - ctr)
         T, N = Triangulation._checked(p[kept], d.simplices, d.neighbors)
         if T is None:
-            raise ValueError("Qhull could not triangulate the nodes even after thinning "
-                             "clusters of nearly coincident nodes")
+            # folds Qhull makes along hull runs collinear to round-off: a fan over the
+            # exact hull's vertices; the caller inserts every other node exactly
+            return Triangulation._hull_fan(p)
         return np.ascontiguousarray(kept[T]), N
+
+    @staticmethod
+    def _hull_fan(p):
+        """Triangles fanning out from one vertex of the exact convex hull (strictly convex
+        vertices only, counter-clockwise), and their neighbours."""
+        h = exact_hull(p, np.lexsort((p[:, 1], p[:, 0])))
+        T = np.ascontiguousarray(np.c_[np.full(h.size - 2, h[0]), h[1:-1], h[2:]])
+        return T, adjacency(T, p.shape[0])
 
     @classmethod
     def from_triangles(cls, nodes, triangles, make_delaunay: bool = True) -> "Triangulation":

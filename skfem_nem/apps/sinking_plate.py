@@ -47,7 +47,7 @@ import numpy as np
 from ..evolution.lagrangian import LagrangianMesh
 from ..coordinates import sibson_coordinates
 from ..geometry.nodesets import box_nodes, polyline_nodes
-from ..geometry.polylines import segment_distances
+from ..geometry.polylines import segment_distances, segments_cross
 from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
 from ..models.rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
 from ..models.stokes import outline_flux, stokes_spaces
@@ -306,17 +306,10 @@ def _self_intersections(P) -> int:
     """Number of pairs of non-adjacent edges of the closed polygon P (k, 2) that cross."""
     Q = np.roll(P, -1, axis=0)
     k = P.shape[0]
-
-    def orient(a, b, c):
-        return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
-                       - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
-
     count = 0
     for i in range(k - 2):
         j = np.arange(i + 2, k if i else k - 1)
-        a, b, c, d = P[i], Q[i], P[j], Q[j]
-        count += int(((orient(a, b, c) * orient(a, b, d) < 0)
-                      & (orient(c, d, a) * orient(c, d, b) < 0)).sum())
+        count += int(segments_cross(P[i], Q[i], P[j], Q[j]).sum())
     return count
 
 

@@ -187,7 +187,7 @@ class NodeRemoval:
         try:
             alive = np.ones(n, dtype=bool)
             for v in idx.tolist():
-                if self._on_wall[v].all() or not self.triangulation.removable(v):
+                if not self.triangulation.removable(v):
                     raise ValueError(f"node {v} is a corner of the hull and cannot be "
                                      f"removed")
                 merge = self.segment_merge(v, alive)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["segment_distances"]
+__all__ = ["segment_distances", "segments_cross"]
 
 
 def _point_segment_distance(x, a, b):
@@ -24,11 +24,17 @@ def segment_distances(a, b, c, d) -> np.ndarray:
     dist = np.minimum(_point_segment_distance(a, c, d), _point_segment_distance(b, c, d))
     dist = np.minimum(dist, _point_segment_distance(c, a, b).T)
     dist = np.minimum(dist, _point_segment_distance(d, a, b).T)
-
-    def orient(p, q, r):
-        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
-                       - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
-
-    A, B, C, D = a[:, None], b[:, None], c[None], d[None]
-    cross = (orient(A, B, C) * orient(A, B, D) < 0) & (orient(C, D, A) * orient(C, D, B) < 0)
+    cross = segments_cross(a[:, None], b[:, None], c[None], d[None])
     return np.where(cross, 0.0, dist).min(axis=1)
+
+
+def _orient_sign(p, q, r):
+    return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
+                   - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+
+
+def segments_cross(a, b, c, d) -> np.ndarray:
+    """Whether the segments a-b and c-d (arrays of points (..., 2), broadcast) cross
+    properly: each has the other's end points strictly on opposite sides."""
+    return ((_orient_sign(a, b, c) * _orient_sign(a, b, d) < 0)
+            & (_orient_sign(c, d, a) * _orient_sign(c, d, b) < 0))

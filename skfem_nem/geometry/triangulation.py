@@ -558,7 +558,7 @@ class Triangulation:
     def star(self, v: int) -> np.ndarray:
         """The triangles around the interior node v, counter-clockwise (``ValueError``
         if v is on the hull: its star is not closed; see :meth:`fan`)."""
-        star, closed = star_of(self.triangles, self.neighbours, v, self._first_with(v))
+        star, closed = self._around(v)
         if not closed:
             raise ValueError(f"node {v} is on the hull: its star is not closed")
         return star
@@ -574,20 +574,26 @@ class Triangulation:
             raise ValueError(f"node {v} is in no triangle")
         return int(hit[0])
 
+    def _around(self, v: int):
+        """``(triangles, closed)``: v's star, or its fan if v is on the hull."""
+        t0 = self._first_with(v)
+        star, closed = star_of(self.triangles, self.neighbours, v, t0)
+        return (star, True) if closed else (fan_of(self.triangles, self.neighbours, v, t0),
+                                            False)
+
+    def _straight(self, v: int, fan) -> bool:
+        """Whether the hull node v lies exactly between the two ends of its ``fan``."""
+        T, P = self.triangles, self.nodes
+        a = int(T[fan[0], (np.flatnonzero(T[fan[0]] == v)[0] + 1) % 3])
+        b = int(T[fan[-1], (np.flatnonzero(T[fan[-1]] == v)[0] + 2) % 3])
+        return orient2d(*P[a], *P[v], *P[b]) == 0 and np.dot(P[a] - P[v], P[b] - P[v]) < 0
+
     def removable(self, v: int) -> bool:
         """Whether :meth:`remove_vertex` can take node v out: an interior node, or a
         hull node exactly between its two hull neighbours on a straight line (a wall
         node that is not a corner), so that the hull stays the same."""
-        star, closed = star_of(self.triangles, self.neighbours, v, self._first_with(v))
-        if closed:
-            return True
-        fan = self.fan(v)
-        T, P = self.triangles, self.nodes
-        a = int(T[fan[0], (np.flatnonzero(T[fan[0]] == v)[0] + 1) % 3])
-        b = int(T[fan[-1], (np.flatnonzero(T[fan[-1]] == v)[0] + 2) % 3])
-        if orient2d(*P[a], *P[v], *P[b]) != 0:
-            return False
-        return bool(np.dot(P[a] - P[v], P[b] - P[v]) < 0)
+        tris, closed = self._around(v)
+        return bool(closed or self._straight(v, tris))
 
     def remove_vertex(self, v: int, star=None):
         """Take node v out of the triangulation (it stays in :attr:`nodes`, in no
@@ -601,16 +607,14 @@ class Triangulation:
         that disappear; apply the same moves to data stored per triangle, then cut it
         to :attr:`ntriangles` rows.
         """
-        if not self.removable(v):
-            raise ValueError(f"node {v} is a corner of the hull: it cannot be removed")
-        if star is None:
-            closed = star_of(self.triangles, self.neighbours, v, self._first_with(v))[1]
-            star = self.star(v) if closed else self.fan(v)
+        star = self._around(v)[0] if star is None else star
         T, N = self.triangles, self.neighbours
         at = [int(np.flatnonzero(T[t] == v)[0]) for t in star]
         link = [int(T[t, (j + 1) % 3]) for t, j in zip(star, at)]
         outer = [int(N[t, j]) for t, j in zip(star, at)]
         if N[star[-1], (at[-1] + 1) % 3] < 0:  # a fan: its last node, the hull edge back
+            if not self._straight(v, star):
+                raise ValueError(f"node {v} is a corner of the hull: it cannot be removed")
             link.append(int(T[star[-1], (at[-1] + 2) % 3]))
             outer.append(-1)
         slots = star[:len(link) - 2]

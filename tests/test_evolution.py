@@ -305,3 +305,29 @@ def test_predictor_overshooting_a_wall_sees_the_velocity_on_the_wall():
     lm.advance(inside_only, dt, tol=1e-13, maxiter=120)
     interior = (y0 > 0) & (y0 < 1) & (lm.nodes[:, 0] > 0) & (lm.nodes[:, 0] < 1)
     np.testing.assert_allclose(lm.nodes[interior, 1], y0[interior] * 0.25 / 1.75, rtol=1e-9)
+
+
+def test_a_node_carried_to_a_wall_stops_short_of_it():
+    """A node whose velocity would carry it through the bottom wall (by less than its
+    distance to it) stops at WALL_REACH of its distance; nodes moving away or along the
+    wall move freely, and the stop is counted. Overshooting by more raises."""
+    from skfem_nem.evolution.stepping import WALL_REACH
+    p = jittered_square(200)
+    lm = LagrangianMesh(p)
+    k = int(np.argmin(np.where(lm.on_walls.any(axis=1), np.inf, lm.nodes[:, 1])))
+    d = lm.nodes[k, 1]
+
+    def down(x, speed=1.5 * d):
+        v = np.zeros_like(x)
+        v[np.abs(x[:, 0] - p[k, 0]) < 1e-9, 1] = -speed  # node k alone
+        return v
+
+    x0 = lm.nodes.copy()
+    rep = lm.advance(down, 1.0)
+    assert rep["stopped_at_walls"] == 1
+    assert lm.nodes[k, 1] == pytest.approx((1 - WALL_REACH) * d, rel=1e-12)
+    others = np.arange(len(x0)) != k
+    np.testing.assert_array_equal(lm.nodes[others], x0[others])
+    assert np.all(lm.triangulation.orientation() > 0)
+    with pytest.raises(ValueError, match=f"first node {k} .*reduce dt"):
+        lm.advance(lambda x: down(x, speed=10 * d), 1.0)

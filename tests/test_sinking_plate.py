@@ -443,3 +443,46 @@ def test_time_step_anticipates_a_wall(tmp_path):
     assert sim._stable_dt(v) == pytest.approx(WALL_FRACTION * P[k, 1] / 1e-3, rel=1e-12)
     v[k] = [1e-3, 0.0]
     assert sim._stable_dt(v) == pytest.approx(away, rel=1e-12)
+
+
+def test_time_step_anticipates_a_closing_film(tmp_path):
+    """The interface pushed towards the plate's outline: the step keeps at least
+    1 - WALL_FRACTION of the film (and not much more: the step is halved only as often as
+    needed); pushed away, or moving with the plate, the film does not limit the step."""
+    from skfem_nem.apps.sinking_plate import WALL_FRACTION
+    from skfem_nem.geometry.polylines import segment_distances
+    sim = SinkingPlate(PlateConfig(nodes=300, plate_z=0.82, max_dt=1e9, cfl=1.0), tmp_path)
+    P, tri, o = sim.lm.nodes, sim.lm.triangulation, sim.outline
+    sim.lm.node_map = np.arange(P.shape[0])
+    iface = tri.segments[tri.segment_source >= sim.outline_segments]
+
+    def film(Q):
+        return segment_distances(Q[iface[:, 0]], Q[iface[:, 1]], Q[o], Q[np.roll(o, -1)]).min()
+
+    v = np.zeros_like(P)
+    v[np.unique(iface), 1] = 1e-3                       # the interface moves up, to the plate
+    closing, away = sim._stable_dt(v), sim._stable_dt(-v)
+    assert closing < 0.5 * away
+    assert film(P + closing * v) >= (1 - WALL_FRACTION) * film(P)
+    assert film(P + 2 * closing * v) < (1 - WALL_FRACTION) * film(P)
+    v[:, 1] = 1e-3                                      # everything up: the film stays
+    v[np.isin(np.arange(P.shape[0]), np.unique(iface), invert=True) & (P[:, 1] == 1.0)] = 0
+    assert sim._stable_dt(v) > closing
+
+
+def test_close_segment_pairs_finds_facing_lines_not_neighbours_along_one():
+    """A hairpin polyline (arms 0.1 apart, spacing 0.05) and a line 0.03 above it: the
+    facing pairs are found with their gaps, never two segments a few apart along one line."""
+    from skfem_nem.geometry.polylines import close_segment_pairs
+    x = np.r_[np.linspace(0, 1, 21), np.linspace(1, 0, 21), np.linspace(0, 1, 11)]
+    P = np.c_[x, np.r_[np.zeros(21), np.full(21, 0.1), np.full(11, 0.13)]]
+    S = np.r_[np.c_[np.arange(41), np.arange(1, 42)], np.c_[42 + np.arange(10), 43 + np.arange(10)]]
+    i, j, gap = close_segment_pairs(P, S, 0.11, apart=4)
+    arm = lambda r: np.where(r < 20, 0, np.where(r < 21, 1, np.where(r < 41, 2, 3)))  # noqa: E731
+    pair = {(int(a), int(b)) for a, b in zip(arm(i), arm(j))}
+    assert pair == {(0, 2), (1, 3), (2, 3)}      # (the bend is 0.03 below the line too)
+    assert gap[(arm(i) == 0) & (arm(j) == 2)].min() == pytest.approx(0.1)
+    assert gap[(arm(i) == 2) & (arm(j) == 3)].min() == pytest.approx(0.03)
+    assert gap.max() < 0.11
+    # the segments near the hairpin's bend are within 4 of each other along the line
+    assert not ((np.abs(i - j) <= 4) & (j < 41)).any()

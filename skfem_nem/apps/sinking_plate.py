@@ -48,6 +48,7 @@ from ..evolution.lagrangian import LagrangianMesh
 from ..coordinates import sibson_coordinates
 from ..geometry.nodesets import box_nodes, polyline_nodes
 from ..geometry.polylines import segment_distances, segments_cross
+from .plate_time_step import FILM_FRACTION, WALL_FRACTION, node_spacing, stable_dt  # noqa: F401
 from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
 from ..models.rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
 from ..models.stokes import outline_flux, stokes_spaces
@@ -285,15 +286,6 @@ def _config_from(data: Dict) -> PlateConfig:
 # geometry helpers
 # ---------------------------------------------------------------------------
 
-#: an interface segment closer to the plate's outline than this fraction of the outline's
-#: node spacing is released (``SinkingPlate._release_film``): a film thinner than a
-#: quarter of the spacing has no node inside and closes within a few steps
-FILM_FRACTION = 0.25
-#: a node approaching a wall moves at most this fraction of its distance to it per step
-#: (the distance shrinks geometrically, the step stays bounded: no collision in a step)
-WALL_FRACTION = 0.5
-
-
 def _polygon_area_centroid(P):
     x, y = P[:, 0], P[:, 1]
     xn, yn = np.roll(x, -1), np.roll(y, -1)
@@ -311,18 +303,6 @@ def _self_intersections(P) -> int:
         j = np.arange(i + 2, k if i else k - 1)
         count += int(segments_cross(P[i], Q[i], P[j], Q[j]).sum())
     return count
-
-
-def node_spacing(P: np.ndarray, T: np.ndarray) -> np.ndarray:
-    """(n,) local spacing of each node: the square root of its share (a third)
-    of the areas of its triangles. P (n, 2) nodes, T (nt, 3) triangles."""
-    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
-    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
-                        - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-    share = np.zeros(P.shape[0])
-    for k in range(3):
-        np.add.at(share, T[:, k], area / 3.0)
-    return np.sqrt(share)
 
 
 def initial_nodes(c: PlateConfig):
@@ -386,6 +366,7 @@ class SinkingPlate:
         self.cfg = cfg
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
+        self._closing = None  # a film that closes within any step (_film_dt)
         if _state is not None:
             self.lm, meta = _state
             self.outline = np.asarray(meta["outline"], dtype=np.int64)
@@ -469,6 +450,7 @@ class SinkingPlate:
         raise AssertionError("unreachable")
 
     def _step(self, dt: float) -> dict:
+        self._check_films()
         c = self.cfg
         lm = self.lm
         t0 = _time.perf_counter()
@@ -578,22 +560,18 @@ class SinkingPlate:
         return self.lm.release_segments(rows[gap < h])
 
     def _stable_dt(self, v: np.ndarray) -> float:
-        """Largest dt that moves no node by more than ``cfl`` times its local
-        spacing (the square root of its share of the triangle areas; slivers do not limit
-        the step: flips repair them, and inverting moves are substepped), nor by more
-        than :data:`WALL_FRACTION` of its distance to a wall it approaches (a node pressed
-        towards a wall by a plate would otherwise pass it within a step)."""
-        c = self.cfg
-        new = self.lm.node_map[:v.shape[0]]  # the nodes of v still in the mesh, now
-        h = node_spacing(self.lm.nodes, self.lm.triangles)[new[new >= 0]]
-        v = v[new >= 0]
-        x = self.lm.nodes[new[new >= 0]]
-        gap = np.c_[x, c.width - x[:, 0], c.height - x[:, 1]]      # left, bottom, right, top
-        approach = np.c_[-v, v]                                        # speed towards each
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lim = c.cfl * h / np.hypot(v[:, 0], v[:, 1])
-            wall = np.where((gap > 0) & (approach > 0), WALL_FRACTION * gap / approach, np.inf)
-        return float(min(c.max_dt, lim.min(), wall.min()))
+        """The next step's dt from this step's nodal velocities v
+        (:func:`~skfem_nem.apps.plate_time_step.stable_dt`); a film found closing within
+        any step is kept for :meth:`_check_films`."""
+        dt, self._closing = stable_dt(self.lm, v, self.cfg, self.outline_segments)
+        return dt
+
+    def _check_films(self) -> None:
+        """``RuntimeError`` with what :meth:`_stable_dt` found at the end of the last
+        step: a film between two material lines that closes within any step (the plate
+        breaks there); raised before the next step changes anything."""
+        if self._closing is not None:
+            raise RuntimeError(self._closing)
 
     # -- outputs ----------------------------------------------------------------
     def write_output(self, spaces=None, r=None, plate=None) -> str:

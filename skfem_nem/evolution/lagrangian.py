@@ -36,14 +36,13 @@ import tempfile
 from typing import Callable, Dict, Optional
 
 import numpy as np
-from numba import njit
 
-from ..coordinates import sibson_coordinates
-from ..geometry.predicates import orient2d
 from ..geometry.meshes import triangulation_mesh
 from ..geometry.triangulation import Triangulation
+from .injection import NodeInjection
 from .merging import NodeRemoval
-from .remap import child_values, remap_average, remap_conservative
+from .quality import cross, inverted, min_angles
+from .remap import remap_average, remap_conservative
 from .stepping import LagrangianStep, check_node_fields
 
 __all__ = ["LagrangianMesh"]
@@ -54,49 +53,13 @@ _W3 = np.full(3, 1 / 6)
 _A3 = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
 
-# ---------------------------------------------------------------------------
-# mesh quality kernels
-# ---------------------------------------------------------------------------
-
-@njit(cache=True)
-def _min_angles(P, T, out):
-    for t in range(T.shape[0]):
-        best = np.pi
-        for k in range(3):
-            a = T[t, k]
-            b = T[t, (k + 1) % 3]
-            c = T[t, (k + 2) % 3]
-            ux = P[b, 0] - P[a, 0]
-            uy = P[b, 1] - P[a, 1]
-            vx = P[c, 0] - P[a, 0]
-            vy = P[c, 1] - P[a, 1]
-            ang = np.arctan2(abs(ux * vy - uy * vx), ux * vx + uy * vy)
-            best = min(best, ang)
-        out[t] = best
-
-
-@njit(cache=True)
-def _inverted(P, T):
-    n = 0
-    for t in range(T.shape[0]):
-        a = T[t, 0]
-        b = T[t, 1]
-        c = T[t, 2]
-        if orient2d(P[a, 0], P[a, 1], P[b, 0], P[b, 1], P[c, 0], P[c, 1]) <= 0.0:
-            n += 1
-    return n
-
-
-def _cross(u, v):
-    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
 
 # ---------------------------------------------------------------------------
 # the evolving mesh
 # ---------------------------------------------------------------------------
 
 
-class LagrangianMesh(NodeRemoval, LagrangianStep):
+class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
     """A 2D node set carried by a flow, kept Delaunay by local flips.
 
     Parameters
@@ -200,6 +163,14 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
         return self.triangulation.nodes
 
     @property
+    def on_walls(self) -> np.ndarray:
+        """(n, 2) read-only: True where a node lies on a wall of the box normal to x
+        (column 0) or to y (column 1); all False without walls."""
+        out = self._on_wall.copy()
+        out.flags.writeable = False
+        return out
+
+    @property
     def triangles(self) -> np.ndarray:
         return self.triangulation.triangles
 
@@ -241,15 +212,21 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
         cell for interior nodes (and of the cell clipped by the normals through
         the hull edges' midpoints for hull nodes); unlike the triangle areas it
         does not jump when an edge flips, since flips happen where the two
-        triangulations give the same cells.
+        triangulations give the same cells. A hull edge whose opposite angle is
+        obtuse (a flat triangle along a wall) counts as a right angle there: its
+        cotangent term would be negative (the circumcentre lies outside), and a wall
+        node between long, flat triangles would get a negative area and never trigger
+        injection where the flow spreads the wall apart.
         """
         P, T = self.nodes, self.triangles
+        N = self.triangulation.neighbours
         out = np.zeros(P.shape[0])
         for k in range(3):
             i, j, l = T[:, k], T[:, (k + 1) % 3], T[:, (k + 2) % 3]
             # angle at l opposite the edge (i, j)
             u, v = P[i] - P[l], P[j] - P[l]
-            cot = (u * v).sum(1) / np.abs(_cross(u, v))
+            cot = (u * v).sum(1) / np.abs(cross(u, v))
+            cot = np.where(N[:, (k + 2) % 3] < 0, np.maximum(cot, 0.0), cot)
             e2 = ((P[i] - P[j]) ** 2).sum(1)
             np.add.at(out, i, cot * e2 / 8.0)
             np.add.at(out, j, cot * e2 / 8.0)
@@ -258,7 +235,7 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
     def min_angle(self) -> float:
         """The smallest triangle angle, degrees."""
         out = np.empty(self.triangles.shape[0])
-        _min_angles(self.nodes, self.triangles, out)
+        min_angles(self.nodes, self.triangles, out)
         return float(np.degrees(out.min()))
 
     def replace_ip_fields(self, fields: Dict[str, np.ndarray]) -> None:
@@ -278,7 +255,7 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
         """Integral over the domain of an integration-point field (weights ``|T|/3``:
         the 3-point rule, and the areas of the smoothing cells)."""
         P, T = self.nodes, self.triangles
-        a = 0.5 * np.abs(_cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
+        a = 0.5 * np.abs(cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
         return np.einsum("t,tk...->...", a / 3.0, self.ip_fields[name])
 
     # -- time step control -----------------------------------------------------
@@ -346,8 +323,9 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
         self.step += 1
         report["injected"] = self.inject_nodes(inject) if inject else 0
         split = self.split_segments(inject) if inject else 0
-        report["injected"] += split
-        report["segments_split"] = split
+        walls = self.split_walls(inject) if inject else 0
+        report["injected"] += split + walls
+        report["segments_split"], report["walls_split"] = split, walls
         n = self.triangulation.npoints
         merged = self.merge_nodes() if merge else {"removed": 0, "merged": 0,
                                                    "node_map": np.arange(n)}
@@ -396,7 +374,7 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
         integration-point fields of the triangles involved by evaluating the
         old linear fields. Returns (flips, substeps, relocated nodes)."""
         self._set_positions(x1)
-        if not _inverted(self.nodes, self.triangles):
+        if not inverted(self.nodes, self.triangles):
             return self.triangulation.make_delaunay(on_flips=self._on_flips), 1, 0
         self._set_positions(x0)
         nsub = max_substeps
@@ -405,7 +383,7 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
         for s in range(1, nsub + 1):
             xb = x0 + (s / nsub) * (x1 - x0)
             self._set_positions(xb)
-            if _inverted(self.nodes, self.triangles):
+            if inverted(self.nodes, self.triangles):
                 relocated += self._relocate(xa, xb)
             flips += self.triangulation.make_delaunay(on_flips=self._on_flips)
             xa = xb
@@ -470,7 +448,7 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
         if missing.size:
             raise ValueError(f"segment {missing[0].tolist()} is no longer an edge "
                              f"({missing.shape[0]} segment(s)): reduce dt")
-        if _inverted(self.nodes, self.triangles):
+        if inverted(self.nodes, self.triangles):
             raise ValueError("a triangle inverts after the repair: reduce dt")
 
     # -- local surgery (rare: relocation of colliding nodes) ---------------------
@@ -547,77 +525,6 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
         self._cache = {}
         self._version += 1
 
-    # -- node injection ----------------------------------------------------------
-    def inject_nodes(self, factor: float = 2.0) -> int:
-        """Insert a node at the centroid of the largest triangle around every
-        node whose Voronoi area (:meth:`node_areas`) exceeds ``factor``
-        times its reference area (initially its first area; raised to its
-        area after each insertion it triggered), skipping slivers (smallest
-        angle below 15 degrees). Only local changes: the triangle is split in
-        three (integration-point fields evaluated from its linear field, which
-        conserves their integrals), then Lawson flips with the remap. Node
-        fields of new nodes come from Sibson interpolation. Returns the number
-        of nodes inserted."""
-        if factor <= 1:
-            raise ValueError(f"the injection factor must exceed 1, got {factor}")
-        area = self.node_areas()
-        grown = np.flatnonzero(area > factor * self._ref_area)
-        if not grown.size:
-            return 0
-        P, T = self.nodes, self.triangles
-        tri_area = 0.5 * np.abs(_cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
-        ang = np.empty(T.shape[0])
-        _min_angles(P, T, ang)
-        # the largest incident triangle that is not a sliver (a centroid in a
-        # sliver along a wall would stack nodes ever closer to the wall)
-        score = np.where(ang > np.radians(15.0), tri_area, -1.0)
-        best = np.full(P.shape[0], -1)
-        order = np.argsort(score)
-        for k in range(3):
-            best[T[order, k]] = order  # the best incident triangle wins
-        ok = score[best[grown]] > 0
-        # nodes whose growth triggered an insertion (or could not) restart
-        # their reference from the area they will have now
-        grown_all = grown
-        grown = grown[ok]
-        if not grown.size:
-            self._ref_area[grown_all] = area[grown_all]
-            return 0
-        targets = np.unique(best[grown])
-        x_new = P[T[targets]].mean(axis=1)
-        fields = {}
-        if self.node_fields:
-            Phi = sibson_coordinates(self.triangulation, x_new)
-            fields = {k: Phi @ v.reshape(v.shape[0], -1) for k, v in self.node_fields.items()}
-        for t, x in zip(targets, x_new):
-            self._split(int(t), x)
-        n_new = x_new.shape[0]
-        for k, v in self.node_fields.items():
-            self.node_fields[k] = np.concatenate([v, fields[k].reshape((n_new,) + v.shape[1:])])
-        self._on_wall = np.concatenate([self._on_wall, np.zeros((n_new, 2), dtype=bool)])
-        self.triangulation.make_delaunay(on_flips=self._on_flips)
-        area = self.node_areas()
-        self._ref_area = np.concatenate([self._ref_area, area[-n_new:]])
-        self._ref_area[grown_all] = np.maximum(self._ref_area[grown_all], area[grown_all])
-        self._invalidate()
-        return n_new
-
-    def _split(self, t, x):
-        """Split triangle t into three at the interior point x (appended as a node);
-        the ip fields of the children are the parent's linear field at their points."""
-        tri = self.triangulation
-        nt = tri.ntriangles
-        parent = tri.triangles[t].copy()
-        tri.split_triangle(t, x)
-        self._touched.append(np.array([t, nt, nt + 1], dtype=np.int64))
-        for name, F in self.ip_fields.items():
-            flat = F.reshape(F.shape[0], 3, -1)
-            new = child_values(tri.nodes[parent], flat[t],
-                               tri.nodes[tri.triangles[[t, nt, nt + 1]]])
-            flat = np.concatenate([flat, new[1:]])
-            flat[t] = new[0]
-            self.ip_fields[name] = flat.reshape((flat.shape[0],) + F.shape[1:])
-
     # -- segments ----------------------------------------------------------------
     def segment_nodes(self) -> np.ndarray:
         """(n,) True for the nodes that end a segment."""
@@ -633,58 +540,6 @@ class LagrangianMesh(NodeRemoval, LagrangianStep):
         np.maximum.at(ref, tri.segment_source, np.hypot(*(self.nodes[seg[:, 0]]
                                                           - self.nodes[seg[:, 1]]).T))
         return ref
-
-    def split_segments(self, factor: float = 2.0) -> int:
-        """Insert a node at the midpoint of every segment longer than ``sqrt(factor)``
-        times the initial length of the segment it comes from (the length scale of the
-        node-area ``factor`` of :meth:`inject_nodes`); both halves become segments. The
-        two triangles at the segment are split in two each (integration-point values
-        from their linear fields), then Lawson flips with the remap. Node fields of a
-        new node: the mean of the segment's two nodes (natural-neighbour functions are
-        linear along a segment). Returns the number of nodes inserted."""
-        if factor <= 1:
-            raise ValueError(f"the injection factor must exceed 1, got {factor}")
-        tri = self.triangulation
-        seg = tri.segments
-        if not seg.size:
-            return 0
-        P = self.nodes
-        length = np.hypot(*(P[seg[:, 0]] - P[seg[:, 1]]).T)
-        long = seg[length > np.sqrt(factor) * self._segment_ref[tri.segment_source]]
-        if not long.size:
-            return 0
-        for a, b in long:
-            self._split_segment(int(a), int(b))
-        a, b = long[:, 0], long[:, 1]
-        for k, v in self.node_fields.items():
-            self.node_fields[k] = np.concatenate([v, 0.5 * (v[a] + v[b])])
-        same = self._on_wall[a] & self._on_wall[b] & (P[a] == P[b])
-        self._on_wall = np.concatenate([self._on_wall, same])
-        tri.make_delaunay(on_flips=self._on_flips)
-        area = self.node_areas()
-        self._ref_area = np.concatenate([self._ref_area, area[-long.shape[0]:]])
-        self._invalidate()
-        return int(long.shape[0])
-
-    def _split_segment(self, a, b):
-        """Split the segment a-b at its midpoint, with the ip fields of its triangles."""
-        tri = self.triangulation
-        T, nt = tri.triangles, tri.ntriangles
-        t = int(np.flatnonzero((T == a).any(axis=1) & (T == b).any(axis=1))[0])
-        k = int(np.flatnonzero((T[t] != a) & (T[t] != b))[0])
-        u = int(tri.neighbours[t, k])
-        parents = [(t, T[t].copy(), [t, nt])] + ([(u, T[u].copy(), [u, nt + 1])] if u >= 0
-                                                  else [])
-        tri.split_edge(t, k, 0.5 * (self.nodes[a] + self.nodes[b]))
-        rows = [t, nt] + ([u, nt + 1] if u >= 0 else [])
-        self._touched.append(np.array(rows, dtype=np.int64))
-        for name, F in self.ip_fields.items():
-            flat = F.reshape(F.shape[0], 3, -1)
-            flat = np.concatenate([flat, np.zeros((tri.ntriangles - nt,) + flat.shape[1:])])
-            for p, verts, children in parents:
-                flat[children] = child_values(tri.nodes[verts], flat[p],
-                                              tri.nodes[tri.triangles[children]])
-            self.ip_fields[name] = flat.reshape((flat.shape[0],) + F.shape[1:])
 
     def polyline(self, nodes, closed: bool = False) -> np.ndarray:
         """The nodes of a polyline of segments, given by its nodes in order at an earlier

@@ -408,10 +408,28 @@ class NodeRemoval:
         self._invalidate()
         return {"removed": removed, "merged": merged, "node_map": new}
 
-    def _merge_candidates(self, fraction, fold_angle):
-        """Nodes to try, in order: folds (by angle: one about to close cannot wait for
-        the next step), then crowded nodes off segments and crowded segment nodes (each
-        by spacing ratio)."""
+    def _joins_short(self, v: int) -> bool:
+        """Whether segment node v, crowded by area, may go: its two segments joined stay
+        within the reference length of their source. A node in a film squeezed between two
+        material lines is crowded by area while the lines keep their spacing; merging it
+        would leave a segment that :meth:`split_segments` splits again the next step (in
+        a run with a thin film of low-viscosity fluid around the plate this merge-and-split
+        churn made up most of the thousands of merges and injections)."""
+        tri = self.triangulation
+        seg = tri.segments
+        rows = np.flatnonzero((seg == v).any(axis=1))
+        if rows.size != 2:
+            return False
+        a, b = (int(seg[r, 0] if seg[r, 1] == v else seg[r, 1]) for r in rows)
+        ref = self._segment_ref[tri.segment_source[rows]].min()
+        return bool(np.hypot(*(self.nodes[a] - self.nodes[b])) <= ref)
+
+    def spacing_ratios(self) -> np.ndarray:
+        """(n,) each node's spacing (square root of its share of the triangle areas) over
+        its reference spacing, what :meth:`merge_nodes` compares with ``fraction``; for a
+        wall node the smaller of that and its nearest neighbour on the wall over its
+        reference spacing; ``inf`` for the corners of the box and hull nodes off its walls
+        (never removed)."""
         tri = self.triangulation
         P, T = self.nodes, self.triangles
         area = 0.5 * np.abs((P[T[:, 1], 0] - P[T[:, 0], 0]) * (P[T[:, 2], 1] - P[T[:, 0], 1])
@@ -442,10 +460,22 @@ class NodeRemoval:
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.sqrt(share / ref)
             ratio[wall] = np.minimum(ratio[wall], nearest[wall] / np.sqrt(ref[wall]))
+        ratio[~(free | wall) | ~(ref > 0)] = np.inf
+        return ratio
+
+    def _merge_candidates(self, fraction, fold_angle):
+        """Nodes to try, in order: folds (by angle: one about to close cannot wait for
+        the next step), then crowded nodes off segments and crowded segment nodes (each
+        by spacing ratio)."""
+        tri = self.triangulation
+        P = self.nodes
+        ratio = self.spacing_ratios()
         on_seg = self.segment_nodes()
-        crowded = np.flatnonzero((free | wall) & (ref > 0) & (ratio < fraction))
-        crowded = np.array([v for v in crowded.tolist() if free[v] or tri.removable(v)],
-                           dtype=np.int64)
+        free = ~self._on_wall.any(axis=1)
+        free[tri.hull_edges.ravel()] = False
+        crowded = np.array([v for v in np.flatnonzero(ratio < fraction).tolist()
+                            if (free[v] or tri.removable(v))
+                            and (not on_seg[v] or self._joins_short(v))], dtype=np.int64)
         crowded = crowded[np.lexsort((ratio[crowded], on_seg[crowded]))]
         seg, src = tri.segments, tri.segment_source
         count = np.bincount(seg.ravel(), minlength=P.shape[0])

@@ -1,0 +1,125 @@
+"""The sinking plate's time step: how far the next step may go without a collision.
+
+A Lagrangian step can be repaired by flips, substeps and relocation as long as nothing
+passes through anything: not a node through a wall, not one material line (the plate's
+outline, the layer interface) through another. The mesh cannot see a collision coming;
+the time step can, from the step's nodal velocities: the spacing limit (cfl), the walls
+(a node approaching one covers at most a fraction of its distance per step) and the films
+between material lines (their gaps shrink by at most that fraction). Distances shrinking
+geometrically keep the step bounded; a film that closes within any step (the plate's two
+faces meeting where it necks) is where the plate breaks, which the model does not follow:
+the caller stops the run there with the message returned.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..geometry.polylines import close_segment_pairs, segment_gaps
+
+__all__ = ["stable_dt", "velocity_now", "film_dt", "node_spacing", "FILM_FRACTION",
+           "WALL_FRACTION", "FILM_WATCH", "FILM_HALVINGS"]
+
+#: an interface segment closer to the plate's outline than this fraction of the outline's
+#: node spacing is released (``SinkingPlate._release_film``): a film thinner than a
+#: quarter of the spacing has no node inside and closes within a few steps
+FILM_FRACTION = 0.25
+#: a node approaching a wall moves at most this fraction of its distance to it per step
+#: (the distance shrinks geometrically, the step stays bounded: no collision in a step)
+WALL_FRACTION = 0.5
+#: the films between material lines thinner than this many times cfl outline spacings
+#: are watched by the time step (a step moves each side by at most cfl local spacings:
+#: thicker films cannot close within it)
+FILM_WATCH = 2.0
+#: the time step is halved at most this many times for a closing film; one that still
+#: closes within a step 2^-10 of the last is where the plate breaks (its faces meet)
+FILM_HALVINGS = 10
+
+
+
+def node_spacing(P: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """(n,) local spacing of each node: the square root of its share (a third)
+    of the areas of its triangles. P (n, 2) nodes, T (nt, 3) triangles."""
+    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
+                        - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    share = np.zeros(P.shape[0])
+    for k in range(3):
+        np.add.at(share, T[:, k], area / 3.0)
+    return np.sqrt(share)
+
+
+
+def velocity_now(lm, v: np.ndarray) -> np.ndarray:
+    """The step's nodal velocities v on the nodes of the mesh ``lm`` now: moved along with
+    its node map; a node injected after the solve gets the mean of its neighbours' (it
+    may sit next to a wall that a plate presses its neighbours towards)."""
+    new = lm.node_map[:v.shape[0]]
+    out = np.full((lm.nodes.shape[0], 2), np.nan)
+    out[new[new >= 0]] = v[new >= 0]
+    unknown = np.isnan(out[:, 0])
+    if unknown.any():
+        E = lm.triangulation.edges
+        E = np.r_[E, E[:, ::-1]]
+        E = E[unknown[E[:, 0]] & ~unknown[E[:, 1]]]
+        total = np.zeros((out.shape[0], 2))
+        np.add.at(total, E[:, 0], out[E[:, 1]])
+        count = np.bincount(E[:, 0], minlength=out.shape[0])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[unknown] = total[unknown] / count[unknown, None]
+        out[np.isnan(out)] = 0.0  # no known neighbour: the next solve limits it
+    return out
+
+
+def stable_dt(lm, v: np.ndarray, c, outline_segments: int):
+    """Largest dt that moves no node of ``lm`` by more than ``c.cfl`` times its local
+    spacing (the square root of its share of the triangle areas; slivers do not limit
+    the step: flips repair them, and inverting moves are substepped), nor by more than
+    :data:`WALL_FRACTION` of its distance to a wall of the box (``c.width`` x
+    ``c.height``) it approaches, nor closes a film between material lines by more than
+    that fraction (:func:`film_dt`). ``v``: this step's nodal velocities (before
+    injection and removal). Returns dt and :func:`film_dt`'s message (or None)."""
+    v = velocity_now(lm, v)
+    h = node_spacing(lm.nodes, lm.triangles)
+    x = lm.nodes
+    gap = np.c_[x, c.width - x[:, 0], c.height - x[:, 1]]      # left, bottom, right, top
+    approach = np.c_[-v, v]                                        # speed towards each
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lim = c.cfl * h / np.hypot(v[:, 0], v[:, 1])
+        wall = np.where((gap > 0) & (approach > 0), WALL_FRACTION * gap / approach, np.inf)
+    return film_dt(lm, v, float(min(c.max_dt, lim.min(), wall.min())), c, outline_segments)
+
+
+def film_dt(lm, v: np.ndarray, dt: float, c, outline_segments: int):
+    """``dt``, halved until every film between two material lines (segments of ``lm``
+    closer than :data:`FILM_WATCH` x cfl outline spacings: outline and interface, the
+    outline's two faces where the plate necks, the interface folded onto itself) keeps
+    at least 1 - :data:`WALL_FRACTION` of its thickness over the step (Euler move with
+    the nodal velocities v on the nodes now): a film that closes within a step carries
+    one line through the other, which no flip or relocation can undo. Given segments
+    below ``outline_segments`` are the outline's. Returns dt and None, or, for a film
+    that still closes after :data:`FILM_HALVINGS` halvings, the last dt that did not
+    collapse and a message saying where the plate breaks."""
+    P, S = lm.nodes, lm.triangulation.segments
+    watch = FILM_WATCH * c.cfl * c.outline_spacing * c.plate_thickness
+    apart = 2 * math.ceil(FILM_WATCH * c.cfl) + 2   # closer along a line: no film
+    i, j, gap = close_segment_pairs(P, S, watch, apart)
+    for _ in range(FILM_HALVINGS + 1):
+        Q = P + dt * v
+        closing = segment_gaps(Q[S[i, 0]], Q[S[i, 1]], Q[S[j, 0]], Q[S[j, 1]]) \
+            < (1 - WALL_FRACTION) * gap
+        if not closing.any():
+            return dt, None
+        dt *= 0.5
+    k = np.flatnonzero(closing)[np.argmin(gap[closing])]
+    x = P[S[i[k]]].mean(axis=0)
+    outline = lm.triangulation.segment_source[[i[k], j[k]]] < outline_segments
+    what = ("two faces of the plate's outline" if outline.all()
+            else "the outline and the interface" if outline.any()
+            else "two parts of the layer interface")
+    why = ("the plate breaks there, which the model does not follow (a higher yield_stress "
+           "or plate_viscosity keeps it whole)" if outline.all() else
+           "one would pass through the other, which the mesh cannot follow")
+    return 2.0 * dt, (f"{what} close at x = {x[0]:.4g}, z = {x[1]:.4g} ({gap[k]:.2g} apart) "
+                      f"within any step {2 ** FILM_HALVINGS} times shorter than the last: {why}")

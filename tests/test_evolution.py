@@ -330,4 +330,11 @@ def test_a_node_carried_to_a_wall_stops_short_of_it():
     np.testing.assert_array_equal(lm.nodes[others], x0[others])
     assert np.all(lm.triangulation.orientation() > 0)
     with pytest.raises(ValueError, match=f"first node {k} .*reduce dt"):
-        lm.advance(lambda x: down(x, speed=10 * d), 1.0)
+        lm.advance(lambda x: down(x, speed=10 * d), 1.0)   # 9 d past it: an error
+    # a node 2e-4 from the wall carried 3e-4 past it (below 1e-3 of the box) stops too
+    lm = LagrangianMesh(np.r_[p, [[0.5031, 2e-4]]])
+    v = np.zeros_like(lm.nodes)
+    v[-1, 1] = -5e-4
+    rep = lm.advance(lambda x: v, 1.0)
+    assert rep["stopped_at_walls"] == 1
+    assert lm.nodes[-1, 1] == pytest.approx((1 - WALL_REACH) * 2e-4, rel=1e-12)

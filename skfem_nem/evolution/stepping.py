@@ -12,7 +12,7 @@ from typing import Dict
 import numpy as np
 
 __all__ = ["LagrangianStep", "check_node_fields", "evaluate_velocity", "check_step_arguments",
-           "predictor_corrector", "keep_in_box", "WALL_REACH"]
+           "predictor_corrector", "keep_in_box", "WALL_REACH", "LEAVE_TOLERANCE"]
 
 
 def check_node_fields(node_fields, n) -> Dict[str, np.ndarray]:
@@ -97,17 +97,22 @@ def predictor_corrector(velocity, x0, dt, tol, maxiter, step):
 #: closer than its spacing resolves; the exact flow never reaches the wall in finite time
 #: and the discrete one should not either (the node approaches it geometrically)
 WALL_REACH = 0.9
+#: a move that overshoots a wall by more than the node's distance to it and by more than
+#: this fraction of the box's size is an error (a velocity not tangent to the walls, a time
+#: step far too long), not a node closer to a wall than the mesh resolves
+LEAVE_TOLERANCE = 1e-3
 
 
 def keep_in_box(x, x0, on_wall, box):
     """Wall coordinates kept exactly, and a node that would reach or pass a wall stopped
     at :data:`WALL_REACH` of its distance; returns the positions and how many nodes were
     stopped. ``ValueError`` naming the first node whose move would overshoot a wall by
-    more than its distance to it (a velocity not tangent to the walls, or a time step
-    far too long)."""
+    more than its distance to it and more than :data:`LEAVE_TOLERANCE` of the box."""
     x = np.where(on_wall, x0, x)
     lo, hi = box
-    far = np.flatnonzero(((x < lo - (x0 - lo)) | (x > hi + (hi - x0))).any(axis=1))
+    slack = LEAVE_TOLERANCE * float(np.max(hi - lo))
+    far = np.flatnonzero(((x < lo - np.maximum(x0 - lo, slack))
+                          | (x > hi + np.maximum(hi - x0, slack))).any(axis=1))
     if far.size:
         raise ValueError(f"{far.size} node(s) would leave the box, first node {far[0]} "
                          f"to {x[far[0]].tolist()}: reduce dt")

@@ -96,9 +96,11 @@ from skfem.refdom import RefTri
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from ..basis import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
-from .stokes_solvers import SOLVERS, SaddlePointProblem, SaddlePointSolution
+from .stokes_solvers import (CACHED_SOLVERS, SOLVERS, SaddlePointProblem, SaddlePointSolution,
+                             StokesCache)
 
-__all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes", "outline_flux",
+__all__ = ["StokesSpaces", "StokesSolution", "StokesCache", "stokes_spaces", "solve_stokes",
+           "outline_flux",
            "boundary_flux",
            "assemble_stokes", "inf_sup_constant", "quadrature_values", "wall_dofs"]
 
@@ -539,7 +541,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
                  system: Optional[StokesSystem] = None,
                  prescribed: Optional[tuple] = None,
                  pressure_mean: Optional[bool] = None,
-                 constraints: Optional[sp.spmatrix] = None) -> StokesSolution:
+                 constraints: Optional[sp.spmatrix] = None,
+                 cache: Optional[StokesCache] = None) -> StokesSolution:
     """Solve the Stokes problem (see the module docstring).
 
     Parameters
@@ -560,7 +563,10 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         ``"direct"``: sparse LU of the whole saddle-point system;
         ``"minres"``: MINRES with an AMG (pyamg) V-cycle on the viscous
         block and the lumped 1/eta-weighted pressure mass, for problems too
-        large to factorise.
+        large to factorise; ``"fgmres"``: flexible GMRES on the whole system
+        with a block-triangular preconditioner (AMG V-cycles on the viscous
+        block, the lumped 1/eta-weighted pressure mass), cost and memory
+        linear in the unknowns.
     tol, maxiter
         Relative tolerance and iteration limit of the iterative parts.
     system
@@ -578,6 +584,11 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         ``C u = 0`` on the velocity dofs, or a pair ``(C, c)`` for ``C u = c``,
         imposed by Lagrange multipliers (returned in ``info["multipliers"]``);
         e.g. the net flux through a material outline (:func:`outline_flux`).
+    cache
+        A :class:`StokesCache` shared by a sequence of solves with
+        ``solver="fgmres"``: the AMG hierarchy of the viscous block is
+        reused while its sparsity pattern stays, and the last solution is
+        the next start. ``ValueError`` with other solvers.
 
     Returns
     -------
@@ -595,8 +606,13 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         iterations (naming both), or the system is singular.
     """
     if solver not in SOLVERS:
-        raise ValueError(f"solver must be 'schur', 'schur-amg', 'direct' or 'minres', got "
+        raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got "
                          f"{solver!r}")
+    if cache is not None and solver not in CACHED_SOLVERS:
+        raise ValueError(f"cache is used by solver {' or '.join(map(repr, CACHED_SOLVERS))} "
+                         f"only, not by solver={solver!r}")
+    if cache is not None and not isinstance(cache, StokesCache):
+        raise ValueError(f"cache must be a StokesCache, got {type(cache).__name__}")
     if not (np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive number, got {tol}")
     sys_ = assemble_stokes(spaces, eta, f, tau0) if system is None else system
@@ -605,7 +621,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         pressure_mean = _walls_fix_pressure(spaces, D)
     red = _reduce(spaces, sys_, D, uD, pressure_mean, constraints)
     info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean}
-    x = SOLVERS[solver](red.problem, tol, maxiter, info)
+    extra = {} if cache is None else {"cache": cache}
+    x = SOLVERS[solver](red.problem, tol, maxiter, info, **extra)
     return _stokes_solution(spaces, sys_, red, x, solver, info)
 
 

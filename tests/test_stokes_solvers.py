@@ -135,3 +135,42 @@ def test_solver_and_cache_keywords_checked(square):
     with pytest.raises(ValueError, match="cache must be a StokesCache"):
         solve_stokes(sp_, 1.0, 0.0, solver="fgmres", cache={})
     assert "fgmres" in SOLVERS
+
+
+def test_vep_step_passes_solver_and_cache():
+    """A plastic step with ``solver="fgmres"``: the same result as the default
+    solver, and the AMG hierarchy built once and reused by the step's Picard
+    iterations (a cache of the caller's is kept across steps)."""
+    from skfem_nem.models.rheology import Material, vep_step
+    sp_ = stokes_spaces(delaunay_mesh(box_nodes(300, seed=1)), "nem")
+    X = sp_.quadrature_points
+    ne, nq = X.shape[1:]
+    inside = (np.abs(X[0] - 0.5) < 0.2) & (np.abs(X[1] - 0.5) < 0.1)
+    mat = Material(np.where(inside, 1e3, 1.0), np.where(inside, 10.0, np.inf),
+                   np.where(inside, 0.05, np.inf))
+    f = np.stack([0 * X[0], -1.0 * inside])
+    tau = np.zeros((2, 2, ne, nq))
+    ref = vep_step(sp_, mat, tau, 1.0, f=f, tol=1e-6)
+    cache = StokesCache()
+    r = vep_step(sp_, mat, tau, 1.0, f=f, tol=1e-6, solver="fgmres", cache=cache)
+    # the Picard iterations (tol 1e-6) end within one of each other at the same field
+    assert abs(r.iterations - ref.iterations) <= 1 and r.iterations > 2 and r.yielded.any()
+    assert np.abs(r.solution.u - ref.solution.u).max() < 1e-5 * np.abs(ref.solution.u).max()
+    assert cache.builds == 1 and cache.reuses == r.iterations - 1
+    # the next step starts from this one's solution
+    r2 = vep_step(sp_, mat, r.tau, 1.0, f=f, tol=1e-6, solver="fgmres", cache=cache)
+    assert cache.builds == 1 and r2.solution.info["warm_start"]
+    with pytest.raises(ValueError, match="'lu'"):
+        vep_step(sp_, mat, tau, 1.0, f=f, solver="lu")
+    with pytest.raises(ValueError, match="cache.*'schur'"):
+        vep_step(sp_, mat, tau, 1.0, f=f, solver="schur", cache=StokesCache())
+
+
+def test_sinking_plate_solver_option():
+    from skfem_nem.apps.sinking_plate import HELP, load_config
+    assert load_config(overrides={"solver": "fgmres"}).solver == "fgmres"
+    assert "fgmres" in HELP["solver"]
+    with pytest.raises(ValueError, match="solver must be one of .*got 'gmres'"):
+        load_config(overrides={"solver": "gmres"})
+    with pytest.raises(ValueError, match="solver must be str"):
+        load_config(overrides={"solver": 3})

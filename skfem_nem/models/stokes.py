@@ -68,9 +68,11 @@ pressure is fixed by its mean (zero) through a Lagrange multiplier.
 
 Solvers
 -------
-``solver="schur"`` (default), ``"schur-amg"``, ``"direct"`` and
-``"minres"``: see :mod:`skfem_nem.models.stokes_solvers`. Iteration counts
-are reported in :class:`StokesSolution`.
+``solver="schur"`` (default), ``"schur-amg"``, ``"direct"``, ``"minres"``
+and ``"fgmres"``: see :mod:`skfem_nem.models.stokes_solvers`. Iteration
+counts are reported in :class:`StokesSolution`; a :class:`StokesCache`
+carries the AMG hierarchy and the last solution of ``"fgmres"`` from one
+solve to the next.
 
 Module layout
 -------------
@@ -565,8 +567,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         block and the lumped 1/eta-weighted pressure mass, for problems too
         large to factorise; ``"fgmres"``: flexible GMRES on the whole system
         with a block-triangular preconditioner (AMG V-cycles on the viscous
-        block, the lumped 1/eta-weighted pressure mass), cost and memory
-        linear in the unknowns.
+        block, the lumped 1/eta-weighted pressure mass), memory and cost per
+        iteration linear in the unknowns.
     tol, maxiter
         Relative tolerance and iteration limit of the iterative parts.
     system

@@ -29,8 +29,10 @@ diagonal of the viscosity-scaled pressure mass matrix for the pressure.
 ``"fgmres"`` is flexible GMRES on the whole system with a block
 upper-triangular preconditioner: AMG V-cycles for the viscous block, the
 lumped 1/eta-weighted pressure mass for the Schur complement; no
-factorisation, so its cost and memory grow linearly with the unknowns, and
-a :class:`StokesCache` keeps its AMG hierarchy and last solution between
+factorisation, so its memory and the cost of an iteration grow linearly with
+the unknowns (the iterations grow with the contrast like those of
+``"schur"``, and it is slower than ``"schur"`` up to 100,000 nodes; see
+``docs/stokes.md``), and a :class:`StokesCache` keeps its AMG hierarchy and last solution between
 solves (Picard iterations, time steps). The iterative solvers fix the mean
 pressure by a rank-one term ``c m m^T`` of the size of 1/eta.
 """
@@ -67,8 +69,11 @@ MINRES_MAX_RTOL = 0.5
 # that a hierarchy refreshed for new matrix values gets the same one)
 AMG_SMOOTHER = ("block_gauss_seidel", {"sweep": "symmetric"})
 # FGMRES restart length: it keeps two vectors of the system's size per iteration
-# up to this many, so memory stays linear in the unknowns
-FGMRES_RESTART = 50
+# up to this many, so memory stays linear in the unknowns (730 MB at 300,000
+# unknowns, against 2.6 GB for the factorisation of "schur"). At 100,000 nodes and
+# a contrast of 1e6 a restart every 50 iterations stalled (no convergence in 760),
+# every 150 converged in 285
+FGMRES_RESTART = 150
 # conjugate-gradient steps (each preconditioned by one AMG V-cycle) per application
 # of the viscous-block preconditioner. The V-cycle alone is a weak solver here
 # (wide natural-neighbour stencils coarsen by a factor of about 30), and with one

@@ -51,7 +51,7 @@ import numpy as np
 
 from .stokes import (StokesCache, StokesSolution, StokesSpaces, quadrature_values,
                      solve_stokes)
-from .stokes_solvers import CACHED_SOLVERS, SOLVERS
+from .stokes_solvers import CACHED_SOLVERS, check_solver
 
 __all__ = ["Material", "combine_materials", "maxwell_coefficients", "strain_rate", "spin",
            "deviator", "second_invariant", "rotate_stress", "return_map",
@@ -503,14 +503,10 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         pair ``(C, c)`` for ``C u = c``), passed to
         :func:`skfem_nem.models.stokes.solve_stokes` (e.g. the net flux through a
         material outline).
-    solver
-        Stokes solver of the Picard iterations (see
-        :func:`skfem_nem.models.stokes.solve_stokes`).
-    cache
-        A :class:`~skfem_nem.models.stokes.StokesCache` for ``solver="fgmres"``,
-        kept by the caller to reuse the AMG hierarchy and start from the last
-        solution across time steps; default a new one per step, shared by its
-        Picard iterations. ``ValueError`` with the other solvers.
+    solver, cache
+        Stokes solver of the Picard iterations and, for ``"fgmres"``, a
+        :class:`~skfem_nem.models.stokes.StokesCache` kept across steps
+        (default: a new one per step, shared by its Picard iterations).
 
     Raises
     ------
@@ -522,12 +518,7 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         If the Picard iterations do not converge in ``maxiter`` iterations
         (naming the count and the last residual).
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got "
-                         f"{solver!r}")
-    if cache is not None and solver not in CACHED_SOLVERS:
-        raise ValueError(f"cache is used by solver {' or '.join(map(repr, CACHED_SOLVERS))} "
-                         f"only, not by solver={solver!r}")
+    check_solver(solver, cache)
     if cache is None and solver in CACHED_SOLVERS:
         cache = StokesCache()
     st = _step_setup(spaces, material, tau_old, dt, f, gravity, plastic_strain, rotation,

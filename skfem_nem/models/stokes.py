@@ -98,8 +98,8 @@ from skfem.refdom import RefTri
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from ..basis import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
-from .stokes_solvers import (CACHED_SOLVERS, SOLVERS, SaddlePointProblem, SaddlePointSolution,
-                             StokesCache)
+from .stokes_solvers import (SOLVERS, SaddlePointProblem, SaddlePointSolution, StokesCache,
+                             check_solver)
 
 __all__ = ["StokesSpaces", "StokesSolution", "StokesCache", "stokes_spaces", "solve_stokes",
            "outline_flux",
@@ -564,11 +564,9 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         (memory linear in the problem size, for large problems);
         ``"direct"``: sparse LU of the whole saddle-point system;
         ``"minres"``: MINRES with an AMG (pyamg) V-cycle on the viscous
-        block and the lumped 1/eta-weighted pressure mass, for problems too
-        large to factorise; ``"fgmres"``: flexible GMRES on the whole system
-        with a block-triangular preconditioner (AMG V-cycles on the viscous
-        block, the lumped 1/eta-weighted pressure mass), memory and cost per
-        iteration linear in the unknowns.
+        block and the lumped 1/eta-weighted pressure mass; ``"fgmres"``:
+        flexible GMRES with a block-triangular AMG preconditioner (memory
+        and cost per iteration linear in the unknowns).
     tol, maxiter
         Relative tolerance and iteration limit of the iterative parts.
     system
@@ -587,10 +585,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         imposed by Lagrange multipliers (returned in ``info["multipliers"]``);
         e.g. the net flux through a material outline (:func:`outline_flux`).
     cache
-        A :class:`StokesCache` shared by a sequence of solves with
-        ``solver="fgmres"``: the AMG hierarchy of the viscous block is
-        reused while its sparsity pattern stays, and the last solution is
-        the next start. ``ValueError`` with other solvers.
+        A :class:`StokesCache` shared by solves with ``solver="fgmres"`` (AMG
+        hierarchy and start vector); ``ValueError`` with other solvers.
 
     Returns
     -------
@@ -607,14 +603,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         If an iterative solver does not reach ``tol`` in ``maxiter``
         iterations (naming both), or the system is singular.
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got "
-                         f"{solver!r}")
-    if cache is not None and solver not in CACHED_SOLVERS:
-        raise ValueError(f"cache is used by solver {' or '.join(map(repr, CACHED_SOLVERS))} "
-                         f"only, not by solver={solver!r}")
-    if cache is not None and not isinstance(cache, StokesCache):
-        raise ValueError(f"cache must be a StokesCache, got {type(cache).__name__}")
+    check_solver(solver, cache)
     if not (np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive number, got {tol}")
     sys_ = assemble_stokes(spaces, eta, f, tau0) if system is None else system
@@ -623,8 +612,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         pressure_mean = _walls_fix_pressure(spaces, D)
     red = _reduce(spaces, sys_, D, uD, pressure_mean, constraints)
     info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean}
-    extra = {} if cache is None else {"cache": cache}
-    x = SOLVERS[solver](red.problem, tol, maxiter, info, **extra)
+    x = SOLVERS[solver](red.problem, tol, maxiter, info,
+                        **({} if cache is None else {"cache": cache}))
     return _stokes_solution(spaces, sys_, red, x, solver, info)
 
 

@@ -47,8 +47,8 @@ import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "CACHED_SOLVERS",
-           "StokesCache", "solve_direct", "solve_schur", "solve_schur_amg", "solve_minres",
-           "solve_fgmres", "fgmres", "rigid_modes"]
+           "StokesCache", "check_solver", "solve_direct", "solve_schur", "solve_schur_amg",
+           "solve_minres", "solve_fgmres", "fgmres", "rigid_modes"]
 
 # relative tolerance of the inner AMG-CG solves of the viscous block
 # ("schur-amg"): at most this, and two orders of magnitude below the outer tol
@@ -585,3 +585,16 @@ SOLVERS: Dict[str, Callable[..., SaddlePointSolution]] = {
 
 CACHED_SOLVERS = ("fgmres",)
 """The solvers that take a ``cache=`` (:class:`StokesCache`) keyword."""
+
+
+def check_solver(solver: str, cache) -> None:
+    """``ValueError`` naming an unknown ``solver``, or a ``cache`` that is not a
+    :class:`StokesCache` or that the solver does not use."""
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got "
+                         f"{solver!r}")
+    if cache is not None and solver not in CACHED_SOLVERS:
+        raise ValueError(f"cache is used by solver {' or '.join(map(repr, CACHED_SOLVERS))} "
+                         f"only, not by solver={solver!r}")
+    if cache is not None and not isinstance(cache, StokesCache):
+        raise ValueError(f"cache must be a StokesCache, got {type(cache).__name__}")

@@ -114,7 +114,7 @@ def test_solvers_agree():
     for method in ("nem", "nem-projection", "taylor-hood"):
         sp_ = stokes_spaces(mesh, method)
         ref = solve_stokes(sp_, sol.viscosity, sol.force, solver="direct")
-        for solver in ("schur", "schur-amg", "minres"):
+        for solver in ("schur", "schur-amg", "minres", "fgmres"):
             s = solve_stokes(sp_, sol.viscosity, sol.force, solver=solver, tol=1e-12,
                              maxiter=5000)
             assert np.abs(s.u - ref.u).max() < 1e-6 * np.abs(ref.u).max(), (method, solver)
@@ -183,7 +183,7 @@ def test_outline_flux_constraint_keeps_region_area():
     assert held.info["multipliers"].shape == (1,)
 
 
-@pytest.mark.parametrize("solver", ["schur", "direct", "minres", "schur-amg"])
+@pytest.mark.parametrize("solver", ["schur", "direct", "minres", "schur-amg", "fgmres"])
 def test_constraint_with_a_right_side(solver):
     """``constraints=(C, c)`` imposes ``C u = c`` (a prescribed flux through an
     outline, here the region growing at a given rate) with every solver; a

@@ -52,6 +52,7 @@ from .plate_time_step import FILM_FRACTION, WALL_FRACTION, node_spacing, stable_
 from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
 from ..models.rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
 from ..models.stokes import outline_flux, stokes_spaces
+from ..models.stokes_solvers import SOLVERS
 
 __all__ = ["PlateConfig", "SinkingPlate", "load_config", "run", "stored_config"]
 
@@ -113,6 +114,8 @@ class PlateConfig:
     integration: str = "smoothed"
     #: Picard tolerance of the plastic iterations
     picard_tol: float = 1e-3
+    #: Stokes solver of the Picard iterations (``solve_stokes``'s ``solver``)
+    solver: str = "schur"
     #: write a checkpoint every this many steps
     checkpoint_every: int = 10
     #: keep the plate outline and the layer interface as segments (constrained mesh: no
@@ -153,6 +156,9 @@ class PlateConfig:
             raise ValueError(f"inject must be 0 (off) or a factor above 1, got {self.inject!r}")
         if self.remap not in ("conservative", "average"):
             raise ValueError(f"remap must be 'conservative' or 'average', got {self.remap!r}")
+        if self.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got "
+                             f"{self.solver!r}")
         if self.integration not in ("smoothed", "gauss"):
             raise ValueError(f"integration must be 'smoothed' or 'gauss', got "
                              f"{self.integration!r}")
@@ -203,6 +209,9 @@ HELP = {
     'integration': 'integration of the velocity gradients: "smoothed" (consistent) or "gauss" '
                    '(3-point rule)',
     'picard_tol': 'Picard tolerance of the plastic iterations',
+    'solver': 'Stokes solver of the Picard iterations: "schur" (sparse LU of the viscous '
+              'block, pressure CG), "fgmres" (AMG-preconditioned flexible GMRES, linear cost '
+              'and memory), "schur-amg", "minres" or "direct"',
     'checkpoint_every': 'write a checkpoint every this many steps',
     'segments': 'keep the plate outline and the layer interface (a line of nodes) as edges '
                 'of the mesh: a constrained Delaunay triangulation, constrained '
@@ -466,7 +475,8 @@ class SinkingPlate:
         # step, carried (as its logarithm) by the mesh like the stress
         guess = lm.ip_fields.get("log_eta_eff")
         r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
-                     tol=c.picard_tol, constraints=self._area_constraint(spaces, dt),
+                     tol=c.picard_tol, solver=c.solver,
+                     constraints=self._area_constraint(spaces, dt),
                      eta_guess=None if guess is None else np.exp(guess))
         lm.ip_fields["log_eta_eff"] = np.log(r.eta_eff)
         lm.ip_fields["stress"] = to_ip_field(r.tau)

@@ -49,8 +49,9 @@ from typing import Callable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from .stokes import (StokesSolution, StokesSpaces, quadrature_values,
+from .stokes import (StokesCache, StokesSolution, StokesSpaces, quadrature_values,
                      solve_stokes)
+from .stokes_solvers import CACHED_SOLVERS, check_solver
 
 __all__ = ["Material", "combine_materials", "maxwell_coefficients", "strain_rate", "spin",
            "deviator", "second_invariant", "rotate_stress", "return_map",
@@ -359,7 +360,8 @@ def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
                     free_slip: Union[str, Sequence[str], None] = "all",
                     no_slip: Union[str, Sequence[str], None] = None,
                     pressure_mean: Optional[bool] = None, solver: str = "schur",
-                    tol: float = 1e-10, constraints=None) -> StokesSolution:
+                    tol: float = 1e-10, constraints=None, maxiter: int = 2000,
+                    cache: Optional[StokesCache] = None) -> StokesSolution:
     """Stokes solve with prescribed velocities: :func:`skfem_nem.models.stokes.solve_stokes`
     with ``prescribed`` (kept for its reaction forces and defaults).
 
@@ -376,6 +378,9 @@ def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
     pressure_mean
         Fix the pressure by its mean (zero). Default: only if every boundary
         node has a constrained velocity component (no free surface).
+    solver, tol, maxiter, constraints, cache
+        As for :func:`skfem_nem.models.stokes.solve_stokes` (default solver:
+        the Schur-complement CG).
 
     Returns
     -------
@@ -383,12 +388,11 @@ def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
         ``info["reaction"]``: (nu,) the boundary forces on the body at the
         constrained dofs (N/m in 2D; zero elsewhere), ``info["fixed"]`` those
         dofs, ``info["bubble"]`` the bubble dof vector where the velocity
-        space has condensed bubbles. ``solver``: as for ``solve_stokes``
-        (default the Schur-complement CG).
+        space has condensed bubbles.
     """
     return solve_stokes(spaces, eta, f, tau0, free_slip=free_slip, no_slip=no_slip,
                         prescribed=prescribed, pressure_mean=pressure_mean, solver=solver,
-                        tol=tol, constraints=constraints)
+                        tol=tol, maxiter=maxiter, constraints=constraints, cache=cache)
 
 
 def velocity_gradient(spaces: StokesSpaces, sol: StokesSolution) -> np.ndarray:
@@ -456,7 +460,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
              plastic_strain: Optional[np.ndarray] = None,
              rotation: str = "jaumann", tol: float = 1e-6, maxiter: int = 100,
              min_viscosity: Optional[float] = None, u_guess: Optional[np.ndarray] = None,
-             constraints=None, eta_guess: Optional[np.ndarray] = None) -> VEPStep:
+             constraints=None, eta_guess: Optional[np.ndarray] = None,
+             solver: str = "schur", cache: Optional[StokesCache] = None) -> VEPStep:
     """One visco-elasto-plastic time step (see the module docstring).
 
     Parameters
@@ -498,23 +503,32 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         pair ``(C, c)`` for ``C u = c``), passed to
         :func:`skfem_nem.models.stokes.solve_stokes` (e.g. the net flux through a
         material outline).
+    solver, cache
+        Stokes solver of the Picard iterations and, for ``"fgmres"``, a
+        :class:`~skfem_nem.models.stokes.StokesCache` kept across steps
+        (default: a new one per step, shared by its Picard iterations).
 
     Raises
     ------
     ValueError
         For a bad ``dt``, stress of the wrong shape or non-finite values
-        (naming the element), or a non-finite new stress (naming the element).
+        (naming the element), or a non-finite new stress (naming the element),
+        an unknown ``solver`` or a ``cache`` it does not use.
     RuntimeError
         If the Picard iterations do not converge in ``maxiter`` iterations
         (naming the count and the last residual).
     """
+    check_solver(solver, cache)
+    if cache is None and solver in CACHED_SOLVERS:
+        cache = StokesCache()
     st = _step_setup(spaces, material, tau_old, dt, f, gravity, plastic_strain, rotation,
                      min_viscosity)
     u = None if u_guess is None else np.asarray(u_guess, dtype=float)
     G = None if u is None else np.asarray(spaces.ubasis.interpolate(u).grad)
     eta_eff = st.start_viscosity(eta_guess)
     walls = (prescribed, free_slip, no_slip, pressure_mean)
-    pic = _picard(spaces, st, u, G, eta_eff, walls, constraints, tol, maxiter)
+    pic = _picard(spaces, st, u, G, eta_eff, walls, constraints, tol, maxiter,
+                  dict(solver=solver, cache=cache))
     return _vep_result(st, pic)
 
 
@@ -622,14 +636,16 @@ def _plastic_viscosity(st: _StepSetup, eps: np.ndarray, G: np.ndarray) -> np.nda
 
 def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
             G: Optional[np.ndarray], eta_eff: np.ndarray, walls: tuple, constraints,
-            tol: float, maxiter: int) -> _PicardResult:
+            tol: float, maxiter: int, solve: dict) -> _PicardResult:
     """Stokes solves with the viscosity and rotated stress of the previous
-    iterate until the relative velocity change is below ``tol``."""
+    iterate until the relative velocity change is below ``tol``; ``solve``:
+    the solver keywords of :func:`solve_stokes_bc`."""
     history = []
     res = np.inf
     for it in range(1, maxiter + 1):
         tau0 = (eta_eff * st.chi)[None, None] * st.rotated(G)
-        sol = solve_stokes_bc(spaces, eta_eff, st.load, tau0, *walls, constraints=constraints)
+        sol = solve_stokes_bc(spaces, eta_eff, st.load, tau0, *walls, constraints=constraints,
+                              **solve)
         G = velocity_gradient(spaces, sol)
         eps = strain_rate(G)
         eta_new = _plastic_viscosity(st, eps, G)

@@ -68,9 +68,11 @@ pressure is fixed by its mean (zero) through a Lagrange multiplier.
 
 Solvers
 -------
-``solver="schur"`` (default), ``"schur-amg"``, ``"direct"`` and
-``"minres"``: see :mod:`skfem_nem.models.stokes_solvers`. Iteration counts
-are reported in :class:`StokesSolution`.
+``solver="schur"`` (default), ``"schur-amg"``, ``"direct"``, ``"minres"``
+and ``"fgmres"``: see :mod:`skfem_nem.models.stokes_solvers`. Iteration
+counts are reported in :class:`StokesSolution`; a :class:`StokesCache`
+carries the AMG hierarchy and the last solution of ``"fgmres"`` from one
+solve to the next.
 
 Module layout
 -------------
@@ -96,9 +98,11 @@ from skfem.refdom import RefTri
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from ..basis import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
-from .stokes_solvers import SOLVERS, SaddlePointProblem, SaddlePointSolution
+from .stokes_solvers import (SOLVERS, SaddlePointProblem, SaddlePointSolution, StokesCache,
+                             check_solver)
 
-__all__ = ["StokesSpaces", "StokesSolution", "stokes_spaces", "solve_stokes", "outline_flux",
+__all__ = ["StokesSpaces", "StokesSolution", "StokesCache", "stokes_spaces", "solve_stokes",
+           "outline_flux",
            "boundary_flux",
            "assemble_stokes", "inf_sup_constant", "quadrature_values", "wall_dofs"]
 
@@ -539,7 +543,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
                  system: Optional[StokesSystem] = None,
                  prescribed: Optional[tuple] = None,
                  pressure_mean: Optional[bool] = None,
-                 constraints: Optional[sp.spmatrix] = None) -> StokesSolution:
+                 constraints: Optional[sp.spmatrix] = None,
+                 cache: Optional[StokesCache] = None) -> StokesSolution:
     """Solve the Stokes problem (see the module docstring).
 
     Parameters
@@ -559,8 +564,9 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         (memory linear in the problem size, for large problems);
         ``"direct"``: sparse LU of the whole saddle-point system;
         ``"minres"``: MINRES with an AMG (pyamg) V-cycle on the viscous
-        block and the lumped 1/eta-weighted pressure mass, for problems too
-        large to factorise.
+        block and the lumped 1/eta-weighted pressure mass; ``"fgmres"``:
+        flexible GMRES with a block-triangular AMG preconditioner (memory
+        and cost per iteration linear in the unknowns).
     tol, maxiter
         Relative tolerance and iteration limit of the iterative parts.
     system
@@ -578,6 +584,9 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         ``C u = 0`` on the velocity dofs, or a pair ``(C, c)`` for ``C u = c``,
         imposed by Lagrange multipliers (returned in ``info["multipliers"]``);
         e.g. the net flux through a material outline (:func:`outline_flux`).
+    cache
+        A :class:`StokesCache` shared by solves with ``solver="fgmres"`` (AMG
+        hierarchy and start vector); ``ValueError`` with other solvers.
 
     Returns
     -------
@@ -594,9 +603,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         If an iterative solver does not reach ``tol`` in ``maxiter``
         iterations (naming both), or the system is singular.
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be 'schur', 'schur-amg', 'direct' or 'minres', got "
-                         f"{solver!r}")
+    check_solver(solver, cache)
     if not (np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive number, got {tol}")
     sys_ = assemble_stokes(spaces, eta, f, tau0) if system is None else system
@@ -605,7 +612,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         pressure_mean = _walls_fix_pressure(spaces, D)
     red = _reduce(spaces, sys_, D, uD, pressure_mean, constraints)
     info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean}
-    x = SOLVERS[solver](red.problem, tol, maxiter, info)
+    x = SOLVERS[solver](red.problem, tol, maxiter, info,
+                        **({} if cache is None else {"cache": cache}))
     return _stokes_solution(spaces, sys_, red, x, solver, info)
 
 

@@ -25,21 +25,30 @@ the problem size). ``"direct"`` factorises the whole saddle-point system
 (slower: natural-neighbour stencils are wide). ``"minres"`` uses MINRES with
 a block-diagonal preconditioner: one smoothed-aggregation AMG V-cycle
 (pyamg, rigid-body modes as near null space) for the viscous block and the
-diagonal of the viscosity-scaled pressure mass matrix for the pressure. The
-iterative solvers fix the mean pressure by a rank-one term ``c m m^T`` of
-the size of 1/eta.
+diagonal of the viscosity-scaled pressure mass matrix for the pressure.
+``"fgmres"`` is flexible GMRES on the whole system with a block
+upper-triangular preconditioner: AMG V-cycles for the viscous block, the
+lumped 1/eta-weighted pressure mass for the Schur complement; no
+factorisation, so its memory and the cost of an iteration grow linearly with
+the unknowns (the iterations grow with the contrast like those of
+``"schur"``, and it is slower than ``"schur"`` up to 100,000 nodes; see
+``docs/stokes.md``), and a :class:`StokesCache` keeps its AMG hierarchy and last solution between
+solves (Picard iterations, time steps). The iterative solvers fix the mean
+pressure by a rank-one term ``c m m^T`` of the size of 1/eta.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable, Dict, NamedTuple
+from dataclasses import dataclass, field
+from typing import Callable, Dict, NamedTuple, Optional
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
-__all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "solve_direct",
-           "solve_schur", "solve_schur_amg", "solve_minres", "rigid_modes"]
+__all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "CACHED_SOLVERS",
+           "StokesCache", "check_solver", "solve_direct", "solve_schur", "solve_schur_amg",
+           "solve_minres", "solve_fgmres", "fgmres", "rigid_modes"]
 
 # relative tolerance of the inner AMG-CG solves of the viscous block
 # ("schur-amg"): at most this, and two orders of magnitude below the outer tol
@@ -48,11 +57,34 @@ INNER_RTOL = 1e-3
 INNER_MAXITER = 1000
 # coarsest AMG level size (pyamg's max_coarse): solved directly there
 AMG_MAX_COARSE = 500
+# solve on the coarsest AMG level: sparse LU (pyamg's default, a pseudo-inverse
+# by dense SVD, took 0.8 s of a 1 s solve at 2,000 nodes)
+AMG_COARSE_SOLVER = "splu"
 # MINRES stops when its preconditioned residual norm is below this factor
 # times tol (its own estimate drifts from the true residual; see solve_minres)
 MINRES_TOL_FACTOR = 10
 # MINRES restart asks for at most this relative reduction of the residual
 MINRES_MAX_RTOL = 0.5
+# smoother of every AMG level (pyamg's default for smoothed aggregation, named so
+# that a hierarchy refreshed for new matrix values gets the same one)
+AMG_SMOOTHER = ("block_gauss_seidel", {"sweep": "symmetric"})
+# FGMRES restart length: it keeps two vectors of the system's size per iteration
+# up to this many, so memory stays linear in the unknowns (730 MB at 300,000
+# unknowns, against 2.6 GB for the factorisation of "schur"). At 100,000 nodes and
+# a contrast of 1e6 a restart every 50 iterations stalled (no convergence in 760),
+# every 150 converged in 285
+FGMRES_RESTART = 150
+# conjugate-gradient steps (each preconditioned by one AMG V-cycle) per application
+# of the viscous-block preconditioner. The V-cycle alone is a weak solver here
+# (wide natural-neighbour stencils coarsen by a factor of about 30), and with one
+# cycle the outer iterations grow 4-7 fold at a viscosity contrast of 1e6; two
+# steps were the fastest of 1-4 steps and of 1-2 stationary cycles at 4,000 and
+# 16,000 nodes (SolCx, contrasts 1 and 1e6)
+VISCOUS_CG_STEPS = 2
+# a cached AMG hierarchy is rebuilt when a solve needs more than this factor
+# times the iterations of the solve it was built for (plus REBUILD_SLACK)
+REBUILD_GROWTH = 1.5
+REBUILD_SLACK = 10
 
 
 @dataclass
@@ -227,17 +259,26 @@ def solve_minres(problem: SaddlePointProblem, tol: float, maxiter: int,
     return SaddlePointSolution(x[:n1], p, its, res)
 
 
-def minres_operators(problem: SaddlePointProblem, Pu):
-    """The saddle-point product (as a function and an operator) and the
-    block-diagonal preconditioner (``Pu`` on the velocity, ``1 / dp``)."""
-    A, B, S, m, c = problem.A, problem.B, problem.S, problem.m, problem.mean_weight
-    n1, npr, dp = problem.n_velocity, problem.n_pressure, problem.dp
+def saddle_matvec(problem: SaddlePointProblem, A: Optional[sp.spmatrix] = None) -> Callable:
+    """The product with the whole saddle-point matrix (mean-pressure term
+    included); ``A`` replaces ``problem.A`` (the same matrix in another format)."""
+    B, S, m, c = problem.B, problem.S, problem.m, problem.mean_weight
+    A = problem.A if A is None else A
+    n1 = problem.n_velocity
 
     def matvec(x):
         xu, xp = x[:n1], x[n1:]
         return np.concatenate([A @ xu + B.T @ xp,
                                B @ xu - S @ xp - c * m * (m @ xp)])
 
+    return matvec
+
+
+def minres_operators(problem: SaddlePointProblem, Pu):
+    """The saddle-point product (as a function and an operator) and the
+    block-diagonal preconditioner (``Pu`` on the velocity, ``1 / dp``)."""
+    n1, npr, dp = problem.n_velocity, problem.n_pressure, problem.dp
+    matvec = saddle_matvec(problem)
     K = spla.LinearOperator((n1 + npr, n1 + npr), matvec=matvec, dtype=float)
     M = spla.LinearOperator(K.shape, matvec=lambda x: np.concatenate([Pu @ x[:n1],
                                                                       x[n1:] / dp]),
@@ -280,7 +321,81 @@ def viscous_amg(problem: SaddlePointProblem):
     import pyamg
     return pyamg.smoothed_aggregation_solver(
         problem.A.tocsr(), B=rigid_modes(problem.ubasis, problem.free),
-        symmetry="symmetric", strength="symmetric", max_coarse=AMG_MAX_COARSE)
+        symmetry="symmetric", strength="symmetric", max_coarse=AMG_MAX_COARSE,
+        presmoother=AMG_SMOOTHER, postsmoother=AMG_SMOOTHER, coarse_solver=AMG_COARSE_SOLVER)
+
+
+def refresh_amg(ml, A: sp.spmatrix) -> None:
+    """Put new values of the fine matrix ``A`` (same size) into the hierarchy
+    ``ml``: the coarse matrices are the Galerkin products with the kept
+    prolongators, the smoothers and the coarse solve are set up again.
+    Cheaper than a new hierarchy (no strength, aggregation or prolongator
+    smoothing) and exact for the new matrix on the finest level."""
+    import pyamg
+    from pyamg.relaxation.smoothing import change_smoothers
+    levels = ml.levels
+    levels[0].A = A.tocsr()
+    for fine, coarse in zip(levels[:-1], levels[1:]):
+        Ac = fine.R @ fine.A @ fine.P
+        coarse.A = Ac.tobsr(blocksize=coarse.A.blocksize) if sp.issparse(coarse.A) and \
+            coarse.A.format == "bsr" else sp.csr_matrix(Ac)
+    change_smoothers(ml, AMG_SMOOTHER, AMG_SMOOTHER)
+    ml.coarse_solver = pyamg.coarse_grid_solver(AMG_COARSE_SOLVER)
+
+
+def amg_cg(ml, A: sp.spmatrix, b: np.ndarray, steps: int) -> np.ndarray:
+    """``steps`` conjugate-gradient steps from zero for ``A x = b``, each
+    preconditioned by one V-cycle of ``ml``: a better approximation of
+    ``A^-1 b`` than as many stationary V-cycles for one product with ``A``
+    more per step."""
+    x = np.zeros_like(b)
+    r = b.copy()
+    z = v_cycle(ml, r)
+    d = z.copy()
+    rz = _dot(r, z)
+    for k in range(steps):
+        Ad = A @ d
+        dAd = _dot(d, Ad)
+        if not dAd > 0:
+            break
+        alpha = rz / dAd
+        x += alpha * d
+        if k == steps - 1:
+            break
+        r -= alpha * Ad
+        z = v_cycle(ml, r)
+        rz, rz_old = _dot(r, z), rz
+        d = z + (rz / rz_old) * d
+    return x
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a . b`` without BLAS (see :func:`fgmres`)."""
+    return float(np.einsum("i,i->", a, b))
+
+
+def _norm(a: np.ndarray) -> float:
+    """Euclidean norm without BLAS (see :func:`fgmres`)."""
+    return float(np.sqrt(_dot(a, a)))
+
+
+def v_cycle(ml, b: np.ndarray) -> np.ndarray:
+    """One AMG V-cycle from zero for ``A x = b`` (pyamg's own preconditioner
+    also computes two norms and a residual per cycle, which are not needed
+    inside a Krylov method)."""
+    levels = ml.levels
+
+    def cycle(k, rhs):
+        lv = levels[k]
+        if k == len(levels) - 1:
+            return ml.coarse_solver(lv.A, rhs)
+        x = np.zeros_like(rhs)
+        lv.presmoother(lv.A, x, rhs)
+        x += lv.P @ cycle(k + 1, lv.R @ (rhs - lv.A @ x))
+        lv.postsmoother(lv.A, x, rhs)
+        return x
+
+    return cycle(0, b)
 
 
 def rigid_modes(ubasis, free: np.ndarray) -> np.ndarray:
@@ -298,8 +413,188 @@ def rigid_modes(ubasis, free: np.ndarray) -> np.ndarray:
     return Bm[free]
 
 
+@dataclass
+class StokesCache:
+    """What solver ``"fgmres"`` keeps from one solve to the next: the AMG
+    hierarchy of the viscous block and the last solution.
+
+    Pass one object to a sequence of solves of similar problems (the Picard
+    iterations of a time step, successive time steps). The hierarchy is
+    reused, with the new matrix values put into it (:func:`refresh_amg`),
+    while the viscous block keeps its sparsity pattern, and rebuilt when the
+    pattern changes or a solve needs more than ``REBUILD_GROWTH`` times the
+    iterations of the solve it was built for. The last solution is the
+    next solve's start where the sizes agree and it is a better start than
+    zero. ``builds`` and ``reuses`` count what happened.
+    """
+
+    hierarchy: object = None
+    pattern: Optional[tuple] = None
+    solution: Optional[np.ndarray] = None
+    base_iterations: Optional[int] = None
+    builds: int = 0
+    reuses: int = 0
+    last_iterations: Optional[int] = field(default=None, repr=False)
+
+    def amg(self, problem: SaddlePointProblem):
+        """The hierarchy for ``problem.A``: the kept one (refreshed) or a new one."""
+        A = problem.A
+        pattern = (A.shape, A.format, A.indptr, A.indices)
+        stale = (self.base_iterations is not None and self.last_iterations is not None
+                 and self.last_iterations > REBUILD_GROWTH * self.base_iterations
+                 + REBUILD_SLACK)
+        if self.hierarchy is not None and not stale and self._same(pattern):
+            refresh_amg(self.hierarchy, A)
+            self.reuses += 1
+            return self.hierarchy, False
+        self.hierarchy = viscous_amg(problem)
+        self.pattern = (A.shape, A.format, A.indptr.copy(), A.indices.copy())
+        self.base_iterations = None
+        self.builds += 1
+        return self.hierarchy, True
+
+    def _same(self, pattern: tuple) -> bool:
+        """True if ``pattern`` is the sparsity pattern the hierarchy was built for."""
+        if self.pattern is None:
+            return False
+        (s0, f0, p0, i0), (s1, f1, p1, i1) = self.pattern, pattern
+        return (s0 == s1 and f0 == f1 and p0.shape == p1.shape and i0.shape == i1.shape
+                and np.array_equal(p0, p1) and np.array_equal(i0, i1))
+
+    def start(self, n: int) -> Optional[np.ndarray]:
+        """The last solution as a start vector of length ``n`` (None if the
+        sizes differ)."""
+        x = self.solution
+        return x.copy() if x is not None and x.size == n else None
+
+    def record(self, x: np.ndarray, iterations: int, rebuilt: bool) -> None:
+        """Keep the solution and the iteration count of a finished solve."""
+        self.solution = x.copy()
+        self.last_iterations = iterations
+        if rebuilt or self.base_iterations is None:
+            self.base_iterations = iterations
+
+
+def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: dict,
+                 cache: Optional[StokesCache] = None) -> SaddlePointSolution:
+    """Flexible GMRES on the whole system, preconditioned by the block upper
+    triangle ``[[A, B^T], [0, -S_hat]]^-1``.
+
+    ``A^-1`` is ``VISCOUS_CG_STEPS`` conjugate-gradient steps preconditioned
+    by AMG V-cycles (rigid-body modes as near null space); ``S_hat`` is the
+    lumped 1/eta-weighted pressure mass ``dp`` (on constraint multipliers the
+    Jacobi estimate of ``C A^-1 C^T``). With an exact ``A^-1`` the triangular
+    form leaves the spectrum of the Schur complement against ``S_hat``, whose
+    iterations ``"schur"`` shows to be flat in the mesh size; the consistent
+    weighted mass in place of the lumped one did not lower them at contrasts
+    of 1e4 and more. The CG steps are not a fixed linear map, hence the
+    flexible variant. Stops on the true relative residual of the whole
+    system. ``cache`` (a :class:`StokesCache`) supplies and keeps the
+    hierarchy and the start vector. Records ``info["amg_levels"]``,
+    ``info["amg_rebuilt"]`` and ``info["warm_start"]``.
+    """
+    cache = StokesCache() if cache is None else cache
+    ml, rebuilt = cache.amg(problem)
+    A, B = ml.levels[0].A, problem.B               # A as CSR: faster products
+    n1, dp = problem.n_velocity, problem.dp
+    matvec = saddle_matvec(problem, A)
+
+    def precondition(r):
+        zp = -r[n1:] / dp
+        zu = amg_cg(ml, A, r[:n1] - B.T @ zp, VISCOUS_CG_STEPS)
+        return np.concatenate([zu, zp])
+
+    rhs = np.concatenate([problem.f, problem.g])
+    x0 = cache.start(rhs.size)
+    warm = x0 is not None and _norm(rhs - matvec(x0)) < _norm(rhs)
+    x, its, res = fgmres(matvec, precondition, rhs, x0 if warm else None, tol, maxiter)
+    info.update(amg_levels=len(ml.levels), amg_rebuilt=rebuilt, warm_start=warm)
+    if not res <= tol:
+        cache.last_iterations = its  # a failed solve asks for a new hierarchy next time
+        raise RuntimeError(f"FGMRES did not converge: {its} iterations (maxiter), relative "
+                           f"residual {res:.3e} > tol {tol:.1e} (raise maxiter, loosen tol, "
+                           f"or use solver='schur', which factorises the viscous block)")
+    cache.record(x, its, rebuilt)
+    p = problem.mean_free(x[n1:])
+    return SaddlePointSolution(x[:n1], p, its, problem.residual(x[:n1], p))
+
+
+def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional[np.ndarray],
+           tol: float, maxiter: int, restart: int = FGMRES_RESTART):
+    """Restarted flexible GMRES (Saad 1993), right-preconditioned.
+
+    Flexible because the preconditioned vectors are kept and the update is
+    built from them, so ``precondition`` may change from one application to
+    the next (scipy's ``gmres`` assumes a fixed preconditioner). Classical
+    Gram-Schmidt applied twice (two matrix-vector products with the basis
+    per pass instead of a loop). Products with the basis and norms go
+    through ``einsum``, not BLAS: a threaded BLAS waiting for cores that
+    numba's threads or other jobs hold made the solves of the sinking plate
+    5-7 times slower. Returns the solution, the number of
+    iterations and the true relative residual ``|b - K x| / |b|``, the
+    stopping test (checked at every restart).
+    """
+    n = b.size
+    bnorm = _norm(b) or 1.0
+    x = np.zeros(n) if x0 is None else np.array(x0, dtype=float)
+    r = b - matvec(x) if x0 is not None else b.copy()
+    its = 0
+    V = np.empty((restart + 1, n))
+    Z = np.empty((restart, n))
+    while True:
+        beta = _norm(r)
+        if beta <= tol * bnorm or its >= maxiter:
+            return x, its, beta / bnorm
+        H = np.zeros((restart + 1, restart))
+        rot = np.zeros((restart, 2))                 # Givens cosines and sines
+        g = np.zeros(restart + 1)
+        g[0] = beta
+        V[0] = r / beta
+        for j in range(restart):
+            Z[j] = precondition(V[j])
+            w = matvec(Z[j])
+            its += 1
+            for _ in range(2):
+                h = np.einsum("ij,j->i", V[:j + 1], w)
+                w -= np.einsum("i,ij->j", h, V[:j + 1])
+                H[:j + 1, j] += h
+            H[j + 1, j] = _norm(w)
+            if H[j + 1, j] > 0:
+                V[j + 1] = w / H[j + 1, j]
+            for i in range(j):
+                ci, si = rot[i]
+                H[i, j], H[i + 1, j] = ci * H[i, j] + si * H[i + 1, j], \
+                    -si * H[i, j] + ci * H[i + 1, j]
+            d = np.hypot(H[j, j], H[j + 1, j])
+            rot[j] = (H[j, j] / d, H[j + 1, j] / d) if d > 0 else (1.0, 0.0)
+            H[j, j], H[j + 1, j] = d, 0.0
+            g[j], g[j + 1] = rot[j, 0] * g[j], -rot[j, 1] * g[j]
+            if abs(g[j + 1]) <= tol * bnorm or its >= maxiter or H[j, j] == 0:
+                break
+        k = j + 1
+        y = sla.solve_triangular(H[:k, :k], g[:k], check_finite=False)
+        x += np.einsum("i,ij->j", y, Z[:k])
+        r = b - matvec(x)
+
+
 SOLVERS: Dict[str, Callable[..., SaddlePointSolution]] = {
     "schur": solve_schur, "schur-amg": solve_schur_amg, "direct": solve_direct,
-    "minres": solve_minres}
+    "minres": solve_minres, "fgmres": solve_fgmres}
 """The solvers of :func:`skfem_nem.models.stokes.solve_stokes` by name, each
 ``(problem, tol, maxiter, info) -> SaddlePointSolution``."""
+
+CACHED_SOLVERS = ("fgmres",)
+"""The solvers that take a ``cache=`` (:class:`StokesCache`) keyword."""
+
+
+def check_solver(solver: str, cache) -> None:
+    """``ValueError`` naming an unknown ``solver``, or a ``cache`` that is not a
+    :class:`StokesCache` or that the solver does not use."""
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got "
+                         f"{solver!r}")
+    if cache is not None and solver not in CACHED_SOLVERS:
+        raise ValueError(f"cache is used by solver {' or '.join(map(repr, CACHED_SOLVERS))} "
+                         f"only, not by solver={solver!r}")
+    if cache is not None and not isinstance(cache, StokesCache):
+        raise ValueError(f"cache must be a StokesCache, got {type(cache).__name__}")

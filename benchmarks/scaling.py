@@ -1,0 +1,192 @@
+"""How the Stokes solvers scale: SolCx against mesh size and viscosity contrast,
+and the step of the sinking-plate app, with the old and the new solver.
+
+**SolCx** (``skfem_nem.models.analytic.SolCx``, the random nodes of
+``examples/ex07_solcx.py`` without interface segments, natural-neighbour
+velocity with bubbles, free slip, ``tol`` 1e-10): for each node count and
+contrast the system is assembled once and each solver runs in a forked child
+process (so that its peak memory is its own): iterations, seconds (best of
+``--repeat``), the relative velocity difference ``|u - u_ref| / |u_ref|`` to
+the direct solve (to ``"schur"`` where the direct solve is skipped) and the
+peak resident memory the solve added (``ru_maxrss`` of the child minus the
+resident size at the fork). A solve still running after ``--max-seconds`` is
+stopped and reported as such; a size whose reference solve takes longer than
+that is skipped with the solvers that follow it.
+
+**Sinking plate**: ``skfem-nem sinking-plate --nodes N --max-steps 3 --solver S``
+in a subprocess for each ``N`` and solver; the mean ``solve_seconds`` (spaces,
+assembly and Picard solves) and ``step_seconds`` of steps 2 and 3 (step 1
+compiles kernels), best of ``--repeat``, and the plate depth after step 3.
+
+Prints markdown tables. Quick run::
+
+    python benchmarks/scaling.py --sizes 1000 4000 --plate-nodes 1500 --repeat 1
+"""
+import argparse
+import csv
+import multiprocessing as mp
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+from ex07_solcx import nodes  # noqa: E402
+
+from skfem_nem import delaunay_mesh  # noqa: E402
+from skfem_nem.models.analytic import SolCx  # noqa: E402
+from skfem_nem.models.stokes import assemble_stokes, solve_stokes, stokes_spaces  # noqa: E402
+
+SOLVER_ORDER = ("direct", "schur", "schur-amg", "minres", "fgmres")
+# the direct solve of the whole system is run up to this many nodes (it took
+# 96 s at 10,000 nodes)
+DIRECT_MAX_NODES = 5000
+
+
+def _rss_kb() -> float:
+    """Current resident set size of this process, kB."""
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1024
+
+
+def _child(conn, spaces, system, solver, repeat, maxiter):
+    """Runs in the forked process: the solve ``repeat`` times, sends
+    (iterations, best seconds, u, peak MB added, error)."""
+    base = _rss_kb()
+    best, s, err = np.inf, None, ""
+    try:
+        for _ in range(repeat):
+            t = time.perf_counter()
+            s = solve_stokes(spaces, None, system=system, solver=solver, tol=1e-10,
+                             maxiter=maxiter)
+            best = min(best, time.perf_counter() - t)
+    except RuntimeError as e:
+        err = str(e).split(":")[0]
+    peak = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base) / 1024
+    conn.send((None if s is None else s.iterations, best, None if s is None else s.u,
+               peak, err))
+    conn.close()
+
+
+def measure(spaces, system, solver, repeat, max_seconds, maxiter):
+    """One solver in a forked child; a dict of what it measured (``status``
+    tells whether it finished)."""
+    ctx = mp.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    p = ctx.Process(target=_child, args=(send, spaces, system, solver, repeat, maxiter))
+    t0 = time.perf_counter()
+    p.start()
+    send.close()
+    ready = recv.poll(max_seconds)
+    if not ready:
+        p.terminate()
+        p.join()
+        return dict(status=f"stopped after {max_seconds:.0f} s")
+    its, sec, u, peak, err = recv.recv()
+    p.join()
+    if err:
+        return dict(status=err, seconds=time.perf_counter() - t0)
+    return dict(status="ok", iterations=its, seconds=sec, u=u, peak_mb=peak)
+
+
+def solcx_table(sizes, contrasts, solvers, repeat, max_seconds, maxiter):
+    """Markdown rows of the SolCx study (printed as they come)."""
+    print("SolCx, tol 1e-10: iterations, seconds (best of "
+          f"{repeat}), relative velocity difference to the reference, peak memory added\n")
+    print("| nodes | unknowns | contrast | solver | iterations | seconds | du (ref) | peak MB |")
+    print("|---|---|---|---|---|---|---|---|")
+    skip = set()
+    for n in sizes:
+        mesh = delaunay_mesh(nodes(n))
+        sp_ = stokes_spaces(mesh, "nem")
+        nn = mesh.p.shape[1]
+        for contrast in contrasts:
+            ex = SolCx(1.0, contrast)
+            system = assemble_stokes(sp_, ex.viscosity, ex.force)
+            ref, ref_name = None, ""
+            for solver in solvers:
+                if solver == "direct" and nn > DIRECT_MAX_NODES:
+                    continue
+                if (solver, contrast) in skip:
+                    print(f"| {nn} | {sp_.n_velocity + sp_.n_pressure} | {contrast:.0e} | "
+                          f"{solver} | skipped (over {max_seconds:.0f} s at a smaller size) "
+                          f"| | | |", flush=True)
+                    continue
+                r = measure(sp_, system, solver, repeat, max_seconds, maxiter)
+                if r["status"] != "ok":
+                    if r["status"].startswith("stopped"):
+                        skip.add((solver, contrast))
+                    print(f"| {nn} | {sp_.n_velocity + sp_.n_pressure} | {contrast:.0e} | "
+                          f"{solver} | {r['status']} | | | |", flush=True)
+                    continue
+                if ref is None:
+                    ref, ref_name = r["u"], solver
+                du = np.linalg.norm(r["u"] - ref) / np.linalg.norm(ref)
+                print(f"| {nn} | {sp_.n_velocity + sp_.n_pressure} | {contrast:.0e} | {solver} | "
+                      f"{r['iterations']} | {r['seconds']:.2f} | {du:.1e} ({ref_name}) | "
+                      f"{r['peak_mb']:.0f} |", flush=True)
+
+
+def plate_run(n, solver, out):
+    """One 3-step sinking-plate run; (solve s, step s, Picard iterations, depth)."""
+    cmd = [sys.executable, "-c", "import sys; from skfem_nem.apps.cli import main; "
+           "sys.exit(main(sys.argv[1:]))", "sinking-plate", "--nodes", str(n),
+           "--max-steps", "3", "--solver", solver, "-o", out, "--quiet"]
+    subprocess.run(cmd, check=True, capture_output=True)
+    with open(Path(out) / "diagnostics.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    later = rows[1:] or rows
+    return (np.mean([float(r["solve_seconds"]) for r in later]),
+            np.mean([float(r["step_seconds"]) for r in later]),
+            sum(int(r["picard_iterations"]) for r in rows), float(rows[-1]["plate_depth"]))
+
+
+def plate_table(sizes, solvers, repeat):
+    """Markdown rows of the sinking-plate study."""
+    print("\nSinking plate, 3 steps: mean solve / step seconds of steps 2-3 (best of "
+          f"{repeat}), Picard iterations, plate depth after step 3\n")
+    print("| nodes | solver | solve s | step s | Picard its | plate depth | solve / "
+          f"{solvers[0]} |")
+    print("|---|---|---|---|---|---|---|")
+    for n in sizes:
+        first = None
+        for solver in solvers:
+            best = None
+            for _ in range(repeat):
+                with tempfile.TemporaryDirectory() as tmp:
+                    r = plate_run(n, solver, tmp)
+                best = r if best is None or r[0] < best[0] else best
+            first = best[0] if first is None else first
+            print(f"| {n} | {solver} | {best[0]:.2f} | {best[1]:.2f} | {best[2]} | "
+                  f"{best[3]:.6f} | {best[0] / first:.2f} |", flush=True)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="*", default=[1000, 10000, 100000])
+    ap.add_argument("--contrasts", type=float, nargs="+", default=[1.0, 1e2, 1e4, 1e6])
+    ap.add_argument("--solvers", nargs="+", default=list(SOLVER_ORDER),
+                    help="first the reference (direct, else schur)")
+    ap.add_argument("--plate-nodes", type=int, nargs="*", default=[1500, 6000, 24000])
+    ap.add_argument("--plate-solvers", nargs="+", default=["schur", "fgmres"])
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--max-seconds", type=float, default=600.0)
+    ap.add_argument("--maxiter", type=int, default=3000)
+    a = ap.parse_args(argv)
+    # numba kernels compiled once, before the forks
+    solve_stokes(stokes_spaces(delaunay_mesh(nodes(100)), "nem"), 1.0, SolCx(1.0, 1.0).force)
+    solvers = sorted(a.solvers, key=lambda s: SOLVER_ORDER.index(s) if s in SOLVER_ORDER
+                     else len(SOLVER_ORDER))
+    if a.sizes:
+        solcx_table(a.sizes, a.contrasts, solvers, a.repeat, a.max_seconds, a.maxiter)
+    if a.plate_nodes:
+        plate_table(a.plate_nodes, a.plate_solvers, a.repeat)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,176 @@
+"""The flexible-GMRES Stokes solver and its cache: agreement with the direct
+solve, reuse of the AMG hierarchy, warm starts and failures."""
+import numpy as np
+import pytest
+
+from skfem_nem import delaunay_mesh
+from skfem_nem.geometry.nodesets import box_nodes, polyline_nodes
+from skfem_nem.models.analytic import SolCx
+from skfem_nem.models.stokes import StokesCache, outline_flux, solve_stokes, stokes_spaces
+from skfem_nem.models.stokes_solvers import SOLVERS
+
+
+# the pressure of the direct solve itself is only this accurate at a 1e6 jump
+# (the factorised Schur-complement solve differs from it by 9e-7 there)
+PRESSURE_RTOL = 1e-5
+
+
+def _close(s, ref, rtol, prtol=PRESSURE_RTOL):
+    """Relative velocity difference below ``rtol``, pressure below ``prtol``."""
+    du = np.linalg.norm(s.u - ref.u) / np.linalg.norm(ref.u)
+    dp = np.linalg.norm(s.p - ref.p) / np.linalg.norm(ref.p)
+    assert du < rtol and dp < prtol, (du, dp)
+
+
+@pytest.fixture(scope="module")
+def square():
+    """A square with a row of nodes on the SolCx interface x = 0.5, and a
+    small square outline on the weak side (for an area constraint)."""
+    sq = [[0.2, 0.3], [0.4, 0.3], [0.4, 0.5], [0.2, 0.5]]
+    line = polyline_nodes(sq, 0.05, closed=True)
+    z = np.linspace(0, 1, 21)
+    mesh = delaunay_mesh(box_nodes(500, lines=[np.c_[0.5 + 0 * z, z], np.r_[line, line[:1]]],
+                                   seed=3))
+    idx = np.array([int(np.argmin(np.hypot(*(mesh.p.T - q).T))) for q in line])
+    return stokes_spaces(mesh, "nem"), idx
+
+
+@pytest.mark.parametrize("contrast", [1.0, 1e6])
+@pytest.mark.parametrize("walls", ["free-slip", "no-slip"])
+def test_fgmres_agrees_with_direct(square, contrast, walls):
+    sp_, _ = square
+    ex = SolCx(1.0, contrast)
+    kw = dict(free_slip=None, no_slip="all") if walls == "no-slip" else {}
+    ref = solve_stokes(sp_, ex.viscosity, ex.force, solver="direct", **kw)
+    s = solve_stokes(sp_, ex.viscosity, ex.force, solver="fgmres", tol=1e-12, maxiter=3000, **kw)
+    assert s.info["pressure_mean"] and s.iterations > 1
+    _close(s, ref, 1e-8)
+    assert s.residual < 1e-10
+
+
+@pytest.mark.parametrize("contrast", [1.0, 1e6])
+def test_fgmres_with_constraint_rows(square, contrast):
+    """An outline-flux constraint with a right side (a pressure-like
+    multiplier row of B, preconditioned by its Jacobi estimate)."""
+    sp_, idx = square
+    ex = SolCx(1.0, contrast)
+    C = outline_flux(sp_, idx)
+    ref = solve_stokes(sp_, ex.viscosity, ex.force, solver="direct", constraints=(C, [1e-3]))
+    s = solve_stokes(sp_, ex.viscosity, ex.force, solver="fgmres", constraints=(C, [1e-3]),
+                     tol=1e-12, maxiter=3000)
+    _close(s, ref, 1e-8)
+    assert (C @ s.u)[0] == pytest.approx(1e-3, rel=1e-8)
+    m, mref = s.info["multipliers"], ref.info["multipliers"]
+    assert m == pytest.approx(mref, rel=1e-6)
+
+
+def test_fgmres_without_fixed_mean_pressure(square):
+    """An open top: the pressure is determined by the traction-free boundary
+    (``pressure_mean`` False, no rank-one term)."""
+    sp_, _ = square
+    mesh = sp_.mesh.with_boundaries({"walls": lambda x: (x[0] < 1e-9) | (x[0] > 1 - 1e-9)
+                                     | (x[1] < 1e-9)})
+    sp2 = stokes_spaces(mesh, "nem")
+    ex = SolCx(1.0, 1e3)
+    ref = solve_stokes(sp2, ex.viscosity, ex.force, free_slip=["walls"], solver="direct")
+    s = solve_stokes(sp2, ex.viscosity, ex.force, free_slip=["walls"], solver="fgmres",
+                     tol=1e-12, maxiter=3000)
+    assert not s.info["pressure_mean"]
+    _close(s, ref, 1e-8)
+
+
+def test_cache_reuses_hierarchy_and_warm_starts(square):
+    sp_, _ = square
+    ex = SolCx(1.0, 1e4)
+    cache = StokesCache()
+    s1 = solve_stokes(sp_, ex.viscosity, ex.force, solver="fgmres", cache=cache)
+    ml = cache.hierarchy
+    assert s1.info["amg_rebuilt"] and not s1.info["warm_start"]
+    # a slightly different viscosity: same pattern, the hierarchy object is kept
+    eta2 = lambda x: ex.viscosity(x) * (1 + 0.05 * np.sin(3 * x[1]))   # noqa: E731
+    s2 = solve_stokes(sp_, eta2, ex.force, solver="fgmres", cache=cache)
+    assert cache.hierarchy is ml and not s2.info["amg_rebuilt"]
+    assert (cache.builds, cache.reuses) == (1, 1)
+    # and the refreshed hierarchy solves the new problem, not the old one
+    ref2 = solve_stokes(sp_, eta2, ex.force, solver="direct")
+    _close(s2, ref2, 1e-7)
+    # the warm start (from s1) needs fewer iterations than a cold one
+    cold = solve_stokes(sp_, eta2, ex.force, solver="fgmres")
+    assert s2.info["warm_start"] and not cold.info["warm_start"]
+    assert s2.iterations < cold.iterations
+    # another node set: other size and pattern, a new hierarchy, no warm start
+    other = stokes_spaces(delaunay_mesh(box_nodes(300, seed=5)), "nem")
+    s3 = solve_stokes(other, ex.viscosity, ex.force, solver="fgmres", cache=cache)
+    assert cache.hierarchy is not ml and s3.info["amg_rebuilt"] and not s3.info["warm_start"]
+    assert cache.builds == 2
+
+
+def test_cache_rebuilds_when_iterations_grow(square):
+    sp_, _ = square
+    ex = SolCx(1.0, 1.0)
+    cache = StokesCache()
+    solve_stokes(sp_, ex.viscosity, ex.force, solver="fgmres", cache=cache)
+    ml = cache.hierarchy
+    cache.solution = None                     # no warm start, as for a new problem
+    cache.last_iterations = 10 * cache.base_iterations + 100
+    s = solve_stokes(sp_, ex.viscosity, ex.force, solver="fgmres", cache=cache)
+    assert s.info["amg_rebuilt"] and cache.hierarchy is not ml
+
+
+def test_fgmres_failure_names_maxiter(square):
+    sp_, _ = square
+    ex = SolCx(1.0, 1e6)
+    cache = StokesCache()
+    with pytest.raises(RuntimeError, match=r"did not converge: 5 iterations \(maxiter\)"):
+        solve_stokes(sp_, ex.viscosity, ex.force, solver="fgmres", maxiter=5, cache=cache)
+    assert cache.solution is None             # a failed solve is no warm start
+
+
+def test_solver_and_cache_keywords_checked(square):
+    sp_, _ = square
+    with pytest.raises(ValueError, match="'gmres'"):
+        solve_stokes(sp_, 1.0, 0.0, solver="gmres")
+    with pytest.raises(ValueError, match="cache.*'schur'"):
+        solve_stokes(sp_, 1.0, 0.0, solver="schur", cache=StokesCache())
+    with pytest.raises(ValueError, match="cache must be a StokesCache"):
+        solve_stokes(sp_, 1.0, 0.0, solver="fgmres", cache={})
+    assert "fgmres" in SOLVERS
+
+
+def test_vep_step_passes_solver_and_cache():
+    """A plastic step with ``solver="fgmres"``: the same result as the default
+    solver, and the AMG hierarchy built once and reused by the step's Picard
+    iterations (a cache of the caller's is kept across steps)."""
+    from skfem_nem.models.rheology import Material, vep_step
+    sp_ = stokes_spaces(delaunay_mesh(box_nodes(300, seed=1)), "nem")
+    X = sp_.quadrature_points
+    ne, nq = X.shape[1:]
+    inside = (np.abs(X[0] - 0.5) < 0.2) & (np.abs(X[1] - 0.5) < 0.1)
+    mat = Material(np.where(inside, 1e3, 1.0), np.where(inside, 10.0, np.inf),
+                   np.where(inside, 0.05, np.inf))
+    f = np.stack([0 * X[0], -1.0 * inside])
+    tau = np.zeros((2, 2, ne, nq))
+    ref = vep_step(sp_, mat, tau, 1.0, f=f, tol=1e-6)
+    cache = StokesCache()
+    r = vep_step(sp_, mat, tau, 1.0, f=f, tol=1e-6, solver="fgmres", cache=cache)
+    # the Picard iterations (tol 1e-6) end within one of each other at the same field
+    assert abs(r.iterations - ref.iterations) <= 1 and r.iterations > 2 and r.yielded.any()
+    assert np.abs(r.solution.u - ref.solution.u).max() < 1e-5 * np.abs(ref.solution.u).max()
+    assert cache.builds == 1 and cache.reuses == r.iterations - 1
+    # the next step starts from this one's solution
+    r2 = vep_step(sp_, mat, r.tau, 1.0, f=f, tol=1e-6, solver="fgmres", cache=cache)
+    assert cache.builds == 1 and r2.solution.info["warm_start"]
+    with pytest.raises(ValueError, match="'lu'"):
+        vep_step(sp_, mat, tau, 1.0, f=f, solver="lu")
+    with pytest.raises(ValueError, match="cache.*'schur'"):
+        vep_step(sp_, mat, tau, 1.0, f=f, solver="schur", cache=StokesCache())
+
+
+def test_sinking_plate_solver_option():
+    from skfem_nem.apps.sinking_plate import HELP, load_config
+    assert load_config(overrides={"solver": "fgmres"}).solver == "fgmres"
+    assert "fgmres" in HELP["solver"]
+    with pytest.raises(ValueError, match="solver must be one of .*got 'gmres'"):
+        load_config(overrides={"solver": "gmres"})
+    with pytest.raises(ValueError, match="solver must be str"):
+        load_config(overrides={"solver": 3})

@@ -9,7 +9,7 @@ from test_evolution_segments import (LINE_Y, assert_same_state, check_chain,
 from helpers import edge_set, square_nodes
 from scipy.spatial import cKDTree
 from skfem_nem import LagrangianMesh
-from skfem_nem.evolution.merging import CLUSTER_FRACTION, conservative_fill
+from skfem_nem.evolution.merging import CLUSTER_FRACTION, WALL_GAP_FRACTION, conservative_fill
 
 A3 = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
@@ -356,3 +356,22 @@ def test_injection_refines_the_walls_too():
     np.testing.assert_array_equal(W[:, 0], (P[:, 0] == 0.0) | (P[:, 0] == 1.0))
     np.testing.assert_allclose(lm.ip_integral("one"), 1.0, rtol=1e-12)
     np.testing.assert_allclose(lm.node_fields["x0"][P[:, 1] == 0.0, 1], 0.0, atol=1e-12)
+
+
+def test_a_node_pressed_against_a_wall_is_removed():
+    """An interior node 1e-4 from the bottom wall (a node stopped short of the wall step
+    after step) is crowded by its distance to the wall, though its share of the areas is
+    not small; a node at a normal distance is not."""
+    p = square_nodes(200, 12, 4, jitter=0.3, margin=0.01)
+    lm = LagrangianMesh(np.r_[p, [[0.47, 1e-4]]])
+    ratio = lm.spacing_ratios()
+    k = lm.nodes.shape[0] - 1
+    share = np.zeros(k + 1)
+    area = 0.5 * lm.triangulation.orientation()
+    np.add.at(share, lm.triangles.ravel(), np.repeat(area / 3, 3))
+    assert share[k] > 0.04 * np.median(share)           # not crowded by its area
+    assert ratio[k] < 0.01 * CLUSTER_FRACTION / WALL_GAP_FRACTION < CLUSTER_FRACTION
+    assert ratio[k] == ratio.min()
+    rep = lm.merge_nodes()
+    assert rep["node_map"][k] == -1
+    check_constrained(lm)

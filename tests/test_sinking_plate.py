@@ -486,3 +486,27 @@ def test_close_segment_pairs_finds_facing_lines_not_neighbours_along_one():
     assert gap.max() < 0.11
     # the segments near the hairpin's bend are within 4 of each other along the line
     assert not ((np.abs(i - j) <= 4) & (j < 41)).any()
+
+
+def test_material_lines_rest_on_a_wall_instead_of_reaching_it(tmp_path):
+    """Nodes of the outline or interface closer to a wall than a quarter of the outline
+    spacing keep no velocity towards it; away from it, along it, farther off or off the
+    lines, velocities are untouched."""
+    from skfem_nem.apps.plate_time_step import FILM_FRACTION, hold_off_walls
+    cfg = PlateConfig(nodes=300)
+    sim = SinkingPlate(cfg, tmp_path)
+    lm = sim.lm
+    h = FILM_FRACTION * cfg.outline_spacing * cfg.plate_thickness
+    line = np.flatnonzero(lm.segment_nodes() & ~lm.on_walls.any(axis=1))
+    a, b = line[:2]
+    off = np.flatnonzero(~lm.segment_nodes() & ~lm.on_walls.any(axis=1))[0]
+    x = np.array(lm.nodes)
+    x[a], x[b], x[off] = [3.0, 0.5 * h], [3.5, 2 * h], [4.0, 0.5 * h]
+    lm.triangulation.move_nodes(x)   # (a probe of positions only, no flips needed here)
+    v = np.zeros_like(x)
+    v[[a, b, off]] = [[0.3, -1.0], [0.0, -1.0], [0.0, -1.0]]
+    w = hold_off_walls(lm, v, cfg)
+    np.testing.assert_array_equal(w[a], [0.3, 0.0])      # towards the bottom: held off
+    np.testing.assert_array_equal(w[[b, off]], v[[b, off]])
+    v[a] = [0.3, 1.0]                                    # away from it: free
+    np.testing.assert_array_equal(hold_off_walls(lm, v, cfg)[a], v[a])

@@ -18,7 +18,8 @@ import numpy as np
 
 from ..geometry.polylines import close_segment_pairs, segment_gaps
 
-__all__ = ["stable_dt", "velocity_now", "film_dt", "node_spacing", "FILM_FRACTION",
+__all__ = ["stable_dt", "velocity_now", "film_dt", "hold_off_walls", "node_spacing",
+           "FILM_FRACTION",
            "WALL_FRACTION", "FILM_WATCH", "FILM_HALVINGS"]
 
 #: an interface segment closer to the plate's outline than this fraction of the outline's
@@ -49,6 +50,24 @@ def node_spacing(P: np.ndarray, T: np.ndarray) -> np.ndarray:
         np.add.at(share, T[:, k], area / 3.0)
     return np.sqrt(share)
 
+
+
+def hold_off_walls(lm, v: np.ndarray, c) -> np.ndarray:
+    """The nodal velocities v with the component towards a wall set to zero for the nodes
+    of material lines (outline, interface) closer to that wall than :data:`FILM_FRACTION`
+    of the outline's spacing: a plate pressed onto the bottom rests there on a film of
+    fluid that the mesh does not resolve, instead of being pushed ever closer (stopped
+    short of the wall step after step, its triangles with the wall flatten to nothing)."""
+    P, W = lm.nodes, lm.on_walls
+    line = lm.segment_nodes()
+    h = FILM_FRACTION * c.outline_spacing * c.plate_thickness
+    v = np.array(v, dtype=float)
+    for axis, size in ((0, c.width), (1, c.height)):
+        free = line & ~W[:, axis]
+        towards = (free & (P[:, axis] < h) & (v[:, axis] < 0)) \
+            | (free & (size - P[:, axis] < h) & (v[:, axis] > 0))
+        v[towards, axis] = 0.0
+    return v
 
 
 def velocity_now(lm, v: np.ndarray) -> np.ndarray:

@@ -48,7 +48,8 @@ from ..evolution.lagrangian import LagrangianMesh
 from ..coordinates import sibson_coordinates
 from ..geometry.nodesets import box_nodes, polyline_nodes
 from ..geometry.polylines import segment_distances, segments_cross
-from .plate_time_step import FILM_FRACTION, WALL_FRACTION, node_spacing, stable_dt  # noqa: F401
+from .plate_time_step import (FILM_FRACTION, WALL_FRACTION, hold_off_walls,  # noqa: F401
+                              node_spacing, stable_dt)
 from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
 from ..models.rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
 from ..models.stokes import outline_flux, stokes_spaces
@@ -481,7 +482,7 @@ class SinkingPlate:
         lm.ip_fields["log_eta_eff"] = np.log(r.eta_eff)
         lm.ip_fields["stress"] = to_ip_field(r.tau)
         lm.ip_fields["plastic_strain"] = np.ascontiguousarray(r.plastic_strain)
-        v = r.solution.velocity_at_nodes()
+        v = hold_off_walls(lm, r.solution.velocity_at_nodes(), c)
         t_solve = _time.perf_counter() - t0
 
         def velocity(x):

@@ -26,7 +26,8 @@ from ..geometry.constrained import pair_keys
 from ..geometry.delaunay2d import is_segment
 from ..geometry.predicates import orient2d
 
-__all__ = ["NodeRemoval", "conservative_fill", "CLUSTER_FRACTION", "FOLD_ANGLE"]
+__all__ = ["NodeRemoval", "conservative_fill", "CLUSTER_FRACTION", "FOLD_ANGLE",
+           "WALL_GAP_FRACTION"]
 
 #: a node whose spacing (square root of its share of the triangle areas) fell below this
 #: fraction of its reference spacing (the square root of the largest reference area, the
@@ -44,6 +45,12 @@ CLUSTER_FRACTION = 0.2
 #: (degrees) is a fold about to close: merging its segments blunts the fold before the
 #: outline can pass through itself within a step.
 FOLD_ANGLE = 20.0
+#: an interior node closer to a wall of the box than this fraction of its reference spacing
+#: is removed too: a node pressed towards a wall is stopped short of it step after step
+#: and its triangles with the wall flatten to nothing (angles of 1e-18 degrees) while its
+#: share of the areas stays; a fraction well below CLUSTER_FRACTION leaves the nodes that
+#: a drawn node set puts near the walls alone
+WALL_GAP_FRACTION = 0.02
 
 
 # ---------------------------------------------------------------------------
@@ -428,8 +435,10 @@ class NodeRemoval:
         """(n,) each node's spacing (square root of its share of the triangle areas) over
         its reference spacing, what :meth:`merge_nodes` compares with ``fraction``; for a
         wall node the smaller of that and its nearest neighbour on the wall over its
-        reference spacing; ``inf`` for the corners of the box and hull nodes off its walls
-        (never removed)."""
+        reference spacing, for a node off the walls the smaller of its ratio and its
+        distance to the nearest wall over :data:`WALL_GAP_FRACTION` of its reference
+        spacing, times :data:`CLUSTER_FRACTION`; ``inf`` for the corners of
+        the box and hull nodes off its walls (never removed)."""
         tri = self.triangulation
         P, T = self.nodes, self.triangles
         area = 0.5 * np.abs((P[T[:, 1], 0] - P[T[:, 0], 0]) * (P[T[:, 2], 1] - P[T[:, 0], 1])
@@ -460,6 +469,14 @@ class NodeRemoval:
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.sqrt(share / ref)
             ratio[wall] = np.minimum(ratio[wall], nearest[wall] / np.sqrt(ref[wall]))
+            if self.walls == "box":
+                # an interior node pressed towards a wall (stopped short of it step after
+                # step) by its distance to the wall: its triangles with the wall flatten
+                # while its share of the areas stays
+                lo, hi = self._box
+                gap = np.minimum(P - lo, hi - P).min(axis=1) / np.sqrt(ref)
+                gap *= CLUSTER_FRACTION / WALL_GAP_FRACTION  # removed below WALL_GAP_FRACTION
+                ratio[free] = np.minimum(ratio[free], gap[free])
         ratio[~(free | wall) | ~(ref > 0)] = np.inf
         return ratio
 

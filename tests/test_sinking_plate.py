@@ -510,3 +510,30 @@ def test_material_lines_rest_on_a_wall_instead_of_reaching_it(tmp_path):
     np.testing.assert_array_equal(w[[b, off]], v[[b, off]])
     v[a] = [0.3, 1.0]                                    # away from it: free
     np.testing.assert_array_equal(hold_off_walls(lm, v, cfg)[a], v[a])
+
+
+def test_step_retried_when_the_plastic_iterations_stall(tmp_path, monkeypatch):
+    """Picard iterations that do not converge make the step retry with half dt, like a
+    mesh that cannot follow; a solver failure of another kind stops at once."""
+    import skfem_nem.apps.sinking_plate as sp
+    sim = SinkingPlate(PlateConfig(**SMALL), tmp_path)
+    real, calls = sp.vep_step, []
+
+    def stalling(*args, **kw):
+        calls.append(args[3])
+        if len(calls) == 1:
+            raise RuntimeError("visco-elasto-plastic Picard iterations did not converge: "
+                               "100 iterations")
+        return real(*args, **kw)
+
+    monkeypatch.setattr(sp, "vep_step", stalling)
+    with pytest.warns(RuntimeWarning, match="Picard .* retrying with dt = 1"):
+        row = sim.step(2.0)
+    assert calls == [2.0, 1.0] and row["retries"] == 1 and sim.lm.time == pytest.approx(1.0)
+
+    def singular(*args, **kw):
+        raise RuntimeError("the viscous block is singular")
+
+    monkeypatch.setattr(sp, "vep_step", singular)
+    with pytest.raises(RuntimeError, match="singular"):
+        sim.step(1.0)

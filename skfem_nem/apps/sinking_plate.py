@@ -475,10 +475,17 @@ class SinkingPlate:
         # Picard iterations start from the effective viscosity of the previous
         # step, carried (as its logarithm) by the mesh like the stress
         guess = lm.ip_fields.get("log_eta_eff")
-        r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
-                     tol=c.picard_tol, solver=c.solver,
-                     constraints=self._area_constraint(spaces, dt),
-                     eta_guess=None if guess is None else np.exp(guess))
+        try:
+            r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
+                         tol=c.picard_tol, solver=c.solver,
+                         constraints=self._area_constraint(spaces, dt),
+                         eta_guess=None if guess is None else np.exp(guess))
+        except RuntimeError as err:
+            if "Picard" not in str(err):
+                raise
+            # the plastic iterations can stall where the yielded region jumps between
+            # iterates; a shorter step changes less and is retried like a mesh failure
+            raise ValueError(f"{err}; reduce dt") from None
         lm.ip_fields["log_eta_eff"] = np.log(r.eta_eff)
         lm.ip_fields["stress"] = to_ip_field(r.tau)
         lm.ip_fields["plastic_strain"] = np.ascontiguousarray(r.plastic_strain)

@@ -530,6 +530,7 @@ def test_step_retried_when_the_plastic_iterations_stall(tmp_path, monkeypatch):
     with pytest.warns(RuntimeWarning, match="Picard .* retrying with dt = 1"):
         row = sim.step(2.0)
     assert calls == [2.0, 1.0] and row["retries"] == 1 and sim.lm.time == pytest.approx(1.0)
+    assert sim.dt_next <= 2.0                            # grows back from the retried step
 
     def singular(*args, **kw):
         raise RuntimeError("the viscous block is singular")

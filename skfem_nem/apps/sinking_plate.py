@@ -446,6 +446,10 @@ class SinkingPlate:
             try:
                 row = self._step(dt)
                 row["retries"] = attempt
+                if attempt:
+                    # a step that had to be shortened: the next grows back gradually
+                    # instead of failing at the full step again
+                    self.dt_next = min(self.dt_next, 2.0 * dt)
                 return row
             except ValueError as err:
                 # the evolving mesh leaves itself unchanged on errors; restore

@@ -522,8 +522,8 @@ def test_step_retried_when_the_plastic_iterations_stall(tmp_path, monkeypatch):
     def stalling(*args, **kw):
         calls.append(args[3])
         if len(calls) == 1:
-            raise RuntimeError("visco-elasto-plastic Picard iterations did not converge: "
-                               "100 iterations")
+            raise sp.PicardNotConverged("visco-elasto-plastic Picard iterations did not "
+                                        "converge: 100 iterations")
         return real(*args, **kw)
 
     monkeypatch.setattr(sp, "vep_step", stalling)

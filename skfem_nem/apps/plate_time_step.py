@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from ..evolution.quality import area_shares
 from ..geometry.polylines import close_segment_pairs, segment_gaps
 
 __all__ = ["stable_dt", "velocity_now", "film_dt", "hold_off_walls", "node_spacing",
@@ -42,14 +43,7 @@ FILM_HALVINGS = 10
 def node_spacing(P: np.ndarray, T: np.ndarray) -> np.ndarray:
     """(n,) local spacing of each node: the square root of its share (a third)
     of the areas of its triangles. P (n, 2) nodes, T (nt, 3) triangles."""
-    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
-    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
-                        - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-    share = np.zeros(P.shape[0])
-    for k in range(3):
-        np.add.at(share, T[:, k], area / 3.0)
-    return np.sqrt(share)
-
+    return np.sqrt(area_shares(P, T))
 
 
 def hold_off_walls(lm, v: np.ndarray, c) -> np.ndarray:

@@ -51,7 +51,8 @@ from ..geometry.polylines import segment_distances, segments_cross
 from .plate_time_step import (FILM_FRACTION, WALL_FRACTION, hold_off_walls,  # noqa: F401
                               node_spacing, stable_dt)
 from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
-from ..models.rheology import Material, from_ip_field, second_invariant, to_ip_field, vep_step
+from ..models.rheology import (Material, PicardNotConverged, from_ip_field, second_invariant,
+                               to_ip_field, vep_step)
 from ..models.stokes import outline_flux, stokes_spaces
 from ..models.stokes_solvers import SOLVERS
 
@@ -484,9 +485,7 @@ class SinkingPlate:
                          tol=c.picard_tol, solver=c.solver,
                          constraints=self._area_constraint(spaces, dt),
                          eta_guess=None if guess is None else np.exp(guess))
-        except RuntimeError as err:
-            if "Picard" not in str(err):
-                raise
+        except PicardNotConverged as err:
             # the plastic iterations can stall where the yielded region jumps between
             # iterates; a shorter step changes less and is retried like a mesh failure
             raise ValueError(f"{err}; reduce dt") from None

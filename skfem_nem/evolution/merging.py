@@ -25,6 +25,7 @@ from numba import njit
 from ..geometry.constrained import pair_keys
 from ..geometry.delaunay2d import is_segment
 from ..geometry.predicates import orient2d
+from .quality import area_shares
 
 __all__ = ["NodeRemoval", "conservative_fill", "CLUSTER_FRACTION", "FOLD_ANGLE",
            "WALL_GAP_FRACTION"]
@@ -441,10 +442,7 @@ class NodeRemoval:
         the box and hull nodes off its walls (never removed)."""
         tri = self.triangulation
         P, T = self.nodes, self.triangles
-        area = 0.5 * np.abs((P[T[:, 1], 0] - P[T[:, 0], 0]) * (P[T[:, 2], 1] - P[T[:, 0], 1])
-                            - (P[T[:, 1], 1] - P[T[:, 0], 1]) * (P[T[:, 2], 0] - P[T[:, 0], 0]))
-        share = np.zeros(P.shape[0])
-        np.add.at(share, T.ravel(), np.repeat(area / 3.0, 3))
+        share = area_shares(P, T)
         free = ~self._on_wall.any(axis=1)
         free[tri.hull_edges.ravel()] = False
         # a node on one wall (not a corner) compares with its own reference: its

@@ -7,7 +7,7 @@ from numba import njit
 
 from ..geometry.predicates import orient2d
 
-__all__ = ["min_angles", "inverted", "cross"]
+__all__ = ["min_angles", "inverted", "cross", "area_shares"]
 
 
 @njit(cache=True)
@@ -44,3 +44,13 @@ def inverted(P, T):
 def cross(u, v):
     """z-component of the cross products of the 2D vectors u and v (broadcast)."""
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def area_shares(P, T) -> np.ndarray:
+    """(n,) each node's share (a third) of the areas of its triangles T (nt, 3) of the
+    nodes P (n, 2): the local measure of density that node removal and the time step use
+    (its square root is the node's spacing)."""
+    area = 0.5 * np.abs(cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
+    share = np.zeros(P.shape[0])
+    np.add.at(share, T.ravel(), np.repeat(area / 3.0, 3))
+    return share

@@ -56,7 +56,12 @@ from .stokes_solvers import CACHED_SOLVERS, check_solver
 __all__ = ["Material", "combine_materials", "maxwell_coefficients", "strain_rate", "spin",
            "deviator", "second_invariant", "rotate_stress", "return_map",
            "prescribed_velocity", "solve_stokes_bc", "velocity_gradient", "VEPStep", "vep_step",
-           "to_ip_field", "from_ip_field", "vep_update"]
+           "to_ip_field", "from_ip_field", "vep_update", "PicardNotConverged"]
+
+
+class PicardNotConverged(RuntimeError):
+    """The plastic (Picard) iterations of :func:`vep_step` did not settle: a caller that
+    can shorten the step (the yielded region then changes less) may retry."""
 
 ArrayLike = Union[float, np.ndarray]
 
@@ -662,9 +667,9 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
         if not st.iterate:
             break
     else:
-        raise RuntimeError(f"visco-elasto-plastic Picard iterations did not converge: "
-                           f"{maxiter} iterations, relative velocity change {res:.3e} > tol "
-                           f"{tol:.1e} (raise maxiter or min_viscosity, or shorten dt)")
+        raise PicardNotConverged(f"visco-elasto-plastic Picard iterations did not converge: "
+                                 f"{maxiter} iterations, relative velocity change {res:.3e} > "
+                                 f"tol {tol:.1e} (raise maxiter or min_viscosity, or shorten dt)")
     return _PicardResult(sol, G, eps, eta_eff, it, res, history)
 
 

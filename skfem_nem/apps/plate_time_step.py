@@ -6,20 +6,21 @@ outline, the layer interface) through another. The mesh cannot see a collision c
 the time step can, from the step's nodal velocities: the spacing limit (cfl), the walls
 (a node approaching one covers at most a fraction of its distance per step) and the films
 between material lines (their gaps shrink by at most that fraction). Distances shrinking
-geometrically keep the step bounded; a film that closes within any step (the plate's two
-faces meeting where it necks) is where the plate breaks, which the model does not follow:
-the caller stops the run there with the message returned.
+geometrically keep the step bounded; a film that closes within any step is returned to
+the caller: where the plate's two faces meet as it necks, the plate breaks there and the
+caller cuts its outline in two (``plate_outlines``); any other closing film stops the run.
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from ..evolution.quality import area_shares
 from ..geometry.polylines import close_segment_pairs, segment_gaps
 
-__all__ = ["stable_dt", "velocity_now", "film_dt", "hold_off_walls", "node_spacing",
+__all__ = ["ClosingFilm", "stable_dt", "velocity_now", "film_dt", "hold_off_walls", "node_spacing",
            "FILM_FRACTION",
            "WALL_FRACTION", "FILM_WATCH", "FILM_HALVINGS"]
 
@@ -92,7 +93,7 @@ def stable_dt(lm, v: np.ndarray, c, outline_segments: int):
     :data:`WALL_FRACTION` of its distance to a wall of the box (``c.width`` x
     ``c.height``) it approaches, nor closes a film between material lines by more than
     that fraction (:func:`film_dt`). ``v``: this step's nodal velocities (before
-    injection and removal). Returns dt and :func:`film_dt`'s message (or None)."""
+    injection and removal). Returns dt and :func:`film_dt`'s closing film (or None)."""
     v = velocity_now(lm, v)
     h = node_spacing(lm.nodes, lm.triangles)
     x = lm.nodes
@@ -113,7 +114,8 @@ def film_dt(lm, v: np.ndarray, dt: float, c, outline_segments: int):
     one line through the other, which no flip or relocation can undo. Given segments
     below ``outline_segments`` are the outline's. Returns dt and None, or, for a film
     that still closes after :data:`FILM_HALVINGS` halvings, the last dt that did not
-    collapse and a message saying where the plate breaks."""
+    collapse and the :class:`ClosingFilm` (where the plate necks through, the caller
+    cuts it in two there; elsewhere it stops)."""
     P, S = lm.nodes, lm.triangulation.segments
     watch = FILM_WATCH * c.cfl * c.outline_spacing * c.plate_thickness
     apart = 2 * math.ceil(FILM_WATCH * c.cfl) + 2   # closer along a line: no film
@@ -131,8 +133,17 @@ def film_dt(lm, v: np.ndarray, dt: float, c, outline_segments: int):
     what = ("two faces of the plate's outline" if outline.all()
             else "the outline and the interface" if outline.any()
             else "two parts of the layer interface")
-    why = ("the plate breaks there, which the model does not follow (a higher yield_stress "
-           "or plate_viscosity keeps it whole)" if outline.all() else
-           "one would pass through the other, which the mesh cannot follow")
-    return 2.0 * dt, (f"{what} close at x = {x[0]:.4g}, z = {x[1]:.4g} ({gap[k]:.2g} apart) "
-                      f"within any step {2 ** FILM_HALVINGS} times shorter than the last: {why}")
+    return 2.0 * dt, ClosingFilm(int(i[k]), int(j[k]), bool(outline.all()), float(gap[k]), (
+        f"{what} close at x = {x[0]:.4g}, z = {x[1]:.4g} ({gap[k]:.2g} apart) within any "
+        f"step {2 ** FILM_HALVINGS} times shorter than the last"))
+
+
+class ClosingFilm(NamedTuple):
+    """A film between two material lines that closes within any step (:func:`film_dt`):
+    rows ``first`` and ``second`` of ``triangulation.segments``, whether both are the
+    outline's, their gap and a line saying where."""
+    first: int
+    second: int
+    outline: bool
+    gap: float
+    message: str

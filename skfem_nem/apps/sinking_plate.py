@@ -47,10 +47,12 @@ import numpy as np
 from ..evolution.lagrangian import LagrangianMesh
 from ..coordinates import sibson_coordinates
 from ..geometry.nodesets import box_nodes, polyline_nodes
-from ..geometry.polylines import segment_distances, segments_cross
+from ..geometry.polylines import segment_distances
+from .plate_figures import plate_figures
+from .plate_outlines import PlateOutlines, polygon_area_centroid
 from .plate_time_step import (FILM_FRACTION, WALL_FRACTION, hold_off_walls,  # noqa: F401
                               node_spacing, stable_dt)
-from .output import CSVLog, PVDWriter, atomic_write_text, read_csv_columns, write_vtu
+from .output import CSVLog, PVDWriter, atomic_write_text, write_vtu
 from ..models.rheology import (Material, PicardNotConverged, from_ip_field, second_invariant,
                                to_ip_field, vep_step)
 from ..models.stokes import outline_flux, stokes_spaces
@@ -297,25 +299,6 @@ def _config_from(data: Dict) -> PlateConfig:
 # geometry helpers
 # ---------------------------------------------------------------------------
 
-def _polygon_area_centroid(P):
-    x, y = P[:, 0], P[:, 1]
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
-    c = x * yn - xn * y
-    A = 0.5 * c.sum()
-    return A, np.array([((x + xn) * c).sum(), ((y + yn) * c).sum()]) / (6 * A)
-
-
-def _self_intersections(P) -> int:
-    """Number of pairs of non-adjacent edges of the closed polygon P (k, 2) that cross."""
-    Q = np.roll(P, -1, axis=0)
-    k = P.shape[0]
-    count = 0
-    for i in range(k - 2):
-        j = np.arange(i + 2, k if i else k - 1)
-        count += int(segments_cross(P[i], Q[i], P[j], Q[j]).sum())
-    return count
-
-
 def initial_nodes(c: PlateConfig):
     """The initial node set: walls, the plate outline, random nodes with density
     ``1 / (1 + d / density_length)`` (d: distance to the plate) and, with
@@ -378,15 +361,16 @@ class SinkingPlate:
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         self._closing = None  # a film that closes within any step (_film_dt)
+        self._pinches = 0 if _state is None else _state[1].get("pinches", 0)
         if _state is not None:
             self.lm, meta = _state
-            self.outline = np.asarray(meta["outline"], dtype=np.int64)
+            # (checkpoints written before the area was stored: the initial rectangle)
+            self.outlines = PlateOutlines.from_meta(
+                meta, meta.get("plate_area0", cfg.plate_length * cfg.plate_thickness))
             self.next_output = meta["next_output"]
             self.dt_next = meta["dt_next"]
             self.outputs = meta["outputs"]
             self.first_output = meta.get("first_output")
-            # (checkpoints written before the area was stored: the initial rectangle)
-            self.plate_area0 = meta.get("plate_area0", cfg.plate_length * cfg.plate_thickness)
             self.outline_segments = meta.get("outline_segments")
             if self.outline_segments is None:  # (older checkpoints) the drawn outline
                 self.outline_segments = len(initial_nodes(cfg)[1])
@@ -402,8 +386,7 @@ class SinkingPlate:
         lm.ip_fields["stress"] = np.zeros((nt, 3, 2, 2))
         lm.ip_fields["plastic_strain"] = np.zeros((nt, 3))
         self.lm = lm
-        self.outline = outline
-        self.plate_area0 = abs(_polygon_area_centroid(nodes[outline])[0])
+        self.outlines = PlateOutlines([outline], [abs(polygon_area_centroid(nodes[outline])[0])])
         # given segments 0 .. outline_segments - 1 are the outline's, then the interface's
         self.outline_segments = len(outline)
         self.next_output = 0.0
@@ -413,12 +396,24 @@ class SinkingPlate:
 
     # -- state ------------------------------------------------------------------
     @property
+    def outline(self) -> np.ndarray:
+        """The plate's outline nodes in order (after a breakup: piece after piece,
+        :attr:`outlines`)."""
+        return self.outlines.nodes
+
+    @property
     def plate_polygon(self) -> np.ndarray:
-        """(k, 2) current outline of the plate."""
+        """(k, 2) the nodes of :attr:`outline`: the plate's polygon while it is whole."""
         return self.lm.nodes[self.outline]
 
+    @property
+    def plate_area0(self) -> float:
+        """The plate's reference area (the sum of its pieces')."""
+        return float(sum(self.outlines.areas0))
+
     def plate_area_centroid(self):
-        return _polygon_area_centroid(self.plate_polygon)
+        """Area of the plate (all pieces) and its centroid."""
+        return self.outlines.area_centroid(self.lm.nodes)
 
     def materials(self, spaces, polygon: Optional[np.ndarray] = None):
         """Per-point :class:`~skfem_nem.models.rheology.Material`, body force
@@ -427,8 +422,9 @@ class SinkingPlate:
         c = self.cfg
         X = spaces.quadrature_points
         ne, nq = X.shape[1:]
-        poly = self.plate_polygon if polygon is None else polygon
-        plate = _inside(poly, X.reshape(2, -1).T).reshape(ne, nq)
+        pts = X.reshape(2, -1).T
+        plate = (self.outlines.inside(self.lm.nodes, pts) if polygon is None
+                 else _inside(polygon, pts)).reshape(ne, nq)
         # P1 dofs are the node indices: the nodes' initial heights at the points
         z0 = np.asarray(spaces.pbasis.interpolate(self.lm.node_fields["z0"]))
         eta_fluid = np.where(z0 > c.interface_z, c.eta_upper, c.eta_lower)
@@ -442,6 +438,7 @@ class SinkingPlate:
     def step(self, dt: float, retries: int = 4) -> dict:
         """One time step of length dt (halved up to ``retries`` times if the
         mesh cannot follow the move); returns the diagnostics row."""
+        self._check_films()
         saved = {k: v.copy() for k, v in self.lm.ip_fields.items()}
         for attempt in range(retries + 1):
             try:
@@ -465,7 +462,6 @@ class SinkingPlate:
         raise AssertionError("unreachable")
 
     def _step(self, dt: float) -> dict:
-        self._check_films()
         c = self.cfg
         lm = self.lm
         t0 = _time.perf_counter()
@@ -500,14 +496,11 @@ class SinkingPlate:
 
         rep = lm.advance(velocity, dt, tol=1e-8, maxiter=20,
                          inject=c.inject if c.inject else None, merge=c.merge)
-        # removed nodes leave the outline (node_map: this step's old -> new indices)
-        self.outline = lm.node_map[self.outline]
-        self.outline = self.outline[self.outline >= 0]
-        released = 0
-        if lm.triangulation.segment_keys.size:
-            # nodes injected on the outline's segments take their places in it
-            self.outline = lm.polyline(self.outline, closed=True)
-            released = self._release_film()
+        # removed nodes leave the outline (node_map: this step's old -> new indices),
+        # nodes injected on the outline's segments take their places in it
+        segments = bool(lm.triangulation.segment_keys.size)
+        self.outlines.renumber(lm.node_map, lm if segments else None)
+        released = self._release_film() if segments else 0
         if rep["merged"] and c.keep_area:
             self._give_back_area()
         # the next step's dt from this step's velocity
@@ -517,7 +510,7 @@ class SinkingPlate:
         row = {"step": lm.step, "time": lm.time, "dt": dt,
                "plate_depth": c.height - cen[1], "plate_x": cen[0],
                "plate_area": A, "fluid_area": c.width * c.height - A,
-               "outline_crossings": _self_intersections(self.plate_polygon),
+               "outline_crossings": self.outlines.crossings(lm.nodes),
                "inverted_triangles": int(np.count_nonzero(lm.triangulation.orientation() <= 0)),
                "non_delaunay_edges": lm.triangulation.non_delaunay_edges(),
                "max_plastic_strain": float(r.plastic_strain.max()),
@@ -527,6 +520,7 @@ class SinkingPlate:
                "flips": rep["flips"], "injected": rep["injected"],
                "relocated": rep["relocated"], "substeps": rep["substeps"],
                "segments_split": rep["segments_split"], "outline_nodes": len(self.outline),
+               "plate_pieces": len(self.outlines.loops), "pinches": self._pinches,
                "segments_released": released,
                "removed": rep["removed"], "merged": rep["merged"],
                "nodes": lm.nodes.shape[0], "min_angle": rep["min_angle"],
@@ -540,11 +534,11 @@ class SinkingPlate:
         ``keep_area`` the flux that brings the plate's area back to its initial
         value over the step (the position-level form of the incompressibility
         of the plate as a whole, which keeps the time-step error from adding up)."""
-        C = outline_flux(spaces, self.outline)
+        import scipy.sparse as sp
+        C = sp.vstack([outline_flux(spaces, o) for o in self.outlines.loops], format="csr")
         if not self.cfg.keep_area:
             return C
-        deficit = self.plate_area0 - abs(self.plate_area_centroid()[0])
-        return C, [deficit / dt]
+        return C, self.outlines.deficits(self.lm.nodes) / dt
 
     def _give_back_area(self) -> None:
         """Give the plate back the area that merges at folds of its outline cut off this
@@ -553,13 +547,15 @@ class SinkingPlate:
         s = (A0 - A) / |grad A|^2 (the position form of the area constraint; a fraction
         of the node spacing: 7e-5 for a loss of 1.6e-3 of the area). Skipped if a
         triangle would invert (the next step's outline flux gives the area back then)."""
-        P = self.plate_polygon
-        A = _polygon_area_centroid(P)[0]
-        grad = 0.5 * np.sign(A) * np.c_[np.roll(P[:, 1], -1) - np.roll(P[:, 1], 1),
-                                        np.roll(P[:, 0], 1) - np.roll(P[:, 0], -1)]
-        step = (self.plate_area0 - abs(A)) / (grad * grad).sum()
+        shift = []
+        for o, deficit in zip(self.outlines.loops, self.outlines.deficits(self.lm.nodes)):
+            P = self.lm.nodes[o]
+            A = polygon_area_centroid(P)[0]
+            grad = 0.5 * np.sign(A) * np.c_[np.roll(P[:, 1], -1) - np.roll(P[:, 1], 1),
+                                            np.roll(P[:, 0], 1) - np.roll(P[:, 0], -1)]
+            shift.append(deficit / (grad * grad).sum() * grad)
         try:
-            self.lm.shift_nodes(self.outline, step * grad)
+            self.lm.shift_nodes(self.outline, np.concatenate(shift))
         except ValueError:
             pass
 
@@ -575,8 +571,8 @@ class SinkingPlate:
         if not rows.size:
             return 0
         seg = tri.segments[rows]
-        o = self.outline
-        gap = segment_distances(P[seg[:, 0]], P[seg[:, 1]], P[o], P[np.roll(o, -1)])
+        o = self.outlines.segment_pairs()
+        gap = segment_distances(P[seg[:, 0]], P[seg[:, 1]], P[o[:, 0]], P[o[:, 1]])
         h = FILM_FRACTION * self.cfg.outline_spacing * self.cfg.plate_thickness
         return self.lm.release_segments(rows[gap < h])
 
@@ -588,11 +584,22 @@ class SinkingPlate:
         return dt
 
     def _check_films(self) -> None:
-        """``RuntimeError`` with what :meth:`_stable_dt` found at the end of the last
-        step: a film between two material lines that closes within any step (the plate
-        breaks there); raised before the next step changes anything."""
-        if self._closing is not None:
-            raise RuntimeError(self._closing)
+        """What :meth:`_stable_dt` found at the end of the last step, before the next
+        step changes anything: where a film of plate closes within any step as the
+        plate necks, the plate breaks and its outline is cut in two there
+        (:meth:`PlateOutlines.pinch`); any other film closing within any step is a
+        ``RuntimeError`` saying where."""
+        closing, self._closing = self._closing, None
+        if closing is None:
+            return
+        why = ("one would pass through the other, which the mesh cannot follow"
+               if not closing.outline else
+               self.outlines.pinch(self.lm, closing.first, closing.second,
+                                   self.cfg.outline_spacing * self.cfg.plate_thickness))
+        if why is not None:
+            self._closing = closing
+            raise RuntimeError(f"{closing.message}: {why}")
+        self._pinches += 1
 
     # -- outputs ----------------------------------------------------------------
     def write_output(self, spaces=None, r=None, plate=None) -> str:
@@ -603,7 +610,7 @@ class SinkingPlate:
         pd = {"initial_depth": c.height - lm.node_fields["z0"],
               "initial_x": lm.node_fields["x0"]}
         on_plate = np.zeros(P.shape[0], dtype=bool)
-        on_plate[_inside(self.plate_polygon, P)] = True
+        on_plate[self.outlines.inside(P, P)] = True
         on_plate[self.outline] = True
         eta_n = np.where(on_plate, c.plate_viscosity,
                          np.where(lm.node_fields["z0"] > c.interface_z, c.eta_upper, c.eta_lower))
@@ -627,10 +634,11 @@ class SinkingPlate:
 
     def checkpoint(self) -> None:
         self.lm.save(self.out / "checkpoint.npz")
-        meta = {"config": asdict(self.cfg), "outline": self.outline.tolist(),
-                "next_output": self.next_output, "dt_next": self.dt_next,
-                "outputs": self.outputs, "first_output": self.first_output,
-                "plate_area0": self.plate_area0, "outline_segments": self.outline_segments}
+        meta = {"config": asdict(self.cfg), "next_output": self.next_output,
+                "dt_next": self.dt_next, "outputs": self.outputs,
+                "first_output": self.first_output, "plate_area0": self.plate_area0,
+                "outline_segments": self.outline_segments, "pinches": self._pinches,
+                **self.outlines.to_meta()}
         atomic_write_text(self.out / "checkpoint.json", json.dumps(meta))
 
     @classmethod
@@ -692,82 +700,9 @@ class SinkingPlate:
 
     # -- figures ----------------------------------------------------------------
     def figures(self) -> list:
-        """fig6.png, plate_strain.png and diagnostics.png in the output folder;
-        returns their paths."""
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        c = self.cfg
-        paths = []
-        panels = []
-        f0 = self.out / "first_output.npz"
-        if f0.exists():
-            d = np.load(f0)
-            panels.append((d["nodes"], d["triangles"], d["depth"], float(d["time"])))
-        lm = self.lm
-        panels.append((lm.nodes, lm.triangles, c.height - lm.node_fields["z0"], lm.time))
-        fig, ax = plt.subplots(len(panels), 1, figsize=(12, 2.2 * len(panels) + 0.6),
-                               squeeze=False)
-        for a, (P, T, depth, t) in zip(ax[:, 0], panels):
-            tp = a.tripcolor(P[:, 0], P[:, 1], T, depth, shading="gouraud", cmap="viridis_r")
-            a.triplot(P[:, 0], P[:, 1], T, lw=0.15, color="k", alpha=0.5)
-            a.set_aspect("equal")
-            a.set_xlim(0, c.width)
-            a.set_ylim(0, c.height)
-            a.set_title(f"t = {t:.4g}: mesh coloured by the nodes' initial depth")
-            fig.colorbar(tp, ax=a, fraction=0.02, pad=0.01, label="initial depth")
-        poly = self.plate_polygon
-        ax[-1, 0].plot(np.r_[poly[:, 0], poly[:1, 0]], np.r_[poly[:, 1], poly[:1, 1]], "r-",
-                       lw=0.8)
-        fig.tight_layout()
-        p = self.out / "fig6.png"
-        fig.savefig(p, dpi=150)
-        plt.close(fig)
-        paths.append(p)
-        # the plate at the end: accumulated plastic strain and stress invariant
-        P, T = lm.nodes, lm.triangles
-        cen = P[T].mean(axis=1)
-        inplate = _inside(poly, cen)
-        lo, hi = poly.min(axis=0), poly.max(axis=0)
-        pad = 0.3 * (hi - lo).max()
-        fig, ax = plt.subplots(2, 1, figsize=(10, 5.5))
-        S = lm.ip_fields["stress"]
-        vals = [(lm.ip_fields["plastic_strain"].mean(axis=1), "accumulated plastic strain",
-                 "magma_r"),
-                (second_invariant(from_ip_field(S)).mean(axis=1) / c.yield_stress,
-                 "stress invariant / yield stress", "viridis")]
-        for a, (v, lab, cmap) in zip(ax, vals):
-            tp = a.tripcolor(P[:, 0], P[:, 1], T[inplate], facecolors=v[inplate], cmap=cmap)
-            a.plot(np.r_[poly[:, 0], poly[:1, 0]], np.r_[poly[:, 1], poly[:1, 1]], "k-", lw=0.5)
-            a.set_xlim(lo[0] - pad, hi[0] + pad)
-            a.set_ylim(lo[1] - pad / 3, hi[1] + pad / 3)
-            a.set_aspect("equal")
-            a.set_title(f"t = {lm.time:.4g}: {lab}")
-            fig.colorbar(tp, ax=a, fraction=0.03, pad=0.01)
-        fig.tight_layout()
-        p = self.out / "plate_strain.png"
-        fig.savefig(p, dpi=150)
-        plt.close(fig)
-        paths.append(p)
-        csvp = self.out / "diagnostics.csv"
-        if csvp.exists():
-            d = read_csv_columns(csvp)
-            if d and len(d["time"]):
-                fig, ax = plt.subplots(2, 3, figsize=(13, 6))
-                keys = [("plate_depth", "plate centroid depth"),
-                        ("plate_area", "plate area"), ("max_plastic_strain", "max plastic strain"),
-                        ("flips", "flips per step"), ("nodes", "nodes (injection)"),
-                        ("min_angle", "minimum angle (deg)")]
-                for a, (k, lab) in zip(ax.ravel(), keys):
-                    a.plot(d["time"], d[k], "-")
-                    a.set_xlabel("t")
-                    a.set_title(lab)
-                fig.tight_layout()
-                p = self.out / "diagnostics.png"
-                fig.savefig(p, dpi=120)
-                plt.close(fig)
-                paths.append(p)
-        return paths
+        """fig6.png, plate_strain.png and diagnostics.png in the output folder
+        (:func:`~skfem_nem.apps.plate_figures.plate_figures`); returns their paths."""
+        return plate_figures(self)
 
 
 def run(cfg: PlateConfig, out="out/sinking-plate", restart: bool = False,

@@ -187,23 +187,10 @@ class NodeRemoval:
         per-node array compacted. Returns the map old -> new node index (-1: removed).
         ``ValueError`` for a corner of the hull, or a segment node whose segments cannot
         be merged; on any error the mesh is left exactly as it was."""
-        idx = np.unique(np.asarray(idx, dtype=np.int64).reshape(-1))
-        n = self.triangulation.npoints
-        if idx.size and (idx[0] < 0 or idx[-1] >= n):
-            raise ValueError(f"node indices must lie in [0, {n}), got {idx.tolist()}")
+        idx = self._node_indices(idx)
         state = self._state()
         try:
-            alive = np.ones(n, dtype=bool)
-            for v in idx.tolist():
-                if not self.triangulation.removable(v):
-                    raise ValueError(f"node {v} is a corner of the hull and cannot be "
-                                     f"removed")
-                merge = self.segment_merge(v, alive)
-                if merge is False:
-                    raise ValueError(f"node {v} ends segments that cannot be merged into one "
-                                     f"(not exactly two, or another node in their triangle)")
-                self._take_out(v, merge)
-                alive[v] = False
+            self._remove_all(idx)
             self.triangulation.make_delaunay(on_flips=self._on_flips)
             new = self._compact()
         except BaseException:
@@ -211,6 +198,75 @@ class NodeRemoval:
             raise
         self._invalidate()
         return new
+
+    def reconnect_segments(self, release, add, source, remove=()) -> np.ndarray:
+        """Replace the segments ``release`` (rows of ``triangulation.segments``) by the
+        node pairs ``add`` (k, 2) of the given segments ``source`` (k,), made edges by
+        flips (the ip fields of the triangles they change refilled conservatively), then
+        remove the nodes ``remove`` as :meth:`remove_nodes` does: how a material polygon
+        is cut in two where its two faces meet. Returns the map old -> new node index.
+        ``ValueError`` for rows, nodes or sources out of range, a new segment that would
+        cross a kept one, or a node that cannot go; the mesh is then left exactly as it
+        was."""
+        tri = self.triangulation
+        release, add, source = self._reconnection(release, add, source)
+        remove = self._node_indices(remove)
+        state = self._state()
+        try:
+            keep = np.ones(tri.segments.shape[0], dtype=bool)
+            keep[release] = False
+            tri.set_segments(np.r_[tri.segments[keep], add],
+                             np.r_[tri.segment_source[keep], source])
+            self._recover_refilled()
+            tri.make_delaunay(on_flips=self._on_flips)
+            self._remove_all(remove)
+            tri.make_delaunay(on_flips=self._on_flips)
+            new = self._compact()
+        except BaseException:
+            self._restore(state)
+            raise
+        self._invalidate()
+        return new
+
+    def _reconnection(self, release, add, source):
+        """The arguments of :meth:`reconnect_segments` checked, as arrays."""
+        tri = self.triangulation
+        k, n = tri.segments.shape[0], tri.npoints
+        release = np.unique(np.asarray(release, dtype=np.int64).reshape(-1))
+        if release.size and (release[0] < 0 or release[-1] >= k):
+            raise ValueError(f"segment rows must lie in [0, {k}), got {release.tolist()}")
+        add = np.asarray(add, dtype=np.int64).reshape(-1, 2)
+        source = np.asarray(source, dtype=np.int64).reshape(-1)
+        if add.size and (add.min() < 0 or add.max() >= n or (add[:, 0] == add[:, 1]).any()):
+            raise ValueError(f"new segments must join two different nodes in [0, {n}), got "
+                             f"{add.tolist()}")
+        nsrc = self._segment_ref.size
+        if source.size != add.shape[0] or (source.size and (source.min() < 0
+                                                             or source.max() >= nsrc)):
+            raise ValueError(f"source must give one given segment in [0, {nsrc}) per new "
+                             f"segment ({add.shape[0]}), got {source.tolist()}")
+        return release, add, source
+
+    def _node_indices(self, idx) -> np.ndarray:
+        idx = np.unique(np.asarray(idx, dtype=np.int64).reshape(-1))
+        n = self.triangulation.npoints
+        if idx.size and (idx[0] < 0 or idx[-1] >= n):
+            raise ValueError(f"node indices must lie in [0, {n}), got {idx.tolist()}")
+        return idx
+
+    def _remove_all(self, idx) -> None:
+        """Take the nodes idx out one by one (:meth:`remove_nodes`, before compaction)."""
+        alive = np.ones(self.triangulation.npoints, dtype=bool)
+        for v in idx.tolist():
+            if not self.triangulation.removable(v):
+                raise ValueError(f"node {v} is a corner of the hull and cannot be "
+                                 f"removed")
+            merge = self.segment_merge(v, alive)
+            if merge is False:
+                raise ValueError(f"node {v} ends segments that cannot be merged into one "
+                                 f"(not exactly two, or another node in their triangle)")
+            self._take_out(v, merge)
+            alive[v] = False
 
     def segment_merge(self, v: int, alive=None):
         """How node v's segments would merge if it were removed: None if v ends no
@@ -255,6 +311,12 @@ class NodeRemoval:
         seg, src = tri.segments, tri.segment_source
         keep = ~(seg == v).any(axis=1)
         tri.set_segments(np.r_[seg[keep], [[a, b]]], np.r_[src[keep], s])
+        self._recover_refilled()
+
+    def _recover_refilled(self):
+        """Make every segment an edge by flips, the triangles they change refilled
+        conservatively from the old ones (which tile the same region)."""
+        tri = self.triangulation
         T0 = tri.triangles.copy()
         tri.recover_segments()
         changed = np.flatnonzero((tri.triangles != T0).any(axis=1))

@@ -1,0 +1,209 @@
+"""The sinking plate's outline: one polygon of nodes until the plate breaks, then one
+per piece.
+
+The plate is the region inside its outline, a closed loop of nodes that moves with the
+flow (kept as segments of the mesh). A weak plate pressed onto the bottom arches and
+necks; where the neck thins until its two faces meet (a film of plate between two
+outline segments closes within any step, :func:`~.plate_time_step.film_dt`), the plate
+breaks, and the model follows: :meth:`PlateOutlines.pinch` cuts the loop in two there.
+Of the two nodes that meet, a and b, one piece keeps both (its new segment b-a crosses
+the neck) and the other closes with a segment between their outer neighbours, so the
+pieces share no node and the fluid between them opens as they separate; what the cut
+takes from the plate (a sliver one film thick) the area constraint gives back, piece by
+piece, over the next steps. A node left closer than :data:`PINCH_FRACTION` of the
+outline's spacing to the other end of its new segment is removed with it.
+"""
+from __future__ import annotations
+
+from typing import List, Optional
+
+import numpy as np
+
+from ..geometry.polylines import segments_cross
+
+__all__ = ["PlateOutlines", "polygon_area_centroid", "PINCH_FRACTION"]
+
+#: after a cut, a node closer than this fraction of the outline's spacing to the node at
+#: the other end of its new segment is removed (the two met as the neck closed; kept,
+#: they would bound a triangle as thin as the closed film)
+PINCH_FRACTION = 0.25
+
+
+def polygon_area_centroid(P):
+    """Signed area and centroid of the closed polygon P (k, 2)."""
+    x, y = P[:, 0], P[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    c = x * yn - xn * y
+    A = 0.5 * c.sum()
+    return A, np.array([((x + xn) * c).sum(), ((y + yn) * c).sum()]) / (6 * A)
+
+
+def crossings(polygons) -> int:
+    """Number of pairs of edges of the closed polygons (each (k, 2)) that cross, edges
+    of one polygon that share a node not counted."""
+    ends = [(P, np.roll(P, -1, axis=0)) for P in polygons]
+    count = 0
+    for m, (P, Q) in enumerate(ends):
+        k = P.shape[0]
+        for i in range(k - 2):
+            j = np.arange(i + 2, k if i else k - 1)
+            count += int(segments_cross(P[i], Q[i], P[j], Q[j]).sum())
+        for R, S in ends[m + 1:]:
+            count += int(segments_cross(P[:, None], Q[:, None], R[None], S[None]).sum())
+    return count
+
+
+class PlateOutlines:
+    """The plate's outline loops (node indices in order, one per piece) and each
+    piece's reference area (what the area constraint holds it to)."""
+
+    def __init__(self, loops, areas0):
+        self.loops: List[np.ndarray] = [np.asarray(o, dtype=np.int64) for o in loops]
+        self.areas0 = [float(a) for a in areas0]
+        if len(self.loops) != len(self.areas0):
+            raise ValueError(f"{len(self.loops)} outline loops but {len(self.areas0)} areas")
+
+    # -- geometry --------------------------------------------------------------
+    @property
+    def nodes(self) -> np.ndarray:
+        """The outline nodes, piece after piece."""
+        return np.concatenate(self.loops)
+
+    def polygons(self, P) -> list:
+        return [P[o] for o in self.loops]
+
+    def area_centroid(self, P):
+        """Total area of the pieces and their common centroid."""
+        ac = [polygon_area_centroid(Q) for Q in self.polygons(P)]
+        A = np.array([abs(a) for a, _ in ac])
+        return A.sum(), (A[:, None] * np.array([c for _, c in ac])).sum(axis=0) / A.sum()
+
+    def deficits(self, P) -> np.ndarray:
+        """(pieces,) reference area minus area now."""
+        return np.array([a0 - abs(polygon_area_centroid(Q)[0])
+                         for a0, Q in zip(self.areas0, self.polygons(P))])
+
+    def inside(self, P, pts) -> np.ndarray:
+        """Whether each point of pts (m, 2) lies inside a piece."""
+        from matplotlib.path import Path as MPath
+        out = np.zeros(pts.shape[0], dtype=bool)
+        for Q in self.polygons(P):
+            out |= MPath(Q).contains_points(pts, radius=0.0)
+        return out
+
+    def crossings(self, P) -> int:
+        return crossings(self.polygons(P))
+
+    def segment_pairs(self) -> np.ndarray:
+        """(k, 2) every outline edge, as consecutive loop nodes."""
+        return np.concatenate([np.c_[o, np.roll(o, -1)] for o in self.loops])
+
+    # -- following the mesh ----------------------------------------------------
+    def renumber(self, node_map, lm=None) -> None:
+        """Follow the mesh's node map (old -> new, -1 removed) and, with ``lm``, put
+        the nodes injected on the outline's segments in their places."""
+        loops = [node_map[o] for o in self.loops]
+        loops = [o[o >= 0] for o in loops]
+        if lm is not None:
+            loops = [lm.polyline(o, closed=True) for o in loops]
+        self.loops = loops
+
+    # -- breakup ---------------------------------------------------------------
+    def pinch(self, lm, first: int, second: int, spacing: float) -> Optional[str]:
+        """Cut the piece whose faces hold the segments ``first`` and ``second`` (rows of
+        ``lm.triangulation.segments``, a film of plate closing between them) in two,
+        as the module docs say; ``spacing``: the outline's node spacing. Returns None,
+        or why not (the mesh and the loops then unchanged)."""
+        found = self._locate(lm.triangulation.segments[[first, second]])
+        if found is None:
+            return "two pieces of the plate meet, which the model does not follow"
+        k, p, q = found
+        o, P = self.loops[k], lm.nodes
+        if not self._neck(P[o], p, q):
+            return ("the plate folds onto itself (its faces meet from outside), which the "
+                    "model does not follow")
+        plan = _cut(P, o, p, q)
+        if plan is None:
+            return "a piece would keep fewer than three nodes"
+        return self._apply(lm, k, plan, spacing)
+
+    def _locate(self, pair):
+        """(piece, position of the first segment, of the second) or None."""
+        for k, o in enumerate(self.loops):
+            ring = np.c_[o, np.roll(o, -1)]
+            pos = [np.flatnonzero(((ring == s) | (ring == s[::-1])).all(axis=1)) for s in pair]
+            if pos[0].size and pos[1].size:
+                return k, int(pos[0][0]), int(pos[1][0])
+        return None
+
+    @staticmethod
+    def _neck(Q, p, q) -> bool:
+        """Whether segment q of the loop Q lies on the plate's side of segment p."""
+        A, _ = polygon_area_centroid(Q)
+        a, b = Q[p], Q[(p + 1) % len(Q)]
+        m = 0.5 * (Q[q] + Q[(q + 1) % len(Q)])
+        side = (b[0] - a[0]) * (m[1] - a[1]) - (b[1] - a[1]) * (m[0] - a[0])
+        return side * A > 0
+
+    def _apply(self, lm, k, plan, spacing) -> Optional[str]:
+        keep, rest, add, release = plan
+        tri = lm.triangulation
+        seg = tri.segments
+        rows = [int(np.flatnonzero(((seg == s) | (seg == s[::-1])).all(axis=1))[0])
+                for s in release]
+        source = tri.segment_source[rows]
+        P = lm.nodes
+        drop = [v for piece, (u, v) in ((keep, add[0]), (rest, add[1]))
+                if len(piece) > 3 and np.hypot(*(P[u] - P[v])) < PINCH_FRACTION * spacing]
+        areas = [abs(polygon_area_centroid(P[piece])[0]) for piece in (keep, rest)]
+        for remove in (drop, []):
+            try:
+                new = lm.reconnect_segments(rows, add, source, remove=remove)
+                break
+            except ValueError as err:
+                why = str(err)
+        else:
+            return f"the cut cannot be made ({why})"
+        share = self.areas0[k] / sum(areas)
+        pieces = [new[np.asarray(piece)] for piece in (keep, rest)]
+        self.loops[k:k + 1] = [piece[piece >= 0] for piece in pieces]
+        self.areas0[k:k + 1] = [a * share for a in areas]
+        for m, o in enumerate(self.loops):
+            if m not in (k, k + 1):
+                self.loops[m] = new[o]
+        return None
+
+    # -- checkpoints -----------------------------------------------------------
+    def to_meta(self) -> dict:
+        return {"outlines": [o.tolist() for o in self.loops], "areas0": self.areas0}
+
+    @classmethod
+    def from_meta(cls, meta: dict, area0: float) -> "PlateOutlines":
+        """From a checkpoint's metadata (``area0``: the plate's area, for checkpoints
+        written before the plate could break, which hold one ``outline``)."""
+        if "outlines" in meta:
+            return cls(meta["outlines"], meta["areas0"])
+        return cls([meta["outline"]], [area0])
+
+
+def _cut(P, o, p, q):
+    """How to cut loop o where its segments p and q (positions) meet: the two pieces (the
+    one that keeps both nodes that meet, the other), the two new segments, the two
+    segments released; None if a piece would keep fewer than three nodes."""
+    n = len(o)
+    cand = [(np.hypot(*(P[o[i % n]] - P[o[j % n]])), i % n, j % n)
+            for i in (p, p + 1) for j in (q, q + 1)]
+    _, ia, ib = min(cand)
+    best = None
+    for s, t in ((ia, ib), (ib, ia)):
+        # piece from s to t keeps both; the rest runs from t + 1 to s - 1
+        keep = [o[(s + m) % n] for m in range((t - s) % n + 1)]
+        rest = [o[(t + m) % n] for m in range(1, (s - t) % n)]
+        if len(keep) < 3 or len(rest) < 3:
+            continue
+        add = np.array([[o[t], o[s]], [o[(s - 1) % n], o[(t + 1) % n]]])
+        length = np.hypot(*(P[add[1, 0]] - P[add[1, 1]]))
+        if best is None or length < best[0]:
+            release = np.array([[o[(s - 1) % n], o[s]], [o[t], o[(t + 1) % n]]])
+            best = (length, (keep, rest, add, release))
+    return None if best is None else best[1]

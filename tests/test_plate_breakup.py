@@ -1,0 +1,206 @@
+"""A plate that necks through breaks in two: segments reconnected in one transaction,
+the outline loop cut at the neck (and not where the plate folds onto itself or two pieces
+meet), and the sinking plate going on with both pieces."""
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from helpers import square_nodes
+from test_evolution_segments import (assert_same_state, check_chain, check_constrained,
+                                     outlined_square, saved_state)
+from skfem_nem import LagrangianMesh
+from skfem_nem.apps.plate_outlines import PINCH_FRACTION, PlateOutlines, polygon_area_centroid
+from skfem_nem.apps.plate_time_step import ClosingFilm
+from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate
+from skfem_nem.geometry.nodesets import polyline_nodes
+
+SPACING = 0.025
+
+
+def pair_rows(lm, pairs):
+    seg = lm.triangulation.segments
+    return [int(np.flatnonzero(((seg == p) | (seg == p[::-1])).all(axis=1))[0]) for p in pairs]
+
+
+def ellipse_mesh(seed=5):
+    nodes, segs, poly, line = outlined_square(300, seed)
+    lm = LagrangianMesh(nodes, segments=segs, ip_fields={"one": np.ones(3)})
+    lm.ip_fields["rand"] = np.random.default_rng(seed).normal(size=(lm.triangles.shape[0], 3))
+    return lm, poly, line
+
+
+def test_reconnect_segments_cuts_a_polygon_in_two():
+    """The ellipse's segments (4, 5) and (25, 26) replaced by (25, 5) and (4, 26): two
+    loops of segments sharing no node, every segment an edge, the mesh constrained
+    Delaunay, integrals of the ip fields kept."""
+    lm, poly, _ = ellipse_mesh()
+    before = {k: lm.ip_integral(k) for k in ("one", "rand")}
+    k = lm.triangulation.segments.shape[0]
+    rows = pair_rows(lm, [poly[[4, 5]], poly[[25, 26]]])
+    source = lm.triangulation.segment_source[rows]
+    new = lm.reconnect_segments(rows, [poly[[25, 5]], poly[[4, 26]]], source)
+    np.testing.assert_array_equal(new, np.arange(lm.nodes.shape[0]))
+    check_constrained(lm)
+    assert lm.triangulation.segments.shape[0] == k
+    a = check_chain(lm, poly[5:26], closed=True)
+    b = check_chain(lm, np.r_[poly[26:], poly[:5]], closed=True)
+    assert not set(a) & set(b) and len(a) + len(b) == len(poly)
+    for name, value in before.items():
+        np.testing.assert_allclose(lm.ip_integral(name), value, rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("stage", ["source", "crossing", "removal", "flips"])
+def test_a_failing_reconnection_leaves_the_mesh_unchanged(stage, tmp_path):
+    """Each stage made to fail in turn (a bad source, two new segments that cross, a
+    node whose segments cannot merge, the last flips): ValueError or the flips' error,
+    and the whole state as before."""
+    lm, poly, _ = ellipse_mesh()
+    rows = pair_rows(lm, [poly[[4, 5]], poly[[25, 26]]])
+    source = lm.triangulation.segment_source[rows]
+    add, remove = [poly[[25, 5]], poly[[4, 26]]], []
+    if stage == "source":
+        source = [0, lm.triangulation.segments.shape[0] + 5]
+    elif stage == "crossing":
+        add = [poly[[25, 5]], poly[[4, 14]]]        # chords whose ends interleave: cross
+    elif stage == "removal":
+        remove = [poly[26]]            # (4, 26, 27) holds the polygon's inner nodes
+    before = saved_state(lm, tmp_path / "before.npz")
+    tri = lm.triangulation
+    if stage == "flips":
+        calls, original = [], tri.make_delaunay
+
+        def failing(*args, **kwargs):
+            calls.append(1)
+            if len(calls) == 2:          # after the segments were recovered and refilled
+                raise RuntimeError("flips failed")
+            return original(*args, **kwargs)
+        tri.make_delaunay = failing
+    with pytest.raises((ValueError, RuntimeError)):
+        lm.reconnect_segments(rows, add, source, remove=remove)
+    if stage == "flips":
+        del tri.make_delaunay
+    assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
+    lm.reconnect_segments(rows, [poly[[25, 5]], poly[[4, 26]]],
+                          lm.triangulation.segment_source[rows])
+    check_constrained(lm)
+
+
+def dumbbell(neck, gap=None, seed=0):
+    """Two lobes 0.25 x 0.3 joined by a neck 0.1 long and ``neck`` thick, or (``gap``) a
+    U: the lobes joined at the bottom with a gap between their tops; random nodes around.
+    Returns the mesh with the outline as segments and the outline's loop."""
+    y0, y1 = 0.5 - neck / 2, 0.5 + neck / 2
+    if gap is None:
+        corners = [[0.2, 0.35], [0.45, 0.35], [0.45, y0], [0.55, y0], [0.55, 0.35],
+                   [0.8, 0.35], [0.8, 0.65], [0.55, 0.65], [0.55, y1], [0.45, y1],
+                   [0.45, 0.65], [0.2, 0.65]]
+    else:
+        corners = [[0.2, 0.35], [0.8, 0.35], [0.8, 0.65], [0.5 + gap / 2, 0.65],
+                   [0.5 + gap / 2, 0.45], [0.5 - gap / 2, 0.45], [0.5 - gap / 2, 0.65],
+                   [0.2, 0.65]]
+    ring = polyline_nodes(corners, SPACING, closed=True)
+    p = square_nodes(300, 16, seed, jitter=0.3, margin=0.01)
+    d, _ = cKDTree(ring).query(p)
+    p = p[(d > 0.03) | (np.arange(p.shape[0]) < 64)]
+    loop = p.shape[0] + np.arange(len(ring))
+    lm = LagrangianMesh(np.r_[p, ring], segments=np.c_[loop, np.roll(loop, -1)],
+                        ip_fields={"one": np.ones(3)})
+    return lm, loop
+
+
+def facing(lm, loop, x, inside_y):
+    """The loop's two segments that cross the vertical x = ``x``, nearest ``inside_y``."""
+    P = lm.nodes[loop]
+    Q = np.roll(P, -1, axis=0)
+    cross = np.flatnonzero((P[:, 0] - x) * (Q[:, 0] - x) < 0)
+    cross = cross[np.argsort(np.abs(0.5 * (P[cross, 1] + Q[cross, 1]) - inside_y))][:2]
+    return pair_rows(lm, [loop[[i, (i + 1) % len(loop)]] for i in cross])
+
+
+@pytest.mark.parametrize("neck", [0.02, 0.2 * SPACING])
+def test_a_plate_is_cut_in_two_at_its_neck(neck):
+    """The cut gives two loops of segments sharing no node, one per lobe, their reference
+    areas the whole's split in proportion; the outlines cross nowhere; a neck thinner than
+    PINCH_FRACTION of the spacing loses one node on each side (they had met), a thicker
+    one none."""
+    lm, loop = dumbbell(neck)
+    A0 = abs(polygon_area_centroid(lm.nodes[loop])[0])
+    outlines = PlateOutlines([loop], [A0])
+    n, area = lm.nodes.shape[0], lm.ip_integral("one")
+    assert outlines.pinch(lm, *facing(lm, loop, 0.5, 0.5), SPACING) is None
+    check_constrained(lm)
+    assert len(outlines.loops) == 2
+    a, b = outlines.loops
+    assert not set(a.tolist()) & set(b.tolist())
+    for o in outlines.loops:
+        check_chain(lm, o, closed=True)
+    assert sum(outlines.areas0) == pytest.approx(A0, rel=1e-14)
+    assert outlines.crossings(lm.nodes) == 0
+    P = lm.nodes
+    assert outlines.inside(P, np.array([[0.3, 0.5], [0.7, 0.5]])).all()
+    lobes = sorted(polygon_area_centroid(P[o])[1][0] for o in outlines.loops)
+    assert lobes[0] < 0.45 < 0.55 < lobes[1]
+    assert 0 <= outlines.deficits(P).sum() <= 2 * neck * SPACING   # the slivers cut off
+    removed = 2 if neck < PINCH_FRACTION * SPACING else 0
+    assert lm.nodes.shape[0] == n - removed
+    assert len(a) + len(b) == len(loop) - removed
+    np.testing.assert_allclose(lm.ip_integral("one"), area, rtol=1e-13)
+
+
+def test_no_cut_where_the_plate_folds_onto_itself_or_two_pieces_meet(tmp_path):
+    """Faces meeting from outside (the arms of a U) or segments of two pieces: the reason
+    comes back, nothing changes."""
+    lm, loop = dumbbell(0.0, gap=0.02)
+    outlines = PlateOutlines([loop], [1.0])
+    before = saved_state(lm, tmp_path / "before.npz")
+    rows = pair_rows(lm, [loop[[i, (i + 1) % len(loop)]] for i in _arms(lm, loop)])
+    why = outlines.pinch(lm, *rows, SPACING)
+    assert "folds onto itself" in why
+    assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
+    assert len(outlines.loops) == 1
+    lm, loop = dumbbell(0.02)
+    outlines = PlateOutlines([loop], [1.0])
+    assert outlines.pinch(lm, *facing(lm, loop, 0.5, 0.5), SPACING) is None
+    first = pair_rows(lm, [outlines.loops[0][:2]])[0]
+    second = pair_rows(lm, [outlines.loops[1][:2]])[0]
+    before = saved_state(lm, tmp_path / "before2.npz")
+    assert "two pieces" in outlines.pinch(lm, first, second, SPACING)
+    assert_same_state(saved_state(lm, tmp_path / "after2.npz"), before)
+
+
+def _arms(lm, loop):
+    """Positions of the two segments facing each other across the U's gap, half way up."""
+    P = lm.nodes[loop]
+    Q = np.roll(P, -1, axis=0)
+    mid = 0.5 * (P + Q)
+    vertical = np.abs(P[:, 0] - Q[:, 0]) < 1e-12
+    out = []
+    for x in (0.49, 0.51):
+        cand = np.flatnonzero(vertical & (np.abs(mid[:, 0] - x) < 1e-9))
+        out.append(cand[np.argmin(np.abs(mid[cand, 1] - 0.55))])
+    return out
+
+
+def test_the_sinking_plate_goes_on_in_two_pieces(tmp_path):
+    """A closing film across the middle of the plate (between its bottom and top faces)
+    cuts it in two before the next step; the run goes on with two outlines held to their
+    areas, counted in the diagnostics, kept through a checkpoint."""
+    cfg = PlateConfig(nodes=300, end_time=6.0, max_dt=2.0, output_interval=6.0)
+    sim = SinkingPlate(cfg, tmp_path)
+    area0 = sim.plate_area0
+    lm, o = sim.lm, sim.outline
+    rows = facing(lm, o, cfg.plate_x + 1e-3, cfg.plate_z)
+    sim._closing = ClosingFilm(rows[0], rows[1], True, 0.1, "two faces close")
+    sim.run(progress=False)
+    from skfem_nem.apps.output import read_csv_columns
+    d = read_csv_columns(tmp_path / "diagnostics.csv")
+    assert (d["plate_pieces"] == 2).all() and d["pinches"][-1] == 1
+    assert np.abs(d["plate_area"] / area0 - 1).max() < 0.02
+    assert d["outline_crossings"].max() == 0 and d["inverted_triangles"].max() == 0
+    assert len(sim.outlines.loops) == 2
+    for loop, a0 in zip(sim.outlines.loops, sim.outlines.areas0):
+        assert abs(polygon_area_centroid(lm.nodes[loop])[0]) == pytest.approx(a0, rel=0.02)
+    again = SinkingPlate.restart(tmp_path)
+    assert [x.tolist() for x in again.outlines.loops] == [x.tolist() for x in sim.outlines.loops]
+    assert again.outlines.areas0 == sim.outlines.areas0
+    sim.figures()

@@ -9,6 +9,7 @@ import pytest
 from skfem_nem.apps.cli import main
 from skfem_nem.apps.output import read_csv_columns
 from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate, initial_nodes, load_config
+from skfem_nem.evolution import StepTooLong
 
 SMALL = dict(nodes=500, end_time=24.0, max_dt=4.0, output_interval=8.0, checkpoint_every=2,
              segments=True)
@@ -302,8 +303,8 @@ def test_step_retried_with_half_dt_and_fields_restored(tmp_path):
     def flaky(velocity, dt, **kw):
         calls.append(dt)
         if len(calls) == 1:
-            raise ValueError("triangle 0 inverts and none of its vertices can be relocated: "
-                             "reduce dt")
+            raise StepTooLong("triangle 0 inverts and none of its vertices can be relocated: "
+                              "reduce dt")
         return real(velocity, dt, **kw)
 
     sim.lm.advance = flaky

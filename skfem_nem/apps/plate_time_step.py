@@ -54,13 +54,14 @@ def hold_off_walls(lm, v: np.ndarray, c) -> np.ndarray:
     fluid that the mesh does not resolve, instead of being pushed ever closer (stopped
     short of the wall step after step, its triangles with the wall flatten to nothing)."""
     P, W = lm.nodes, lm.on_walls
+    lo, hi = lm.box
     line = lm.segment_nodes()
     h = FILM_FRACTION * c.outline_spacing * c.plate_thickness
     v = np.array(v, dtype=float)
-    for axis, size in ((0, c.width), (1, c.height)):
+    for axis in (0, 1):
         free = line & ~W[:, axis]
-        towards = (free & (P[:, axis] < h) & (v[:, axis] < 0)) \
-            | (free & (size - P[:, axis] < h) & (v[:, axis] > 0))
+        towards = (free & (P[:, axis] - lo[axis] < h) & (v[:, axis] < 0)) \
+            | (free & (hi[axis] - P[:, axis] < h) & (v[:, axis] > 0))
         v[towards, axis] = 0.0
     return v
 
@@ -90,14 +91,15 @@ def stable_dt(lm, v: np.ndarray, c, outline_segments: int):
     """Largest dt that moves no node of ``lm`` by more than ``c.cfl`` times its local
     spacing (the square root of its share of the triangle areas; slivers do not limit
     the step: flips repair them, and inverting moves are substepped), nor by more than
-    :data:`WALL_FRACTION` of its distance to a wall of the box (``c.width`` x
-    ``c.height``) it approaches, nor closes a film between material lines by more than
-    that fraction (:func:`film_dt`). ``v``: this step's nodal velocities (before
-    injection and removal). Returns dt and :func:`film_dt`'s closing film (or None)."""
+    :data:`WALL_FRACTION` of its distance to a wall of the mesh's box it approaches, nor
+    closes a film between material lines by more than that fraction (:func:`film_dt`).
+    ``v``: this step's nodal velocities (before injection and removal). Returns dt and
+    :func:`film_dt`'s closing film (or None)."""
     v = velocity_now(lm, v)
     h = node_spacing(lm.nodes, lm.triangles)
     x = lm.nodes
-    gap = np.c_[x, c.width - x[:, 0], c.height - x[:, 1]]      # left, bottom, right, top
+    lo, hi = lm.box
+    gap = np.c_[x - lo, hi - x]                                    # left, bottom, right, top
     approach = np.c_[-v, v]                                        # speed towards each
     with np.errstate(divide="ignore", invalid="ignore"):
         lim = c.cfl * h / np.hypot(v[:, 0], v[:, 1])

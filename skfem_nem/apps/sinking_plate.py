@@ -45,6 +45,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from ..evolution.lagrangian import LagrangianMesh
+from ..evolution.stepping import StepTooLong
 from ..coordinates import sibson_coordinates
 from ..geometry.nodesets import box_nodes, polyline_nodes
 from ..geometry.polylines import segment_distances
@@ -449,11 +450,13 @@ class SinkingPlate:
                     # instead of failing at the full step again
                     self.dt_next = min(self.dt_next, 2.0 * dt)
                 return row
-            except ValueError as err:
-                # the evolving mesh leaves itself unchanged on errors; restore
-                # the integration-point fields that the solve had updated
+            except (StepTooLong, PicardNotConverged) as err:
+                # the evolving mesh leaves itself unchanged on errors; restore the
+                # integration-point fields that the solve had updated. The plastic
+                # iterations can stall where the yielded region jumps between iterates:
+                # a shorter step changes less, as it moves the mesh less
                 self.lm.replace_ip_fields(saved)
-                if attempt == retries or "reduce dt" not in str(err):
+                if attempt == retries:
                     raise
                 import warnings
                 warnings.warn(f"step {self.lm.step + 1} at t = {self.lm.time:.6g}: {err}; "
@@ -476,15 +479,10 @@ class SinkingPlate:
         # Picard iterations start from the effective viscosity of the previous
         # step, carried (as its logarithm) by the mesh like the stress
         guess = lm.ip_fields.get("log_eta_eff")
-        try:
-            r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
-                         tol=c.picard_tol, solver=c.solver,
-                         constraints=self._area_constraint(spaces, dt),
-                         eta_guess=None if guess is None else np.exp(guess))
-        except PicardNotConverged as err:
-            # the plastic iterations can stall where the yielded region jumps between
-            # iterates; a shorter step changes less and is retried like a mesh failure
-            raise ValueError(f"{err}; reduce dt") from None
+        r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
+                     tol=c.picard_tol, solver=c.solver,
+                     constraints=self._area_constraint(spaces, dt),
+                     eta_guess=None if guess is None else np.exp(guess))
         lm.ip_fields["log_eta_eff"] = np.log(r.eta_eff)
         lm.ip_fields["stress"] = to_ip_field(r.tau)
         lm.ip_fields["plastic_strain"] = np.ascontiguousarray(r.plastic_strain)

@@ -4,5 +4,6 @@ Integration-point fields are remapped on flips and nodes are injected where the 
 """
 from .lagrangian import LagrangianMesh
 from .lagrangian3d import LagrangianMesh3D
+from .stepping import StepTooLong
 
-__all__ = ["LagrangianMesh", "LagrangianMesh3D"]
+__all__ = ["LagrangianMesh", "LagrangianMesh3D", "StepTooLong"]

@@ -43,7 +43,7 @@ from .injection import NodeInjection
 from .merging import NodeRemoval
 from .quality import cross, inverted, min_angles
 from .remap import remap_average, remap_conservative
-from .stepping import LagrangianStep, check_node_fields
+from .stepping import LagrangianStep, StepTooLong, check_node_fields
 
 __all__ = ["LagrangianMesh"]
 
@@ -85,7 +85,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         ``sqrt(inject)`` times its initial length is split at its midpoint (both
         halves stay segments; ``triangulation.segment_source`` names the given
         segment each piece comes from). A step after which a segment would not be an
-        edge (segments crossing) raises ``ValueError`` ("reduce dt") and leaves the
+        edge (segments crossing) raises :class:`StepTooLong` ("reduce dt") and leaves the
         mesh as it was.
     walls
         ``"box"`` (default): nodes on the bounding box of the initial nodes
@@ -402,7 +402,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
                 break
             cand = self._relocation_candidates(inv, removed)
             if not cand:
-                raise ValueError(f"triangle {inv[0]} ({T[inv[0]].tolist()}) inverts and none of "
+                raise StepTooLong(f"triangle {inv[0]} ({T[inv[0]].tolist()}) inverts and none of "
                                  f"its vertices can be relocated: reduce dt")
             self._set_positions(xa)
             for v in cand:
@@ -434,7 +434,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         try:
             tri.recover_segments()
         except ValueError as err:
-            raise ValueError(f"{err}; the segments of relocated nodes cannot be edges "
+            raise StepTooLong(f"{err}; the segments of relocated nodes cannot be edges "
                              f"again: reduce dt") from None
         changed = np.flatnonzero((tri.triangles != T0).any(axis=1))
         if changed.size:
@@ -442,14 +442,14 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         self._touched.append(changed)
 
     def _check_segments(self):
-        """``ValueError`` ("reduce dt") unless every segment is an edge and every
+        """:class:`StepTooLong` ("reduce dt") unless every segment is an edge and every
         triangle positive: a step never loses a segment silently."""
         missing = self.triangulation.missing_segments()
         if missing.size:
-            raise ValueError(f"segment {missing[0].tolist()} is no longer an edge "
+            raise StepTooLong(f"segment {missing[0].tolist()} is no longer an edge "
                              f"({missing.shape[0]} segment(s)): reduce dt")
         if inverted(self.nodes, self.triangles):
-            raise ValueError("a triangle inverts after the repair: reduce dt")
+            raise StepTooLong("a triangle inverts after the repair: reduce dt")
 
     # -- local surgery (rare: relocation of colliding nodes) ---------------------
     def _snapshot(self, tris, T=None):
@@ -488,7 +488,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         try:
             star = tri.star(v)
         except ValueError:
-            raise ValueError(f"node {v} is on the hull and cannot be relocated: "
+            raise StepTooLong(f"node {v} is on the hull and cannot be relocated: "
                              f"reduce dt") from None
         snap = self._snapshot(star)
         slots, moves = tri.remove_vertex(v, star)

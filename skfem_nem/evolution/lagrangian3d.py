@@ -26,7 +26,7 @@ from typing import Callable, Dict, Optional
 import numpy as np
 
 from ..basis import NaturalNeighbourBasis
-from .stepping import LagrangianStep, check_node_fields
+from .stepping import LagrangianStep, StepTooLong, check_node_fields
 from ..geometry.meshes import delaunay_mesh
 
 __all__ = ["LagrangianMesh3D"]
@@ -145,7 +145,7 @@ class LagrangianMesh3D(LagrangianStep):
         try:
             mesh = delaunay_mesh(x)
         except ValueError as err:
-            raise ValueError(f"step {self.step + 1}: the moved nodes cannot be "
+            raise StepTooLong(f"step {self.step + 1}: the moved nodes cannot be "
                              f"triangulated without losing a node ({err}); reduce dt") from None
         new = mesh.t.T
         kept = _rows_in(np.sort(new, axis=1), np.sort(self._mesh.t.T, axis=1))

@@ -11,8 +11,16 @@ from typing import Dict
 
 import numpy as np
 
-__all__ = ["LagrangianStep", "check_node_fields", "evaluate_velocity", "check_step_arguments",
-           "predictor_corrector", "keep_in_box", "WALL_REACH", "LEAVE_TOLERANCE"]
+__all__ = ["StepTooLong", "LagrangianStep", "check_node_fields", "evaluate_velocity",
+           "check_step_arguments", "predictor_corrector", "keep_in_box", "WALL_REACH",
+           "LEAVE_TOLERANCE"]
+
+
+class StepTooLong(ValueError):
+    """A step the mesh cannot follow at this dt, though a shorter one may pass: a
+    triangle that inverts with no vertex to relocate, segments that cannot be edges
+    again, a node carried out of the box. The mesh is left as it was before the step;
+    a caller may retry with a shorter step (the sinking plate halves it)."""
 
 
 def check_node_fields(node_fields, n) -> Dict[str, np.ndarray]:
@@ -114,7 +122,7 @@ def keep_in_box(x, x0, on_wall, box):
     far = np.flatnonzero(((x < lo - np.maximum(x0 - lo, slack))
                           | (x > hi + np.maximum(hi - x0, slack))).any(axis=1))
     if far.size:
-        raise ValueError(f"{far.size} node(s) would leave the box, first node {far[0]} "
+        raise StepTooLong(f"{far.size} node(s) would leave the box, first node {far[0]} "
                          f"to {x[far[0]].tolist()}: reduce dt")
     low, high = lo + (1 - WALL_REACH) * (x0 - lo), hi - (1 - WALL_REACH) * (hi - x0)
     stopped = ((x < low) | (x > high)) & ~on_wall
@@ -132,6 +140,12 @@ class LagrangianStep:
     may change), and ``_repair(x0, x, dt, max_substeps, inject)``, which moves the mesh
     from x0 to x, advances the clock and returns the dimension's part of the report.
     """
+
+    @property
+    def box(self):
+        """``(lo, hi)``: the corners of the box of the initial nodes (the walls, with
+        ``walls="box"``)."""
+        return self._box[0].copy(), self._box[1].copy()
 
     def _velocity(self, velocity, x):
         if self.walls != "box":

@@ -262,3 +262,35 @@ def test_reactions_balance_pure_shear(box):
     assert r[nd[0, np.isclose(x[0], 0)]].sum() == pytest.approx(-4.0, rel=0.01)
     assert r[nd[1, np.isclose(x[1], 1)]].sum() == pytest.approx(-4.0, rel=0.01)
     assert sol.info["pressure_mean"]
+
+
+def test_a_picard_limit_cycle_settles_by_relaxation(box, monkeypatch):
+    """A viscosity law that overshoots its fixed point (viscosity 2) by a factor 1.5 in log,
+    clipped, so that plain Picard iterations cycle between two viscosities for ever (like
+    a yielded region that jumps back and forth): they do not converge in
+    PICARD_RELAX_AFTER iterations; after that each iterate moves half way in log viscosity,
+    the error shrinks fourfold per iteration, and the step converges on the fixed point
+    with the velocity change below PICARD_RELAXATION * tol."""
+    import skfem_nem.models.rheology as rh
+    S = box
+    ne, nq = S.quadrature_points.shape[1:]
+    X = S.quadrature_points
+    f = np.zeros((2, ne, nq))
+    f[1] = -1.0 * ((X[0] < 0.5) & (X[1] < 0.5))          # a heavy corner sinks
+    mat, tau0 = Material(1.0, np.inf, 1e30), np.zeros((2, 2, ne, nq))
+    kw = dict(f=f, rotation="none", tol=1e-6)
+    rate1 = second_invariant(rh.vep_step(S, mat, tau0, 1.0, **kw).strain_rate)
+
+    def overshooting(st, eps, G):
+        # the (uniform) viscosity of this iterate, from its strain rate: x = log2(eta) - 1
+        x = np.log2(rate1.sum() / second_invariant(eps).sum()) - 1.0
+        return np.full(rate1.shape, 2.0 ** (1.0 + np.clip(-1.5 * x, -0.6, 0.9)))
+
+    monkeypatch.setattr(rh, "_plastic_viscosity", overshooting)
+    with pytest.raises(rh.PicardNotConverged, match="did not converge"):
+        rh.vep_step(S, mat, tau0, 1.0, maxiter=rh.PICARD_RELAX_AFTER, **kw)
+    r = rh.vep_step(S, mat, tau0, 1.0, maxiter=100, **kw)
+    assert rh.PICARD_RELAX_AFTER < r.iterations < rh.PICARD_RELAX_AFTER + 20
+    np.testing.assert_allclose(r.eta_eff, 2.0, rtol=1e-5)
+    assert r.history[-1] <= rh.PICARD_RELAXATION * 1e-6
+    assert min(r.history[1:rh.PICARD_RELAX_AFTER]) > 0.5      # cycling until then

@@ -6,9 +6,10 @@ viscosity given (the default grid: nodes 300, 1000, 3000; seeds 0-4; plate densi
 1.5 and 3; yield stress 0.05 and 0.3; lower-layer viscosity 1 and 100: 120 runs), all
 other parameters at their defaults, and reports for each run whether it completed, the
 time reached, the largest plate-area deviation, outline crossings, the smallest angle,
-the final node count, injections, removals and merges, retried steps and the wall
-time. A run that stops (the mesh cannot continue, a solver fails) is reported with its
-reason, never aborts the study. Each run writes its outputs in its own folder under
+the final node count, injections, removals and merges, retried steps, the pieces the
+plate ended in (it breaks where it necks through) and the wall time. A run that stops
+(the mesh cannot continue, a solver fails) is reported with its reason, never aborts
+the study. Each run writes its outputs in its own folder under
 ``--out``; the rows go to ``robustness.csv`` there as runs finish (a study can be
 resumed: finished runs are read back, not redone) and the markdown table is printed.
 
@@ -31,7 +32,8 @@ import numpy as np
 
 COLUMNS = ["nodes", "seed", "plate_density", "yield_stress", "eta_lower", "completed",
            "t_reached", "steps", "max_area_deviation", "outline_crossings", "min_angle",
-           "final_nodes", "injected", "removed", "merged", "retries", "seconds", "stop"]
+           "final_nodes", "injected", "removed", "merged", "retries", "pieces", "seconds",
+           "stop"]
 GRID = {"nodes": [300, 1000, 3000], "seeds": [0, 1, 2, 3, 4], "plate_density": [1.5, 3.0],
         "yield_stress": [0.05, 0.3], "eta_lower": [1.0, 100.0]}
 
@@ -79,6 +81,7 @@ def run_one(setting, end_time: float, out: str) -> dict:
                min_angle=float(d["min_angle"].min()), final_nodes=int(d["nodes"][-1]),
                injected=int(d["injected"].sum()), removed=int(d["removed"].sum()),
                merged=int(d["merged"].sum()), retries=int(d["retries"].sum()),
+               pieces=len(sim.outlines.loops),
                seconds=round(seconds, 1), stop=stop)
     return row
 
@@ -118,11 +121,20 @@ def read_done(path: Path) -> dict:
                      "eta_lower": float(r["eta_lower"])}): r for r in rows}
 
 
+def _rewrite(log: Path, rows) -> None:
+    """Write ``rows`` to ``log`` with today's columns (missing ones empty)."""
+    with open(log, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=COLUMNS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({c: r.get(c, "") for c in COLUMNS})
+
+
 def table(rows) -> str:
     """The markdown table of the rows."""
     head = ["nodes", "seed", "density", "yield", "eta_lower", "completed", "t", "steps",
             "area dev.", "crossings", "min angle", "nodes at end", "injected", "removed",
-            "merged", "retries", "s", "stop"]
+            "merged", "retries", "pieces", "s", "stop"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         def f(k, fmt="{}"):
@@ -136,7 +148,8 @@ def table(rows) -> str:
             f("eta_lower", "{:g}"), f("completed"), f("t_reached", "{:.5g}"), f("steps"),
             f("max_area_deviation", "{:.1e}"), f("outline_crossings"),
             f("min_angle", "{:.2g}"), f("final_nodes"), f("injected"), f("removed"),
-            f("merged"), f("retries"), f("seconds", "{:.0f}"), f("stop") or "-"]) + " |")
+            f("merged"), f("retries"), f("pieces") or "1", f("seconds", "{:.0f}"),
+            f("stop") or "-"]) + " |")
     return "\n".join(lines)
 
 
@@ -165,6 +178,8 @@ def main(argv=None):
     done = read_done(log)
     todo = [s for s in settings(args) if name_of(s) not in done]
     rows = [done[name_of(s)] for s in settings(args) if name_of(s) in done]
+    if done and set(next(iter(done.values()))) != set(COLUMNS):
+        _rewrite(log, list(done.values()))    # a study begun with fewer columns
     new_file = not log.exists()
     with open(log, "a", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=COLUMNS)

@@ -324,13 +324,23 @@ def test_robustness_study_rows_table_and_resume(tmp_path, capsys):
     for r in rows:
         assert r["t_reached"] == pytest.approx(6.0) and r["steps"] >= 2
         assert 0 <= r["max_area_deviation"] < 1e-2 and r["outline_crossings"] == 0
-        assert r["min_angle"] > 0 and r["final_nodes"] > 300
+        assert r["min_angle"] > 0 and r["final_nodes"] > 300 and r["pieces"] == 1
     out = capsys.readouterr().out
     assert "| 300 | 0 | 3 | 0.3 | 1 | True | 6 |" in out
     assert "2 of 2 runs completed" in out
     again = bench.main(args)
     assert "[1/" not in capsys.readouterr().out            # nothing was run again
     assert [str(r["completed"]) for r in again] == ["True", "True"]
+    # a study begun before a column was added is rewritten with it, its rows kept
+    log = tmp_path / "robustness.csv"
+    lines = log.read_text().splitlines()
+    log.write_text("\n".join(",".join(x.split(",")[:-3] + x.split(",")[-2:])
+                             for x in lines) + "\n")          # without "pieces"
+    assert "pieces" not in log.read_text().splitlines()[0]
+    again = bench.main(args)
+    assert "[1/" not in capsys.readouterr().out
+    assert log.read_text().splitlines()[0].split(",")[-3] == "pieces"
+    assert len(log.read_text().splitlines()) == 3
     # a run that cannot go on is reported, not raised
     stopped = bench._safe_run({"nodes": 300, "seed": 0, "plate_density": 1.5,
                                "yield_stress": 0.3, "eta_lower": -1.0}, 6.0, str(tmp_path))

@@ -119,12 +119,15 @@ class PlateOutlines:
             return "two pieces of the plate meet, which the model does not follow"
         k, p, q = found
         o, P = self.loops[k], lm.nodes
-        if not self._neck(P[o], p, q):
-            return ("the plate folds onto itself (its faces meet from outside), which the "
-                    "model does not follow")
         plan = _cut(P, o, p, q)
         if plan is None:
             return "a piece would keep fewer than three nodes"
+        # a neck leaves two pieces turning the way the plate does; where the plate folds
+        # onto itself (its faces meet from outside) one of them is the fluid it encloses
+        turn = np.sign(polygon_area_centroid(P[o])[0])
+        if any(polygon_area_centroid(P[piece])[0] * turn <= 0 for piece in plan[:2]):
+            return ("the plate folds onto itself (its faces meet from outside), which the "
+                    "model does not follow")
         return self._apply(lm, k, plan, spacing)
 
     def _locate(self, pair):
@@ -135,15 +138,6 @@ class PlateOutlines:
             if pos[0].size and pos[1].size:
                 return k, int(pos[0][0]), int(pos[1][0])
         return None
-
-    @staticmethod
-    def _neck(Q, p, q) -> bool:
-        """Whether segment q of the loop Q lies on the plate's side of segment p."""
-        A, _ = polygon_area_centroid(Q)
-        a, b = Q[p], Q[(p + 1) % len(Q)]
-        m = 0.5 * (Q[q] + Q[(q + 1) % len(Q)])
-        side = (b[0] - a[0]) * (m[1] - a[1]) - (b[1] - a[1]) * (m[0] - a[0])
-        return side * A > 0
 
     def _apply(self, lm, k, plan, spacing) -> Optional[str]:
         keep, rest, add, release = plan

@@ -183,14 +183,18 @@ def _arms(lm, loop):
 
 def test_the_sinking_plate_goes_on_in_two_pieces(tmp_path):
     """A closing film across the middle of the plate (between its bottom and top faces)
-    cuts it in two before the next step; the run goes on with two outlines held to their
-    areas, counted in the diagnostics, kept through a checkpoint."""
+    cuts it in two before the next step, also after a restart from a checkpoint written
+    with the film pending; the run goes on with two outlines held to their areas, counted
+    in the diagnostics, kept through a checkpoint."""
     cfg = PlateConfig(nodes=300, end_time=6.0, max_dt=2.0, output_interval=6.0)
     sim = SinkingPlate(cfg, tmp_path)
     area0 = sim.plate_area0
     lm, o = sim.lm, sim.outline
     rows = facing(lm, o, cfg.plate_x + 1e-3, cfg.plate_z)
     sim._closing = ClosingFilm(rows[0], rows[1], True, 0.1, "two faces close")
+    sim.checkpoint()                     # (a stopped run's checkpoint keeps the film)
+    sim = SinkingPlate.restart(tmp_path)
+    lm = sim.lm
     sim.run(progress=False)
     from skfem_nem.apps.output import read_csv_columns
     d = read_csv_columns(tmp_path / "diagnostics.csv")

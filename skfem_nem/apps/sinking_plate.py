@@ -51,8 +51,8 @@ from ..geometry.nodesets import box_nodes, polyline_nodes
 from ..geometry.polylines import segment_distances
 from .plate_figures import plate_figures
 from .plate_outlines import PlateOutlines, polygon_area_centroid
-from .plate_time_step import (FILM_FRACTION, WALL_FRACTION, hold_off_walls,  # noqa: F401
-                              node_spacing, stable_dt)
+from .plate_time_step import (FILM_FRACTION, WALL_FRACTION, ClosingFilm,  # noqa: F401
+                              hold_off_walls, node_spacing, stable_dt)
 from .output import CSVLog, PVDWriter, atomic_write_text, write_vtu
 from ..models.rheology import (Material, PicardNotConverged, from_ip_field, second_invariant,
                                to_ip_field, vep_step)
@@ -361,8 +361,13 @@ class SinkingPlate:
         self.cfg = cfg
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
-        self._closing = None  # a film that closes within any step (_film_dt)
-        self._pinches = 0 if _state is None else _state[1].get("pinches", 0)
+        # a film that closes within any step (_stable_dt), dealt with before the next
+        self._closing = None
+        self._pinches = 0
+        if _state is not None:
+            closing = _state[1].get("closing")
+            self._closing = None if closing is None else ClosingFilm(*closing)
+            self._pinches = _state[1].get("pinches", 0)
         if _state is not None:
             self.lm, meta = _state
             # (checkpoints written before the area was stored: the initial rectangle)
@@ -636,6 +641,7 @@ class SinkingPlate:
                 "dt_next": self.dt_next, "outputs": self.outputs,
                 "first_output": self.first_output, "plate_area0": self.plate_area0,
                 "outline_segments": self.outline_segments, "pinches": self._pinches,
+                "closing": None if self._closing is None else list(self._closing),
                 **self.outlines.to_meta()}
         atomic_write_text(self.out / "checkpoint.json", json.dumps(meta))
 

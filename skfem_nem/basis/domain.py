@@ -7,8 +7,9 @@ domain are void. A point computed on a boundary facet (a facet quadrature point,
 smoothing cell's edge, a node of a refined plotting mesh) may then land a few ulps outside
 the facet, in a void sliver, and the coordinates would call it outside the domain.
 
-:func:`into_domain` moves such points, within :data:`NEAR` (relative to the diagonal of the
-nodes' bounding box) of a boundary facet, onto the facet and :data:`NUDGE` inside, towards
+:func:`into_domain` moves such points, within the hull policy's round-off
+(``geometry.hull.OUTSIDE_ROUNDOFF``, relative to the diagonal of the nodes' bounding box) of
+a boundary facet, onto the facet and :data:`NUDGE` inside, towards
 the centroid of the facet's triangle: the values change by about ``NUDGE`` times the
 diagonal times the gradient. Points farther out are left alone and reported.
 """
@@ -16,13 +17,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.hull import OUTSIDE_ROUNDOFF
 from ..geometry.meshes import outside_domain
 
-__all__ = ["into_domain", "check_used_nodes", "NEAR", "NUDGE"]
+__all__ = ["into_domain", "check_used_nodes", "NUDGE"]
 
-#: distance from the boundary (relative to the bounding-box diagonal) taken as round-off
-NEAR = 1e-10
-#: how far inside (relative to the diagonal) a point within NEAR is put
+#: how far inside (relative to the diagonal) a point outside by round-off is put
 NUDGE = 1e-12
 #: point-segment pairs measured at once
 _CHUNK = 1 << 22
@@ -51,7 +51,7 @@ def _nearest_facets(mesh, x, facets):
 
 def into_domain(mesh, x):
     """``(x', far)``: the (m, 2) points x, those outside the domain of the 2D ``mesh`` by
-    round-off (within ``NEAR`` of a boundary facet) moved just inside; ``far`` holds the
+    round-off (within ``OUTSIDE_ROUNDOFF`` of a boundary facet) moved just inside; ``far`` holds the
     indices of the points outside by more (in a hole or a notch). x is not modified."""
     x = np.asarray(x, dtype=np.float64)
     out = outside_domain(mesh, x)
@@ -60,7 +60,7 @@ def into_domain(mesh, x):
     bf = mesh.boundary_facets()
     diag = float(np.hypot(*np.ptp(mesh.p, axis=1)))
     j, dist, foot = _nearest_facets(mesh, x[out], bf)
-    near = dist <= NEAR * diag
+    near = dist <= OUTSIDE_ROUNDOFF * diag
     tri = mesh.f2t[0, bf[j[near]]]
     c = mesh.p[:, mesh.t[:, tri]].mean(axis=1).T       # centroids of the facets' triangles
     step = c - foot[near]

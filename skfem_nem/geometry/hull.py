@@ -9,13 +9,17 @@ no gradients (they are one-sided there). One number, so that the two methods agr
 points those are; 1e-12 is far above the round-off of the distance (a few ulps of the local
 length) and far below any distance at which the one-sided limit would be a visible error.
 
-Points further outside are outside. The 2D coordinates move points that are outside by less
-than ``OUTSIDE_ROUNDOFF`` times the diagonal of the nodes' bounding box onto the hull (their
-``hull_tol`` option): queries computed from the nodes (a mapped quadrature point on a hull
-edge) land a few ulps outside.
+Points further outside are outside, except by round-off: a point outside the domain by
+less than ``OUTSIDE_ROUNDOFF`` times the diagonal of the nodes' bounding box is taken to be
+on its boundary. The 2D coordinates move such points outside the convex hull onto it (their
+``hull_tol`` option); the basis on a non-convex domain moves them from a void sliver just
+inside the nearest boundary facet (``basis.domain.into_domain``). Queries computed from the
+nodes land a few ulps outside: a mapped quadrature point on a hull edge, the midpoint of a
+refined circle's chord, the side of a mapped mesh that is straight only to round-off. One
+number for both, 1e-10: far above those few ulps, far below any gap a mesh resolves.
 """
 HULL_TOLERANCE = 1e-12
-OUTSIDE_ROUNDOFF = 1e-13
+OUTSIDE_ROUNDOFF = 1e-10
 # Hull nodes lie on a facet's plane within this times the nodes' diameter when queries are
 # grouped by facet (n-D): far above the round-off of the fitted plane, far below a real gap.
 FACET_PLANE = 1e-9

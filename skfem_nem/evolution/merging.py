@@ -187,17 +187,7 @@ class NodeRemoval:
         per-node array compacted. Returns the map old -> new node index (-1: removed).
         ``ValueError`` for a corner of the hull, or a segment node whose segments cannot
         be merged; on any error the mesh is left exactly as it was."""
-        idx = self._node_indices(idx)
-        state = self._state()
-        try:
-            self._remove_all(idx)
-            self.triangulation.make_delaunay(on_flips=self._on_flips)
-            new = self._compact()
-        except BaseException:
-            self._restore(state)
-            raise
-        self._invalidate()
-        return new
+        return self._removal(self._node_indices(idx))
 
     def reconnect_segments(self, release, add, source, remove=()) -> np.ndarray:
         """Replace the segments ``release`` (rows of ``triangulation.segments``) by the
@@ -210,17 +200,25 @@ class NodeRemoval:
         was."""
         tri = self.triangulation
         release, add, source = self._reconnection(release, add, source)
-        remove = self._node_indices(remove)
-        state = self._state()
-        try:
+
+        def reconnect():
             keep = np.ones(tri.segments.shape[0], dtype=bool)
             keep[release] = False
             tri.set_segments(np.r_[tri.segments[keep], add],
                              np.r_[tri.segment_source[keep], source])
             self._recover_refilled()
             tri.make_delaunay(on_flips=self._on_flips)
-            self._remove_all(remove)
-            tri.make_delaunay(on_flips=self._on_flips)
+        return self._removal(self._node_indices(remove), first=reconnect)
+
+    def _removal(self, idx, first=None) -> np.ndarray:
+        """One transaction: ``first()`` (if given), the nodes idx taken out, flips,
+        compaction; returns the node map. On any error the state is restored."""
+        state = self._state()
+        try:
+            if first is not None:
+                first()
+            self._remove_all(idx)
+            self.triangulation.make_delaunay(on_flips=self._on_flips)
             new = self._compact()
         except BaseException:
             self._restore(state)

@@ -208,3 +208,14 @@ def test_the_sinking_plate_goes_on_in_two_pieces(tmp_path):
     assert [x.tolist() for x in again.outlines.loops] == [x.tolist() for x in sim.outlines.loops]
     assert again.outlines.areas0 == sim.outlines.areas0
     sim.figures()
+
+
+def test_crossings_count_within_and_between_outlines():
+    """A bow tie crosses itself once; two squares overlapping at a corner cross twice;
+    apart, or sharing nothing but a neighbourhood, nothing."""
+    from skfem_nem.apps.plate_outlines import crossings
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    bowtie = square[[0, 1, 3, 2]]
+    assert crossings([bowtie]) == 1
+    assert crossings([square, square + 0.5]) == 2
+    assert crossings([square, square + 1.5]) == 0 == crossings([square])

@@ -68,13 +68,15 @@ ArrayLike = Union[float, np.ndarray]
 # Picard iterations stop once the effective viscosity changes by less than
 # this (max |log ratio|) in the first iteration, or after the second
 VISCOSITY_SETTLED = 1e-12
-# after this many Picard iterations without convergence the viscosity update is relaxed:
-# the yielded region can jump back and forth from one iterate to the next (a limit cycle,
-# the velocity change stuck at a few times tol: a plate pressed onto the bottom); each
-# iterate then moves only PICARD_RELAXATION of the way (in log viscosity), and the
-# velocity change must fall below PICARD_RELAXATION * tol (a relaxed iterate changes by
-# that fraction of the fixed point's residual). 40 lies well past what converging steps
-# take (at most 33 iterations over the sinking plate's robustness runs): they are untouched
+# after this many Picard iterations without convergence, iterates that cycle (two
+# successive velocity changes pointing opposite ways: the yielded region jumping back and
+# forth, the change stuck at a few times tol; measured on a plate pressed onto the bottom)
+# switch to a relaxed viscosity update for the rest of the step: each iterate moves only
+# PICARD_RELAXATION of the way (in log viscosity), and the velocity change must fall
+# below PICARD_RELAXATION * tol (a relaxed iterate changes by that fraction of the fixed
+# point's residual). A slow, steady approach is left alone (relaxing would slow it). 40
+# lies well past what converging steps take (at most 33 iterations over the sinking
+# plate's robustness runs): they are untouched
 PICARD_RELAX_AFTER = 40
 PICARD_RELAXATION = 0.5
 # default lower bound of the effective viscosity, relative to the smallest
@@ -655,7 +657,7 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
     iterate until the relative velocity change is below ``tol``; ``solve``:
     the solver keywords of :func:`solve_stokes_bc`."""
     history = []
-    res, weight = np.inf, 1.0
+    res, weight, du_last = np.inf, 1.0, None
     for it in range(1, maxiter + 1):
         tau0 = (eta_eff * st.chi)[None, None] * st.rotated(G)
         sol = solve_stokes_bc(spaces, eta_eff, st.load, tau0, *walls, constraints=constraints,
@@ -664,16 +666,18 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
         eps = strain_rate(G)
         eta_new = _plastic_viscosity(st, eps, G)
         if u is None:
-            res = np.inf if st.iterate else 0.0
+            res, du = (np.inf if st.iterate else 0.0), None
         else:
-            res = float(np.abs(sol.u - u).max() / max(np.abs(sol.u).max(), 1e-300))
+            du = sol.u - u
+            res = float(np.abs(du).max() / max(np.abs(sol.u).max(), 1e-300))
+            if it >= PICARD_RELAX_AFTER and du_last is not None and du @ du_last < 0:
+                weight = PICARD_RELAXATION    # cycling (no slow, steady approach): relax
         history.append(res)
-        u = sol.u
+        u, du_last = sol.u, du
         d_eta = float(np.abs(np.log(eta_new / eta_eff)).max())
         if res <= tol * weight and (d_eta <= VISCOSITY_SETTLED or it > 1):
             eta_eff = eta_new
             break
-        weight = PICARD_RELAXATION if it >= PICARD_RELAX_AFTER else 1.0
         eta_eff = eta_eff ** (1.0 - weight) * eta_new ** weight
         if not st.iterate:
             break

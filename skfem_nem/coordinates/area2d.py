@@ -44,9 +44,10 @@ Cost
     triangulation is a tree of triangles), in-circle tests decided by the
     cached circumcircles unless they are within round-off of the circle
     (then by the exact predicate), and the Sibson areas summed edge by edge
-    over that tree. All of it is inlined into one parallel loop over blocks
-    of consecutive queries, which write their rows straight into staging
-    buffers that are copied in parallel into the CSR arrays: numba
+    over that tree. All of it is inlined into one kernel for a block of
+    consecutive queries, compiled without reference counting, which a
+    parallel loop runs over the blocks; they write their rows straight into
+    staging buffers that are copied in parallel into the CSR arrays: numba
     reference-counts the arrays passed to a called function with atomic
     operations, which would cost more than the geometry and keep a second
     thread from helping.

@@ -113,8 +113,8 @@ def sinking_plate(args) -> int:
     print(f"sinking plate: {sim.lm.nodes.shape[0]} nodes, {sim.lm.triangles.shape[0]} "
           f"triangles, t = {sim.lm.time:g} -> {cfg.end_time:g}; output in {args.output}")
     if not kernels_cached():
-        print("first run after installing: compiling the numerical kernels (under a minute, "
-              "once) before the first step", flush=True)
+        print("first run after installing: compiling the numerical kernels (about half a "
+              "minute, once) before the first step", flush=True)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning

@@ -44,9 +44,10 @@ Cost
     triangulation is a tree of triangles), in-circle tests decided by the
     cached circumcircles unless they are within round-off of the circle
     (then by the exact predicate), and the Sibson areas summed edge by edge
-    over that tree. All of it is inlined into one parallel loop over blocks
-    of consecutive queries, which write their rows straight into staging
-    buffers that are copied in parallel into the CSR arrays: numba
+    over that tree. All of it is inlined into one kernel for a block of
+    consecutive queries, compiled without reference counting, which a
+    parallel loop runs over the blocks; they write their rows straight into
+    staging buffers that are copied in parallel into the CSR arrays: numba
     reference-counts the arrays passed to a called function with atomic
     operations, which would cost more than the geometry and keep a second
     thread from helping.
@@ -319,9 +320,9 @@ def _write_row(nn, nb, area, gax, gay, want_grad, perm, pos, s_i, s_v, s_gx, s_g
                 s_gy[pos + r] = (gay[i] - phi * gsy) * inv
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _query_block(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, general, width,
-                 lo, hi, pos, end, s_i, s_v, s_gx, s_gy, count, status, tri):
+                 lo, hi, pos, end, s_i, s_v, s_gx, s_gy, count, status, tri, ib, fb, cnb):
     """Natural-neighbour coordinates of the points Q[lo:hi], one after another.
 
     ``start`` (m,): the triangle each walk starts from, or empty: then the
@@ -339,39 +340,28 @@ def _query_block(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad
     the point, for q in [lo, hi). Rows with more than ``width`` natural
     neighbours, and all rows once fewer than ``width`` positions are left
     before ``end``, get status OVERFLOW and no entries. Returns the position
-    after the last entry.
+    after the last entry. Work space: ``ib`` (14, width + 4) int64, ``fb``
+    (8, width + 2) float64 and ``cnb`` (width, 3) int64, from :func:`_work_space`.
 
-    Inlined, like everything it calls: numba reference-counts the array
+    Everything it calls is inlined, and it is compiled without reference
+    counting (it allocates nothing): numba reference-counts the array
     arguments of the functions it calls with atomic operations, which cost
-    more than the geometry and keep threads from scaling.
+    more than the geometry and keep threads from scaling. It is called once
+    per block and not inlined into :func:`_query_all`: numba's parallel passes
+    over the inlined code took most of a first run's compilation (34 s of 60).
     """
     # Long kernel: one pass over a block of queries keeps each query's walk, cavity, areas
     # and row in registers and reuses the block's buffers; split into calls, every stage
     # would pass the 25 buffers again per query.
     ccap = width
-    cav = np.empty(ccap, np.int64)
-    cpar = np.empty(ccap, np.int64)
-    cchd = np.empty(ccap, np.int64)
-    cpa = np.empty(ccap, np.int64)
-    cpb = np.empty(ccap, np.int64)
-    cedge = np.empty(ccap, np.int64)
-    cstep = np.empty(ccap, np.int64)
-    stk = np.empty(ccap, np.int64)
-    cnb = np.empty((ccap, 3), np.int64)
-    rej = np.empty(ccap + 4, np.int64)
-    ox = np.empty(ccap)
-    oy = np.empty(ccap)
-    nn = np.empty(ccap + 2, np.int64)
-    be_b = np.empty(ccap + 2, np.int64)
-    be_u = np.empty(ccap + 2, np.int64)
-    be_c = np.empty(ccap + 2, np.int64)
-    perm = np.empty(ccap + 2, np.int64)
-    vx = np.empty(ccap + 2)
-    vy = np.empty(ccap + 2)
-    dv = np.empty(ccap + 2)
-    area = np.empty(ccap + 2)
-    gax = np.empty(ccap + 2)
-    gay = np.empty(ccap + 2)
+    cav, cpar, cchd, cpa = ib[0, :ccap], ib[1, :ccap], ib[2, :ccap], ib[3, :ccap]
+    cpb, cedge, cstep, stk = ib[4, :ccap], ib[5, :ccap], ib[6, :ccap], ib[7, :ccap]
+    rej = ib[8, :ccap + 4]
+    nn, be_b, be_u = ib[9, :ccap + 2], ib[10, :ccap + 2], ib[11, :ccap + 2]
+    be_c, perm = ib[12, :ccap + 2], ib[13, :ccap + 2]
+    ox, oy = fb[0, :ccap], fb[1, :ccap]
+    vx, vy, dv = fb[2, :ccap + 2], fb[3, :ccap + 2], fb[4, :ccap + 2]
+    area, gax, gay = fb[5, :ccap + 2], fb[6, :ccap + 2], fb[7, :ccap + 2]
     prev = -1
     for q in range(lo, hi):
         count[q] = 0
@@ -447,6 +437,13 @@ def _query_block(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad
     return pos
 
 
+@njit(cache=True)
+def _work_space(width):
+    """The work space of :func:`_query_block` for rows of up to ``width`` entries."""
+    return (np.empty((14, width + 4), np.int64), np.empty((8, width + 2)),
+            np.empty((width, 3), np.int64))
+
+
 # below this many queries a batch runs as one block per piece: waking the
 # thread pool would cost more than it saves
 _PARALLEL_MIN = 2000
@@ -500,9 +497,11 @@ def _query_all(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, 
             hi = c0 + (blk + 1) * mc // nblocks
             base = (lo - c0) * room + blk * width
             end = (hi - c0) * room + (blk + 1) * width
+            ib, fb, cnb = _work_space(width)
             bfill[blk] = _query_block(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind,
                                       want_grad, general, width, lo, hi, base, end,
-                                      s_i, s_v, s_gx, s_gy, count, status, tri) - base
+                                      s_i, s_v, s_gx, s_gy, count, status, tri, ib, fb,
+                                      cnb) - base
         for r in range(c0, c1):
             indptr[r + 1] = indptr[r] + count[r]
         nnz = indptr[c0]
@@ -520,15 +519,15 @@ def _query_all(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, 
         for blk in prange(nblocks):
             lo = c0 + blk * mc // nblocks
             base = (lo - c0) * room + blk * width
-            off = indptr[lo]
-            f = bfill[blk]
-            ind0[off:off + f] = s_i[base:base + f]
-            val0[off:off + f] = s_v[base:base + f]
-            if want_grad:
-                ind1[off:off + f] = s_i[base:base + f]
-                ind2[off:off + f] = s_i[base:base + f]
-                val1[off:off + f] = s_gx[base:base + f]
-                val2[off:off + f] = s_gy[base:base + f]
+            off = indptr[lo] - base
+            for j in range(base, base + bfill[blk]):  # not slices: see _grown
+                ind0[off + j] = s_i[j]
+                val0[off + j] = s_v[j]
+                if want_grad:
+                    ind1[off + j] = s_i[j]
+                    ind2[off + j] = s_i[j]
+                    val1[off + j] = s_gx[j]
+                    val2[off + j] = s_gy[j]
     return ind0, ind1, ind2, val0, val1, val2, indptr[m]
 
 
@@ -536,12 +535,15 @@ def _query_all(P, T, N, S, CC, Q, start, grid, nc, glo, gspan, kind, want_grad, 
 def _grown(a, cap, n):
     """A copy of ``a[:n]`` with room for ``cap`` entries, its pages faulted
     in from this one thread (first touches of the same pages from several
-    threads at once serialise in the kernel and cost far more)."""
+    threads at once serialise in the kernel and cost far more). Copied in a
+    loop: a slice assignment compiles numba's shape check with its error
+    message, seconds of a first run."""
     b = np.empty(cap, a.dtype)
     step = max(1, 4096 // b.itemsize)
     for i in range(0, cap, step):
         b[i] = 0
-    b[:n] = a[:n]
+    for i in range(n):
+        b[i] = a[i]
     return b
 
 

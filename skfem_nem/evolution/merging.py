@@ -78,6 +78,16 @@ def _clip_half(src, ns, px, py, qx, qy, dst):
 
 
 @njit(cache=True)
+def _copy_points(src, ns, dst):
+    """Copy the points src[:ns] to dst[:ns] and return ns (a loop: numba's slice
+    assignment compiles a shape check with its error message, seconds on a first run)."""
+    for i in range(ns):
+        dst[i, 0] = src[i, 0]
+        dst[i, 1] = src[i, 1]
+    return ns
+
+
+@njit(cache=True)
 def _bary(x, y, X):
     ax, ay = X[0, 0], X[0, 1]
     d = (X[1, 0] - ax) * (X[2, 1] - ay) - (X[1, 1] - ay) * (X[2, 0] - ax)
@@ -127,12 +137,10 @@ def conservative_fill(Xo, Vo, Xn):
                       - (Y[1, 1] - Y[0, 1]) * (Y[2, 0] - Y[0, 0]))
         rhs = np.zeros((3, c))
         for i in range(Xo.shape[0]):
-            a[:3] = Y
-            ns = 3
+            ns = _copy_points(Y, Y.shape[0], a)
             for e in range(3):
                 p, q = Xo[i, e], Xo[i, (e + 1) % 3]
-                ns = _clip_half(a, ns, p[0], p[1], q[0], q[1], b)
-                a[:ns] = b[:ns]
+                ns = _copy_points(b, _clip_half(a, ns, p[0], p[1], q[0], q[1], b), a)
                 if ns < 3:
                     break
             if ns >= 3:

@@ -338,3 +338,18 @@ def test_a_node_carried_to_a_wall_stops_short_of_it():
     rep = lm.advance(lambda x: v, 1.0)
     assert rep["stopped_at_walls"] == 1
     assert lm.nodes[-1, 1] == pytest.approx((1 - WALL_REACH) * 2e-4, rel=1e-12)
+
+
+def test_replace_ip_fields_restores_a_saved_set_exactly():
+    """A saved set of ip fields replaces the current one whole: values back, a field
+    added since dropped; a field with the wrong row count is refused, nothing changed."""
+    lm = LagrangianMesh(square_nodes(60, 8, 0), ip_fields={"s": np.arange(3.0)})
+    saved = {k: v.copy() for k, v in lm.ip_fields.items()}
+    lm.ip_fields["s"][:] = -1.0
+    lm.ip_fields["added"] = np.ones((lm.triangles.shape[0], 3))
+    with pytest.raises(ValueError, match="'bad' has"):
+        lm.replace_ip_fields({"s": saved["s"], "bad": np.ones((2, 3))})
+    assert set(lm.ip_fields) == {"s", "added"}
+    lm.replace_ip_fields(saved)
+    assert set(lm.ip_fields) == {"s"}
+    np.testing.assert_array_equal(lm.ip_fields["s"], saved["s"])

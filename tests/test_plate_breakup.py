@@ -219,3 +219,40 @@ def test_crossings_count_within_and_between_outlines():
     assert crossings([bowtie]) == 1
     assert crossings([square, square + 0.5]) == 2
     assert crossings([square, square + 1.5]) == 0 == crossings([square])
+
+
+def test_a_step_whose_faces_would_cross_cuts_the_plate_there(tmp_path):
+    """Every try of a step fails because two faces of the plate would cross (within a
+    relocation): the plate is cut there, with a warning, and the step goes on; where one
+    of the two is the interface, the step fails as before."""
+    from skfem_nem.evolution import StepTooLong
+    cfg = PlateConfig(nodes=300, end_time=6.0, max_dt=2.0, output_interval=6.0)
+    sim = SinkingPlate(cfg, tmp_path)
+    lm = sim.lm
+    seg = lm.triangulation.segments
+    faces = [seg[r].tolist() for r in facing(lm, sim.outline, cfg.plate_x + 1e-3, cfg.plate_z)]
+    real, calls = lm.advance, []
+
+    def crossing(velocity, dt, **kw):
+        calls.append(dt)
+        if len(calls) <= 5:
+            raise StepTooLong("segments would cross: reduce dt", crossing=faces)
+        return real(velocity, dt, **kw)
+
+    lm.advance = crossing
+    with pytest.warns(RuntimeWarning, match="the plate is cut there"):
+        row = sim.step(2.0)
+    assert calls == [2.0, 1.0, 0.5, 0.25, 0.125, 0.125] and row["dt"] == 0.125
+    assert len(sim.outlines.loops) == 2 and row["pinches"] == 1 and row["plate_pieces"] == 2
+    tri = lm.triangulation
+    iface = tri.segments[tri.segment_source >= sim.outline_segments][0].tolist()
+    calls.clear()
+
+    def interface(velocity, dt, **kw):
+        calls.append(dt)
+        raise StepTooLong("segments would cross: reduce dt", crossing=[faces[0], iface])
+
+    lm.advance = interface
+    with pytest.raises(StepTooLong, match="would cross"), pytest.warns(RuntimeWarning):
+        sim.step(2.0)
+    assert len(calls) == 5 and len(sim.outlines.loops) == 2

@@ -539,3 +539,19 @@ def test_step_retried_when_the_plastic_iterations_stall(tmp_path, monkeypatch):
     monkeypatch.setattr(sp, "vep_step", singular)
     with pytest.raises(RuntimeError, match="singular"):
         sim.step(1.0)
+
+
+def test_csv_log_keeps_rows_on_restart_and_widens_for_new_columns(tmp_path):
+    """A restart keeps the rows up to its time; a row with columns the file lacks (a run
+    restarted from an older version's output) widens the file instead of dropping them."""
+    from skfem_nem.apps.output import CSVLog
+    p = tmp_path / "d.csv"
+    log = CSVLog(p)
+    for t in (1.0, 2.0, 3.0):
+        log.append({"time": t, "a": 10 * t})
+    log = CSVLog(p, keep_until=2.0)
+    log.append({"time": 3.5, "a": 35.0, "b": 7.0})
+    d = read_csv_columns(p)
+    np.testing.assert_array_equal(d["time"], [1.0, 2.0, 3.5])
+    np.testing.assert_array_equal(d["a"], [10.0, 20.0, 35.0])
+    assert np.isnan(d["b"][:2]).all() and d["b"][2] == 7.0

@@ -141,6 +141,8 @@ class CSVLog:
         new = not self.path.exists()
         if self.fields is None:
             self.fields = list(row.keys())
+        elif not new and set(row) - set(self.fields):
+            self._widen([k for k in row if k not in self.fields])
         with open(self.path, "a", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=self.fields, extrasaction="ignore")
             if new:
@@ -149,8 +151,21 @@ class CSVLog:
             fh.flush()
 
 
+    def _widen(self, more: list) -> None:
+        """Add the columns ``more`` (a run restarted from an older version's output
+        reports more): the file rewritten with them, empty in the rows before."""
+        with open(self.path, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        self.fields = self.fields + more
+        with open(self.path, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=self.fields)
+            w.writeheader()
+            w.writerows(rows)
+
+
 def read_csv_columns(path) -> Dict[str, np.ndarray]:
-    """Columns of a CSV log written by :class:`CSVLog`."""
+    """Columns of a CSV log written by :class:`CSVLog` (an empty value is NaN)."""
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
-    return {k: np.array([float(r[k]) for r in rows]) for k in (rows[0] if rows else {})}
+    return {k: np.array([float(r[k]) if r[k] != "" else np.nan for r in rows])
+            for k in (rows[0] if rows else {})}

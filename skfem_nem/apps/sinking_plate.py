@@ -441,10 +441,43 @@ class SinkingPlate:
         force[1] = -c.plate_density * c.gravity * plate
         return Material(viscosity=eta, shear_modulus=mu, yield_stress=Y), force, plate
 
-    def step(self, dt: float, retries: int = 4) -> dict:
-        """One time step of length dt (halved up to ``retries`` times if the
-        mesh cannot follow the move); returns the diagnostics row."""
+    def step(self, dt: float, retries: int = 4, cuts: int = 3) -> dict:
+        """One time step of length dt (halved up to ``retries`` times if the mesh cannot
+        follow the move; where the last try fails because two faces of the plate would
+        cross, the plate is cut there and the step tried again, at most ``cuts``
+        times); returns the diagnostics row."""
         self._check_films()
+        try:
+            return self._tries(dt, retries)
+        except StepTooLong as err:
+            if cuts < 1 or not self._cut_where_faces_cross(err):
+                raise
+        return self.step(dt / 2 ** retries, retries, cuts - 1)
+
+    def _cut_where_faces_cross(self, err: StepTooLong) -> bool:
+        """Where a step failed because two segments of the plate's outline would cross
+        (faces a film thinner than the mesh resolves apart, crossing within a
+        relocation), cut the plate there as at a closing film; whether it was cut."""
+        if err.crossing is None:
+            return False
+        tri = self.lm.triangulation
+        rows = [np.flatnonzero(((tri.segments == p) | (tri.segments == p[::-1])).all(axis=1))
+                for p in np.asarray(err.crossing)]
+        if any(r.size != 1 for r in rows) or \
+                (tri.segment_source[[r[0] for r in rows]] >= self.outline_segments).any():
+            return False
+        why = self.outlines.pinch(self.lm, int(rows[0][0]), int(rows[1][0]),
+                                  self.cfg.outline_spacing * self.cfg.plate_thickness)
+        if why is None:
+            import warnings
+            self._pinches += 1
+            warnings.warn(f"step {self.lm.step + 1} at t = {self.lm.time:.6g}: {err}; the "
+                          f"plate is cut there and the step tried again", RuntimeWarning,
+                          stacklevel=3)
+        return why is None
+
+    def _tries(self, dt: float, retries: int) -> dict:
+        """:meth:`step` without cuts: dt halved up to ``retries`` times."""
         saved = {k: v.copy() for k, v in self.lm.ip_fields.items()}
         for attempt in range(retries + 1):
             try:

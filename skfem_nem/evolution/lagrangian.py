@@ -239,11 +239,10 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         return float(np.degrees(out.min()))
 
     def replace_ip_fields(self, fields: Dict[str, np.ndarray]) -> None:
-        """Replace the integration-point fields by copies of ``fields`` (same names
-        and row counts), e.g. to undo what a failed solve had written into them."""
-        if set(fields) != set(self.ip_fields):
-            raise ValueError(f"ip fields {sorted(fields)} do not match the mesh's "
-                             f"{sorted(self.ip_fields)}")
+        """Replace the integration-point fields by copies of ``fields`` (one row per
+        triangle each; fields not named are dropped), e.g. to undo what a failed solve
+        had written into them, including a field it added. ``ValueError`` naming a field
+        with the wrong number of rows, the fields then unchanged."""
         for k, v in fields.items():
             if np.shape(v)[:1] != (self.triangulation.ntriangles,):
                 raise ValueError(f"ip field {k!r} has {np.shape(v)[:1]} rows, the mesh "
@@ -403,7 +402,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             cand = self._relocation_candidates(inv, removed)
             if not cand:
                 raise StepTooLong(f"triangle {inv[0]} ({T[inv[0]].tolist()}) inverts and none of "
-                                 f"its vertices can be relocated: reduce dt")
+                                  f"its vertices can be relocated: reduce dt")
             self._set_positions(xa)
             for v in cand:
                 self._remove_vertex(int(v))
@@ -435,7 +434,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             tri.recover_segments()
         except ValueError as err:
             raise StepTooLong(f"{err}; the segments of relocated nodes cannot be edges "
-                             f"again: reduce dt") from None
+                              f"again: reduce dt", getattr(err, "nodes", None)) from None
         changed = np.flatnonzero((tri.triangles != T0).any(axis=1))
         if changed.size:
             self._fill_from(self._snapshot(changed, T0), changed)
@@ -447,7 +446,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         missing = self.triangulation.missing_segments()
         if missing.size:
             raise StepTooLong(f"segment {missing[0].tolist()} is no longer an edge "
-                             f"({missing.shape[0]} segment(s)): reduce dt")
+                              f"({missing.shape[0]} segment(s)): reduce dt")
         if inverted(self.nodes, self.triangles):
             raise StepTooLong("a triangle inverts after the repair: reduce dt")
 
@@ -489,7 +488,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             star = tri.star(v)
         except ValueError:
             raise StepTooLong(f"node {v} is on the hull and cannot be relocated: "
-                             f"reduce dt") from None
+                              f"reduce dt") from None
         snap = self._snapshot(star)
         slots, moves = tri.remove_vertex(v, star)
         for k, F in self.ip_fields.items():

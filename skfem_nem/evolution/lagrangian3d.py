@@ -146,7 +146,7 @@ class LagrangianMesh3D(LagrangianStep):
             mesh = delaunay_mesh(x)
         except ValueError as err:
             raise StepTooLong(f"step {self.step + 1}: the moved nodes cannot be "
-                             f"triangulated without losing a node ({err}); reduce dt") from None
+                              f"triangulated without losing a node ({err}); reduce dt") from None
         new = mesh.t.T
         kept = _rows_in(np.sort(new, axis=1), np.sort(self._mesh.t.T, axis=1))
         self._mesh = mesh

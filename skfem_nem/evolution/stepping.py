@@ -20,7 +20,12 @@ class StepTooLong(ValueError):
     """A step the mesh cannot follow at this dt, though a shorter one may pass: a
     triangle that inverts with no vertex to relocate, segments that cannot be edges
     again, a node carried out of the box. The mesh is left as it was before the step;
-    a caller may retry with a shorter step (the sinking plate halves it)."""
+    a caller may retry with a shorter step (the sinking plate halves it). ``crossing``:
+    the node pairs of two segments that would cross, where that is the cause."""
+
+    def __init__(self, message, crossing=None):
+        super().__init__(message)
+        self.crossing = crossing
 
 
 def check_node_fields(node_fields, n) -> Dict[str, np.ndarray]:
@@ -123,7 +128,7 @@ def keep_in_box(x, x0, on_wall, box):
                           | (x > hi + np.maximum(hi - x0, slack))).any(axis=1))
     if far.size:
         raise StepTooLong(f"{far.size} node(s) would leave the box, first node {far[0]} "
-                         f"to {x[far[0]].tolist()}: reduce dt")
+                          f"to {x[far[0]].tolist()}: reduce dt")
     low, high = lo + (1 - WALL_REACH) * (x0 - lo), hi - (1 - WALL_REACH) * (hi - x0)
     stopped = ((x < low) | (x > high)) & ~on_wall
     return np.clip(x, low, high), int(stopped.any(axis=1).sum())

@@ -52,11 +52,12 @@ _FAILED = 3          # no progress (only on invalid input triangulations)
 
 class CrossingSegments(ValueError):
     """Two segments cross: ``first`` and ``second`` are their indices in the given
-    segments (``second`` is -1 if it is not one of them)."""
+    segments (``second`` is -1 if it is not one of them); ``nodes``: their two node
+    pairs, where known."""
 
-    def __init__(self, message, first, second):
+    def __init__(self, message, first, second, nodes=None):
         super().__init__(message)
-        self.first, self.second = first, second
+        self.first, self.second, self.nodes = first, second, nodes
 
 
 def pair_keys(pairs) -> np.ndarray:
@@ -383,7 +384,8 @@ def recover_segments(P, T, N, keys, source):
         i, j = err.first, err.second
         raise CrossingSegments(
             f"segment {pairs[i].tolist()} (of given segment {source[i]}) would cross "
-            f"segment {pairs[j].tolist()} (of given segment {source[j]})", i, j) from None
+            f"segment {pairs[j].tolist()} (of given segment {source[j]})", i, j,
+            (pairs[i].tolist(), pairs[j].tolist()) if j >= 0 else None) from None
     return S, source[src]
 
 

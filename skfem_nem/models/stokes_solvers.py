@@ -131,8 +131,11 @@ class SaddlePointProblem:
                                                       np.linalg.norm(self.g), 1e-300))
 
     def mean_free(self, p: np.ndarray) -> np.ndarray:
-        """``p`` shifted to mean zero if the mean pressure is fixed."""
-        return p - (self.m @ p) / self.area if self.pressure_mean else p
+        """``p`` shifted to mean zero if the mean pressure is fixed (the pressures
+        only: the constraint multipliers, where ``m`` is zero, keep their values)."""
+        if not self.pressure_mean:
+            return p
+        return p - (self.m @ p) / self.area * (self.m != 0)
 
 
 class SaddlePointSolution(NamedTuple):

@@ -6,6 +6,7 @@ Layers as sub-packages, bottom to top; a lower layer never imports a higher one:
 - :mod:`skfem_nem.coordinates`: Sibson and Laplace coordinates (2D area method, n-D recursion);
 - :mod:`skfem_nem.basis`: NEM trial functions inside scikit-fem's assembly, consistent
   integration by gradient smoothing;
+- :mod:`skfem_nem.parallel`: solvers on PETSc over MPI (optional petsc4py);
 - :mod:`skfem_nem.evolution`: the Lagrangian evolving mesh;
 - :mod:`skfem_nem.models`: Stokes flow, visco-elasto-plastic rheology, analytic solutions;
 - :mod:`skfem_nem.apps`: the sinking plate, the command line, output writers.

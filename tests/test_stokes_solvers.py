@@ -174,3 +174,26 @@ def test_sinking_plate_solver_option():
         load_config(overrides={"solver": "gmres"})
     with pytest.raises(ValueError, match="solver must be str"):
         load_config(overrides={"solver": 3})
+
+
+def test_mean_free_shifts_the_pressures_not_the_multipliers(square):
+    """Fixing the mean pressure shifts every pressure by the same constant; the
+    multipliers of extra constraints are no pressures and keep their values."""
+    sp_, idx = square
+
+    class Captured(Exception):
+        pass
+
+    def capture(problem, tol, maxiter, info):
+        raise Captured(problem)
+
+    SOLVERS["capture"] = capture
+    try:
+        with pytest.raises(Captured) as got:
+            solve_stokes(sp_, 1.0, 0.0, solver="capture", constraints=outline_flux(sp_, idx))
+    finally:
+        del SOLVERS["capture"]
+    problem = got.value.args[0]
+    p = np.r_[np.full(sp_.n_pressure, 2.5), 7.0]
+    q = problem.mean_free(p)
+    assert problem.pressure_mean and np.abs(q[:-1]).max() < 1e-13 and q[-1] == 7.0

@@ -164,6 +164,10 @@ class PlateConfig:
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got "
                              f"{self.solver!r}")
+        if self.solver == "petsc":
+            raise ValueError("solver 'petsc' is not supported by the sinking plate yet (every "
+                             "MPI rank would write the outputs; see docs/parallel.md, what is "
+                             "left): use 'schur' or 'fgmres'")
         if self.integration not in ("smoothed", "gauss"):
             raise ValueError(f"integration must be 'smoothed' or 'gauss', got "
                              f"{self.integration!r}")

@@ -68,8 +68,9 @@ pressure is fixed by its mean (zero) through a Lagrange multiplier.
 
 Solvers
 -------
-``solver="schur"`` (default), ``"schur-amg"``, ``"direct"``, ``"minres"``
-and ``"fgmres"``: see :mod:`skfem_nem.models.stokes_solvers`. Iteration
+``solver="schur"`` (default), ``"schur-amg"``, ``"direct"``, ``"minres"``,
+``"fgmres"`` and ``"petsc"`` (MPI, ``docs/parallel.md``): see
+:mod:`skfem_nem.models.stokes_solvers`. Iteration
 counts are reported in :class:`StokesSolution`; a :class:`StokesCache`
 carries the AMG hierarchy and the last solution of ``"fgmres"`` from one
 solve to the next.
@@ -564,9 +565,9 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         (memory linear in the problem size, for large problems);
         ``"direct"``: sparse LU of the whole saddle-point system;
         ``"minres"``: MINRES with an AMG (pyamg) V-cycle on the viscous
-        block and the lumped 1/eta-weighted pressure mass; ``"fgmres"``:
-        flexible GMRES with a block-triangular AMG preconditioner (memory
-        and cost per iteration linear in the unknowns).
+        block and the lumped 1/eta-weighted pressure mass; ``"fgmres"``: flexible GMRES
+        with a block-triangular AMG preconditioner (memory and cost per iteration
+        linear in the unknowns); ``"petsc"``: the same on PETSc over MPI (optional).
     tol, maxiter
         Relative tolerance and iteration limit of the iterative parts.
     system

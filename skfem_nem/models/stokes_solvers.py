@@ -34,7 +34,10 @@ the unknowns (the iterations grow with the contrast like those of
 ``"schur"``, and it is slower than ``"schur"`` up to 100,000 nodes; see
 ``docs/stokes.md``), and a :class:`StokesCache` keeps its AMG hierarchy and last solution between
 solves (Picard iterations, time steps). The iterative solvers fix the mean
-pressure by a rank-one term ``c m m^T`` of the size of 1/eta.
+pressure by a rank-one term ``c m m^T`` of the size of 1/eta. ``"petsc"`` is
+``"fgmres"``'s method on PETSc over MPI (optional petsc4py; the mean pressure as
+PETSc's null space instead of the rank-one term; :mod:`skfem_nem.parallel`, imported
+only when it is chosen).
 """
 from __future__ import annotations
 
@@ -48,7 +51,8 @@ import scipy.sparse.linalg as spla
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "CACHED_SOLVERS",
            "StokesCache", "check_solver", "solve_direct", "solve_schur", "solve_schur_amg",
-           "solve_minres", "solve_fgmres", "fgmres", "rigid_modes"]
+           "solve_minres", "solve_fgmres", "solve_petsc", "strip_order", "fgmres",
+           "rigid_modes"]
 
 # relative tolerance of the inner AMG-CG solves of the viscous block
 # ("schur-amg"): at most this, and two orders of magnitude below the outer tol
@@ -131,8 +135,11 @@ class SaddlePointProblem:
                                                       np.linalg.norm(self.g), 1e-300))
 
     def mean_free(self, p: np.ndarray) -> np.ndarray:
-        """``p`` shifted to mean zero if the mean pressure is fixed."""
-        return p - (self.m @ p) / self.area if self.pressure_mean else p
+        """``p`` shifted to mean zero if the mean pressure is fixed (the pressures
+        only: the constraint multipliers, where ``m`` is zero, keep their values)."""
+        if not self.pressure_mean:
+            return p
+        return p - (self.m @ p) / self.area * (self.m != 0)
 
 
 class SaddlePointSolution(NamedTuple):
@@ -577,9 +584,49 @@ def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional
         r = b - matvec(x)
 
 
+def solve_petsc(problem: SaddlePointProblem, tol: float, maxiter: int,
+                info: dict) -> SaddlePointSolution:
+    """The preconditioned FGMRES of :func:`solve_fgmres` on PETSc over MPI
+    (:func:`skfem_nem.parallel.solve_saddle_petsc`): the same block upper-triangular
+    preconditioner, GAMG with the rigid-body modes on the viscous block, the lumped
+    1/eta-weighted pressure mass for the Schur complement, the constant pressure as
+    the null space when the mean is fixed. The problem is the same on every rank
+    (assembled serially, replicated); each rank owns a strip of the domain
+    (:func:`strip_order`) and every rank gets the whole solution. Options: PETSc's,
+    prefix ``-stokes_``. Records ``info["ranks"]``, ``info["ksp_reason"]`` and
+    ``info["viscous_pc"]`` (the viscous block's preconditioner)."""
+    from ..parallel import solve_saddle_petsc
+    pressure = problem.m != 0                       # not the constraint multipliers
+    res = solve_saddle_petsc(
+        problem.A, problem.B, -problem.S, problem.f, problem.g, -problem.dp, tol, maxiter,
+        modes=rigid_modes(problem.ubasis, problem.free),
+        pressure_null=pressure.astype(float) if problem.pressure_mean else None,
+        order=strip_order(problem))
+    info.update(ranks=res.ranks, ksp_reason=res.reason, viscous_pc=res.viscous_pc)
+    p = problem.mean_free(res.p)
+    return SaddlePointSolution(res.u, p, res.krylov_iterations, problem.residual(res.u, p))
+
+
+def strip_order(problem: SaddlePointProblem) -> np.ndarray:
+    """The unknowns (free velocity dofs, then pressures and multipliers) sorted by the
+    first coordinate of where they live, multipliers last: split into consecutive
+    blocks, each rank owns a strip of the domain with its velocity and pressure
+    unknowns together. Pressure dofs are taken to be the mesh's nodes (P1); otherwise
+    the pressures keep their place after the velocity."""
+    ub = problem.ubasis
+    xu = np.asarray(ub.doflocs)[0, problem.free]
+    nodes = np.asarray(ub.mesh.p)[0]
+    npr = int(np.count_nonzero(problem.m))
+    if npr == nodes.size and np.all(problem.m[:npr] != 0):
+        xp = np.concatenate([nodes, np.full(problem.n_pressure - npr, np.inf)])
+    else:
+        xp = np.full(problem.n_pressure, np.inf)
+    return np.argsort(np.concatenate([xu, xp]), kind="stable")
+
+
 SOLVERS: Dict[str, Callable[..., SaddlePointSolution]] = {
     "schur": solve_schur, "schur-amg": solve_schur_amg, "direct": solve_direct,
-    "minres": solve_minres, "fgmres": solve_fgmres}
+    "minres": solve_minres, "fgmres": solve_fgmres, "petsc": solve_petsc}
 """The solvers of :func:`skfem_nem.models.stokes.solve_stokes` by name, each
 ``(problem, tol, maxiter, info) -> SaddlePointSolution``."""
 

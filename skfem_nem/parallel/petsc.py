@@ -1,0 +1,216 @@
+"""PETSc through petsc4py: finding it, moving scipy matrices and numpy vectors in and out.
+
+Why a module of its own: petsc4py is optional (the default installation is pip-only and
+PyPI has no PETSc binaries), so every use of it goes through :func:`import_petsc`, which
+finds a Debian PETSc that is installed but not on the path and otherwise raises one clear
+error naming the installation route. Everything else in :mod:`skfem_nem.parallel` is
+built on the few conversions here.
+
+The matrices are assembled serially and replicated on every rank for now: each rank
+inserts only its own block of rows (PETSc's default split of the rows, or the split the
+caller gives), so the distributed matrix is the serial one. :func:`check_replicated`
+verifies that the ranks really hold the same matrix (a random node set drawn without a
+seed would differ). PETSc objects are destroyed explicitly (:func:`destroying`): left to
+the garbage collector, a parallel object's destruction is a collective call made at
+different times on different ranks, which can hang or mix messages at exit.
+"""
+from __future__ import annotations
+
+import glob
+import hashlib
+import os
+import sys
+from contextlib import contextmanager
+from typing import Iterator, Optional, Sequence, Tuple
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debian_petsc_dir",
+           "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
+           "default_options", "default_split", "row_range"]
+
+PETSC_INSTALL_HINT = (
+    "petsc4py and mpi4py are needed for the parallel solvers. PyPI has PETSc only as a "
+    "source build; on Debian or Ubuntu install the binaries with "
+    "`apt-get install python3-petsc4py python3-mpi4py`, make a virtual environment that sees "
+    "them (`/usr/bin/python3 -m venv --system-site-packages .venv-mpi`), install this package "
+    "there with numpy below 2 (`pip install -e \".[test]\" \"numpy<2\"`), and set PETSC_DIR to "
+    "Debian's PETSc (/usr/lib/petscdir/petsc3.*/x86_64-linux-gnu-real) if it is not found; "
+    "see docs/parallel.md")
+"""How to install PETSc for this package: the text of :class:`PetscUnavailableError`."""
+
+# Debian's PETSc for real scalars: petsc4py lives in its lib/python3/dist-packages, and
+# Debian's .pth file finds it only through PETSC_DIR or the /usr/lib/petsc link (which
+# only the development package installs)
+DEBIAN_PETSC_GLOB = "/usr/lib/petscdir/petsc*/*-real"
+
+
+class PetscUnavailableError(ImportError):
+    """petsc4py (or mpi4py) cannot be imported; the message says how to install them."""
+
+
+def debian_petsc_dir() -> Optional[str]:
+    """PETSC_DIR if set, else the newest Debian PETSc for real scalars, else None."""
+    env = os.environ.get("PETSC_DIR")
+    if env:
+        return env
+    found = sorted(glob.glob(DEBIAN_PETSC_GLOB))
+    return found[-1] if found else None
+
+
+def import_petsc():
+    """The ``petsc4py.PETSc`` module, initialised with the command line.
+
+    Looks for petsc4py on the path, then in the PETSc directory of
+    :func:`debian_petsc_dir`. The command-line arguments go to PETSc's options database
+    (``-stokes_ksp_monitor`` and the like), as in any PETSc program. Raises
+    :class:`PetscUnavailableError` naming the installation route when petsc4py, mpi4py
+    or PETSc's library cannot be loaded.
+    """
+    if "petsc4py.PETSc" in sys.modules:
+        return sys.modules["petsc4py.PETSc"]
+    try:
+        petsc4py = _find_petsc4py()
+        import mpi4py  # noqa: F401  (PETSc's communicators as mpi4py ones)
+        petsc4py.init(sys.argv)
+        from petsc4py import PETSc
+    except ImportError as err:
+        raise PetscUnavailableError(f"{PETSC_INSTALL_HINT} (import failed: {err})") from None
+    return PETSc
+
+
+def _find_petsc4py():
+    """Import petsc4py from the path or from Debian's PETSc directory."""
+    try:
+        import petsc4py
+        return petsc4py
+    except ImportError:
+        where = debian_petsc_dir()
+        if where is None:
+            raise
+    site = os.path.join(where, "lib", "python3", "dist-packages")
+    if not os.path.isdir(site):
+        raise ImportError(f"no petsc4py under PETSC_DIR={where}")
+    sys.path.append(site)
+    import petsc4py
+    return petsc4py
+
+
+def default_split(n: int, size: int) -> list:
+    """PETSc's default numbers of rows per rank: ``n`` split as equally as possible,
+    the lower ranks taking one more where it does not divide."""
+    return [n // size + (1 if r < n % size else 0) for r in range(size)]
+
+
+def row_range(n: int, comm, owned: Optional[Sequence[int]] = None) -> Tuple[int, int]:
+    """This rank's rows ``[r0, r1)`` of ``n``: from ``owned`` (rows per rank) if given,
+    else PETSc's default split (as equal as possible, lower ranks taking the rest)."""
+    size, rank = comm.getSize(), comm.getRank()
+    owned = default_split(n, size) if owned is None else [int(k) for k in owned]
+    if len(owned) != size or sum(owned) != n or min(owned) < 0:
+        raise ValueError(f"owned must give {size} non-negative row counts adding up to {n}, "
+                         f"got {owned}")
+    r0 = sum(owned[:rank])
+    return r0, r0 + owned[rank]
+
+
+def csr_to_petsc(A: sp.spmatrix, comm=None, owned: Optional[Sequence[int]] = None):
+    """A square scipy sparse matrix (the same on every rank) as a PETSc AIJ matrix
+    (MPIAIJ on several ranks), each rank inserting its own block of rows
+    (:func:`row_range`); the columns are split like the rows."""
+    PETSc = import_petsc()
+    comm = PETSc.COMM_WORLD if comm is None else comm
+    A = sp.csr_matrix(A)
+    n, m = A.shape
+    if n != m:
+        raise ValueError(f"csr_to_petsc needs a square matrix, got shape {A.shape}")
+    r0, r1 = row_range(n, comm, owned)
+    block = A[r0:r1]
+    block.sort_indices()
+    csr = (block.indptr.astype(PETSc.IntType), block.indices.astype(PETSc.IntType),
+           np.asarray(block.data, dtype=PETSc.ScalarType))
+    M = PETSc.Mat().createAIJ(size=((r1 - r0, n), (r1 - r0, n)), csr=csr, comm=comm)
+    M.assemble()
+    return M
+
+
+def vector(values: np.ndarray, comm=None, owned: Optional[Sequence[int]] = None):
+    """A PETSc vector holding this rank's block of ``values`` (the same on every rank)."""
+    PETSc = import_petsc()
+    comm = PETSc.COMM_WORLD if comm is None else comm
+    values = np.asarray(values, dtype=PETSc.ScalarType)
+    r0, r1 = row_range(values.size, comm, owned)
+    v = PETSc.Vec().createMPI((r1 - r0, values.size), comm=comm)
+    v.setArray(values[r0:r1])
+    return v
+
+
+def gather(v) -> np.ndarray:
+    """The whole of the distributed vector ``v`` on every rank."""
+    PETSc = import_petsc()
+    scatter, whole = PETSc.Scatter.toAll(v)
+    try:
+        scatter.scatter(v, whole, addv=PETSc.InsertMode.INSERT,
+                        mode=PETSc.ScatterMode.FORWARD)
+        return whole.getArray().copy()
+    finally:
+        scatter.destroy()
+        whole.destroy()
+
+
+@contextmanager
+def destroying(*objects) -> Iterator[list]:
+    """A list of PETSc objects (more may be appended) destroyed on leaving, in reverse
+    order, on every rank at the same point of the program; then PETSc's deferred
+    garbage (wrappers of sub-objects the Python collector dropped) is cleaned up there
+    too, a collective call."""
+    kept = [o for o in objects if o is not None]
+    try:
+        yield kept
+    finally:
+        for obj in reversed(kept):
+            obj.destroy()
+        PETSc = import_petsc()
+        if hasattr(PETSc, "garbage_cleanup"):  # petsc4py 3.18 and later
+            PETSc.garbage_cleanup()
+
+
+@contextmanager
+def default_options(prefix: str, defaults: dict) -> Iterator[None]:
+    """Put ``defaults`` (option name without ``-`` and ``prefix`` -> value) into PETSc's
+    options database where the user has not set them, and take them out again on
+    leaving: the user's options (command line, ``PETSC_OPTIONS``,
+    ``PETSc.Options().setValue``) win, the PETSc way."""
+    PETSc = import_petsc()
+    opts = PETSc.Options()
+    added = []
+    for key, value in defaults.items():
+        name = prefix + key
+        if not opts.hasName(name):
+            opts.setValue(name, value)
+            added.append(name)
+    try:
+        yield
+    finally:
+        for name in added:
+            opts.delValue(name)
+
+
+def check_replicated(A: sp.spmatrix, comm=None, what: str = "matrix") -> None:
+    """``ValueError`` if the ranks do not hold the same sparse matrix ``A`` (naming
+    the ranks that differ from rank 0): the serial assembly must be replicated."""
+    PETSc = import_petsc()
+    comm = PETSc.COMM_WORLD if comm is None else comm
+    if comm.getSize() == 1:
+        return
+    A = sp.csr_matrix(A)
+    h = hashlib.sha1()
+    for part in (np.asarray(A.shape), A.indptr, A.indices, A.data):
+        h.update(np.ascontiguousarray(part).tobytes())
+    digests = comm.tompi4py().allgather(h.hexdigest())
+    differ = [r for r, d in enumerate(digests) if d != digests[0]]
+    if differ:
+        raise ValueError(f"the {what} differs between rank 0 and rank(s) {differ}: the "
+                         f"serial assembly must give the same system on every rank (seed "
+                         f"random node sets)")

@@ -1,0 +1,164 @@
+"""Saddle-point systems on PETSc: FGMRES with a fieldsplit Schur-complement preconditioner.
+
+Why here and in this form: the Stokes solver ``solve_stokes(..., solver="petsc")`` needs
+PETSc's distributed Krylov methods and algebraic multigrid, but this layer sits below the
+models and knows no Stokes problem. It solves the plain block system ::
+
+    [A  B^T] [u]   [f]
+    [B  C  ] [p] = [g]
+
+given as scipy blocks (the same on every rank), with the preconditioner of the serial
+``"fgmres"`` solver translated into PETSc's terms: the block upper triangle
+``[[A, B^T], [0, S_hat]]^-1`` (``-pc_fieldsplit_schur_fact_type upper``), the viscous
+block ``A`` approximated by two conjugate-gradient steps preconditioned by algebraic
+multigrid (GAMG with the caller's near null space, e.g. the rigid-body modes) and the
+Schur complement by a given diagonal (the lumped 1/eta-weighted pressure mass, negated:
+PETSc's Schur complement is ``C - B A^-1 B^T``). A constant pressure that the walls leave
+free is handed to PETSc as the null space of the whole matrix, in place of the serial
+solvers' rank-one term (which would make a dense block).
+
+The unknowns may be renumbered (``order``) before the rows are split between the ranks,
+so that each rank owns a strip of the domain with its velocity and pressure unknowns
+together. Every default is a PETSc option under the prefix (``-stokes_``), which the
+options database overrides: ``-stokes_fieldsplit_0_pc_type hypre``,
+``-stokes_ksp_monitor``, ``-stokes_pc_type lu -stokes_pc_factor_mat_solver_type mumps``.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple, Optional
+
+import numpy as np
+import scipy.sparse as sp
+
+from .petsc import (check_replicated, csr_to_petsc, default_options, default_split, destroying,
+                    gather, import_petsc, row_range, vector)
+from .solver import converged_or_raise, null_space
+
+__all__ = ["SaddleResult", "solve_saddle_petsc", "saddle_defaults", "split_counts"]
+
+# FGMRES restart length: as the serial "fgmres" (memory of two vectors per iteration)
+FGMRES_RESTART = 150
+# conjugate-gradient steps per application of the viscous-block preconditioner, each
+# preconditioned by one multigrid V-cycle: the serial "fgmres" found two the fastest
+VISCOUS_CG_STEPS = 2
+
+
+class SaddleResult(NamedTuple):
+    """The two blocks of the solution (whole, on every rank) and how they were found."""
+
+    u: np.ndarray
+    p: np.ndarray
+    krylov_iterations: int  # FGMRES iterations
+    reason: int
+    ranks: int
+    viscous_pc: str         # the preconditioner PETSc used on the first block
+
+
+def saddle_defaults(tol: float, maxiter: int) -> dict:
+    """The PETSc options (without prefix) :func:`solve_saddle_petsc` starts from."""
+    return {"ksp_type": "fgmres", "ksp_gmres_restart": FGMRES_RESTART, "ksp_rtol": tol,
+            "ksp_atol": 0.0, "ksp_max_it": int(maxiter),
+            "fieldsplit_0_ksp_type": "cg", "fieldsplit_0_ksp_max_it": VISCOUS_CG_STEPS,
+            "fieldsplit_0_ksp_norm_type": "none", "fieldsplit_0_pc_type": "gamg",
+            "fieldsplit_1_ksp_type": "preonly", "fieldsplit_1_pc_type": "jacobi"}
+
+
+def split_counts(mask: np.ndarray, size: int) -> list:
+    """How many of the rows marked by ``mask`` each of ``size`` ranks owns under
+    PETSc's default split of ``mask.size`` rows."""
+    ends = np.cumsum([0] + default_split(mask.size, size))
+    return [int(np.count_nonzero(mask[a:b])) for a, b in zip(ends[:-1], ends[1:])]
+
+
+def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.ndarray,
+                       g: np.ndarray, schur_diagonal: np.ndarray, tol: float, maxiter: int,
+                       modes: Optional[np.ndarray] = None,
+                       pressure_null: Optional[np.ndarray] = None,
+                       order: Optional[np.ndarray] = None,
+                       prefix: str = "stokes_") -> SaddleResult:
+    """Solve the block system of the module docstring on PETSc's ``COMM_WORLD``.
+
+    ``schur_diagonal`` (len(g),) approximates the Schur complement ``C - B A^-1 B^T``
+    (negative); ``modes`` (len(f), k) are the near null space of ``A``;
+    ``pressure_null`` (len(g),) spans the null space of the whole matrix in the second
+    block, if it has one; ``order`` renumbers the unknowns (new ``i`` is old
+    ``order[i]``) before the rows are split. Stops on the relative residual ``tol`` of
+    the whole system; ``RuntimeError`` naming PETSc's reason if it does not converge.
+    """
+    PETSc = import_petsc()
+    comm = PETSc.COMM_WORLD
+    n1, n2 = len(f), len(g)
+    n = n1 + n2
+    for name, v in (("schur_diagonal", schur_diagonal), ("pressure_null", pressure_null)):
+        if v is not None and np.shape(v) != (n2,):
+            raise ValueError(f"{name} has shape {np.shape(v)}, expected ({n2},) like g")
+    K = sp.bmat([[A, B.T], [B, C]], format="csr")
+    perm = np.arange(n) if order is None else np.asarray(order)
+    if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
+        raise ValueError(f"order must be a permutation of the {n} unknowns")
+    K = K[perm][:, perm]
+    check_replicated(K, comm, "saddle-point matrix")
+    velocity = perm < n1
+    r0, r1 = row_range(n, comm)
+    with destroying(csr_to_petsc(K, comm), vector(np.concatenate([f, g])[perm], comm)) as objs:
+        Kmat, rhs = objs
+        x = rhs.duplicate()
+        objs.append(x)
+        ksp, is0 = _fieldsplit_ksp(comm, Kmat, objs, prefix,
+                                   r0 + np.flatnonzero(velocity[r0:r1]),
+                                   r0 + np.flatnonzero(~velocity[r0:r1]))
+        _attach_spaces(Kmat, ksp.getPC(), is0, objs, perm, velocity, schur_diagonal, modes,
+                       pressure_null, comm.getSize())
+        with default_options(prefix, saddle_defaults(tol, maxiter)):
+            ksp.setFromOptions()
+            ksp.solve(rhs, x)
+        its, reason = ksp.getIterationNumber(), int(ksp.getConvergedReason())
+        converged_or_raise(ksp, "solver='petsc'")
+        pc0 = ksp.getPC().getFieldSplitSubKSP()[0].getPC().getType() \
+            if ksp.getPC().getType() == PETSc.PC.Type.FIELDSPLIT else ""
+        whole = np.empty(n)
+        whole[perm] = gather(x)
+    return SaddleResult(whole[:n1], whole[n1:], its, reason, comm.getSize(), pc0)
+
+
+def _fieldsplit_ksp(comm, Kmat, objs: list, prefix: str, rows0: np.ndarray,
+                    rows1: np.ndarray):
+    """The KSP with the Schur fieldsplit on the owned rows of both blocks, and the index
+    set of the first block (both kept in ``objs`` for destruction)."""
+    PETSc = import_petsc()
+    is0 = PETSc.IS().createGeneral(rows0.astype(PETSc.IntType), comm=comm)
+    is1 = PETSc.IS().createGeneral(rows1.astype(PETSc.IntType), comm=comm)
+    ksp = PETSc.KSP().create(comm=comm)
+    objs += [is0, is1, ksp]
+    ksp.setOptionsPrefix(prefix)
+    ksp.setOperators(Kmat)
+    pc = ksp.getPC()
+    pc.setType(PETSc.PC.Type.FIELDSPLIT)
+    pc.setFieldSplitIS(("0", is0), ("1", is1))
+    pc.setFieldSplitType(PETSc.PC.CompositeType.SCHUR)
+    pc.setFieldSplitSchurFactType(PETSc.PC.SchurFactType.UPPER)
+    return ksp, is0
+
+
+def _attach_spaces(Kmat, pc, is0, objs: list, perm: np.ndarray, velocity: np.ndarray,
+                   schur_diagonal: np.ndarray, modes, pressure_null, size: int) -> None:
+    """The Schur approximation, the near null space of the first block (composed on
+    its index set, where the fieldsplit looks for it) and the null space of ``Kmat``."""
+    PETSc = import_petsc()
+    n1 = int(velocity.sum())
+    pressure_order = perm[~velocity] - n1
+    Sp = csr_to_petsc(sp.diags(np.asarray(schur_diagonal, dtype=float)[pressure_order]),
+                      owned=split_counts(~velocity, size))
+    objs.append(Sp)
+    pc.setFieldSplitSchurPreType(PETSc.PC.SchurPreType.USER, Sp)
+    if modes is not None:
+        ns = null_space(np.asarray(modes)[perm[velocity]], owned=split_counts(velocity, size))
+        objs.append(ns)
+        is0.compose("nearnullspace", ns)
+    if pressure_null is not None:
+        z = np.zeros(perm.size)
+        z[n1:] = pressure_null
+        nsk = null_space(z[perm][:, None])
+        objs.append(nsk)
+        Kmat.setNullSpace(nsk)
+        Kmat.setTransposeNullSpace(nsk)

@@ -1,0 +1,113 @@
+"""solve_stokes(..., solver="petsc") on 1 and 2 ranks against the serial solvers:
+SolCx at a viscosity contrast of 1e6, no-slip walls with an extra constraint row, the
+options database, and the rows owned by each rank."""
+import numpy as np
+import pytest
+
+from skfem_nem import delaunay_mesh
+from skfem_nem.geometry.nodesets import box_nodes, polyline_nodes
+from skfem_nem.models.analytic import SolCx
+from skfem_nem.models.stokes import outline_flux, solve_stokes, stokes_spaces
+
+# agreement asked of the PETSc solution with the serial one (velocity and pressure,
+# relative in the 2-norm); both solved to relative residuals far below it
+AGREEMENT = 1e-8
+# the serial reference: the default Schur-complement solver, converged this tightly
+SERIAL_TOL = 1e-12
+# the PETSc solve's relative residual (PETSc's norm of the whole system)
+PETSC_TOL = 1e-11
+# the true relative residual asked of the PETSc solution (solve_stokes' measure): at a
+# contrast of 1e6 round-off leaves about 1e-10 whatever the tolerance (8e-11 measured
+# for the serial "fgmres" and for "petsc" at tol 1e-12 with a constraint row)
+RESIDUAL = 1e-9
+# the pressure of the direct (LU) solve is itself only this accurate at a 1e6 jump
+# (the serial "schur" and the PETSc solves differ from it by 4e-7 on this mesh, from
+# each other by 2e-10): velocity is compared with AGREEMENT, pressure with this
+DIRECT_PRESSURE_RTOL = 1e-5
+
+
+def rel(a, b):
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+@pytest.fixture(scope="module")
+def square():
+    """SolCx's square (seeded: the same mesh on every rank) with nodes on the interface
+    and a small square outline on the weak side (for a flux constraint)."""
+    sq = [[0.2, 0.3], [0.4, 0.3], [0.4, 0.5], [0.2, 0.5]]
+    line = polyline_nodes(sq, 0.05, closed=True)
+    z = np.linspace(0, 1, 21)
+    mesh = delaunay_mesh(box_nodes(400, lines=[np.c_[0.5 + 0 * z, z], np.r_[line, line[:1]]],
+                                   seed=3))
+    idx = np.array([int(np.argmin(np.hypot(*(mesh.p.T - q).T))) for q in line])
+    return stokes_spaces(mesh, "nem"), idx
+
+
+@pytest.mark.parametrize("contrast", [1.0, 1e6])
+def test_solcx_matches_the_serial_solution(square, comm, agree, contrast):
+    spaces, _ = square
+    ex = SolCx(1.0, contrast)
+    serial = solve_stokes(spaces, ex.viscosity, ex.force, solver="schur", tol=SERIAL_TOL)
+    direct = solve_stokes(spaces, ex.viscosity, ex.force, solver="direct")
+    s = solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL)
+    got = agree((rel(s.u, serial.u), rel(s.p, serial.p), rel(s.u, direct.u),
+                 rel(s.p, direct.p), s.residual, s.info["ranks"], float(s.u @ s.u)))
+    for du, dp, du_lu, dp_lu, res, ranks, uu in got:
+        assert du < AGREEMENT and dp < AGREEMENT, (du, dp)
+        assert du_lu < AGREEMENT and dp_lu < DIRECT_PRESSURE_RTOL, (du_lu, dp_lu)
+        assert res < RESIDUAL and ranks == comm.getSize()
+        assert uu == got[0][-1]  # every rank holds the same solution
+    assert s.info["pressure_mean"] and s.iterations > 1 and s.info["viscous_pc"] == "gamg"
+
+
+def test_no_slip_with_a_constraint_row(square, agree):
+    """No-slip walls and an outline-flux constraint with a right side: a multiplier
+    row in the pressure block, preconditioned by its Jacobi estimate."""
+    spaces, idx = square
+    ex = SolCx(1.0, 1e6)
+    kw = dict(free_slip=None, no_slip="all", constraints=(outline_flux(spaces, idx), [1e-3]))
+    serial = solve_stokes(spaces, ex.viscosity, ex.force, solver="schur", tol=SERIAL_TOL, **kw)
+    s = solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL, **kw)
+    m_serial, m = serial.info["multipliers"], s.info["multipliers"]
+    got = agree((rel(s.u, serial.u), rel(s.p, serial.p), rel(m, m_serial)))
+    assert all(max(g) < AGREEMENT for g in got), got
+
+
+def test_options_database_overrides_the_defaults(square, PETSc, agree):
+    """-stokes_fieldsplit_0_pc_type hypre replaces GAMG; -stokes_ksp_max_it 2 makes
+    the solve fail, naming PETSc's reason."""
+    spaces, _ = square
+    ex = SolCx(1.0, 1e6)
+    serial = solve_stokes(spaces, ex.viscosity, ex.force, solver="schur", tol=SERIAL_TOL)
+    opts = PETSc.Options()
+    opts.setValue("stokes_fieldsplit_0_pc_type", "hypre")
+    try:
+        s = solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL)
+    finally:
+        opts.delValue("stokes_fieldsplit_0_pc_type")
+    got = agree((s.info["viscous_pc"], rel(s.u, serial.u), rel(s.p, serial.p)))
+    assert all(pc == "hypre" and du < AGREEMENT and dp < AGREEMENT for pc, du, dp in got), got
+    opts.setValue("stokes_ksp_max_it", 2)
+    try:
+        with pytest.raises(RuntimeError, match="DIVERGED_MAX_IT after 2 iterations"):
+            solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL)
+    finally:
+        opts.delValue("stokes_ksp_max_it")
+    # the option is gone again: the defaults hold
+    s = solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL)
+    assert s.info["viscous_pc"] == "gamg" and s.iterations > 2
+
+
+def test_open_top_without_a_pressure_null_space(square, agree):
+    """Walls on three sides and an open top: the pressure is determined by the
+    traction-free boundary (no null space handed to PETSc)."""
+    spaces, _ = square
+    mesh = spaces.mesh.with_boundaries({"walls": lambda x: (x[0] < 1e-9) | (x[0] > 1 - 1e-9)
+                                        | (x[1] < 1e-9)})
+    open_top = stokes_spaces(mesh, "nem")
+    ex = SolCx(1.0, 1e3)
+    kw = dict(free_slip=["walls"])
+    serial = solve_stokes(open_top, ex.viscosity, ex.force, solver="schur", tol=SERIAL_TOL, **kw)
+    s = solve_stokes(open_top, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL, **kw)
+    got = agree((s.info["pressure_mean"], rel(s.u, serial.u), rel(s.p, serial.p)))
+    assert all(not mean and du < AGREEMENT and dp < AGREEMENT for mean, du, dp in got), got

@@ -231,3 +231,15 @@ def test_relocation_of_segment_nodes_keeps_the_segments():
         check_constrained(lm)
     assert recovered                                  # segment nodes were relocated
     assert failed < 30
+
+
+def test_segment_rows_find_segments_by_their_nodes():
+    """Each segment's node pair, in either order, gives its row; a pair that is not a
+    segment gives -1, as does any pair on a mesh without segments."""
+    nodes, segs, poly, _ = outlined_square(300, 2)
+    tri = LagrangianMesh(nodes, segments=segs).triangulation
+    S = tri.segments
+    np.testing.assert_array_equal(tri.segment_rows(S), np.arange(S.shape[0]))
+    np.testing.assert_array_equal(tri.segment_rows(S[:, ::-1]), np.arange(S.shape[0]))
+    assert tri.segment_rows([[poly[0], poly[5]]]).tolist() == [-1]
+    assert LagrangianMesh(nodes).triangulation.segment_rows(S[:2]).tolist() == [-1, -1]

@@ -19,6 +19,7 @@ from typing import List, Optional
 
 import numpy as np
 
+from ..geometry.constrained import pair_keys
 from ..geometry.polylines import segments_cross
 
 __all__ = ["PlateOutlines", "polygon_area_centroid", "PINCH_FRACTION"]
@@ -132,9 +133,10 @@ class PlateOutlines:
 
     def _locate(self, pair):
         """(piece, position of the first segment, of the second) or None."""
+        keys = pair_keys(pair)
         for k, o in enumerate(self.loops):
-            ring = np.c_[o, np.roll(o, -1)]
-            pos = [np.flatnonzero(((ring == s) | (ring == s[::-1])).all(axis=1)) for s in pair]
+            ring = pair_keys(np.c_[o, np.roll(o, -1)])
+            pos = [np.flatnonzero(ring == key) for key in keys]
             if pos[0].size and pos[1].size:
                 return k, int(pos[0][0]), int(pos[1][0])
         return None
@@ -142,9 +144,7 @@ class PlateOutlines:
     def _apply(self, lm, k, plan, spacing) -> Optional[str]:
         keep, rest, add, release = plan
         tri = lm.triangulation
-        seg = tri.segments
-        rows = [int(np.flatnonzero(((seg == s) | (seg == s[::-1])).all(axis=1))[0])
-                for s in release]
+        rows = tri.segment_rows(release)
         source = tri.segment_source[rows]
         P = lm.nodes
         drop = [v for piece, (u, v) in ((keep, add[0]), (rest, add[1]))

@@ -465,12 +465,10 @@ class SinkingPlate:
         if err.crossing is None:
             return False
         tri = self.lm.triangulation
-        rows = [np.flatnonzero(((tri.segments == p) | (tri.segments == p[::-1])).all(axis=1))
-                for p in np.asarray(err.crossing)]
-        if any(r.size != 1 for r in rows) or \
-                (tri.segment_source[[r[0] for r in rows]] >= self.outline_segments).any():
+        rows = tri.segment_rows(err.crossing)
+        if (rows < 0).any() or (tri.segment_source[rows] >= self.outline_segments).any():
             return False
-        why = self.outlines.pinch(self.lm, int(rows[0][0]), int(rows[1][0]),
+        why = self.outlines.pinch(self.lm, int(rows[0]), int(rows[1]),
                                   self.cfg.outline_spacing * self.cfg.plate_thickness)
         if why is None:
             import warnings

@@ -22,9 +22,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
-from .constrained import (check_segments, edge_keys, insert_segments, recover_segments,
-                          segment_through, segments_of, sorted_segments, split_key,
-                          triangle_edge_keys)
+from .constrained import (check_segments, edge_keys, insert_segments, pair_keys,
+                          recover_segments, segment_through, segments_of, sorted_segments,
+                          split_key, triangle_edge_keys)
 from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exact_hull, first_fold,
                          grow_cavity, insert_vertex, lawson, locate_many, orientations,
                          segment_key)
@@ -287,6 +287,15 @@ class Triangulation:
         ``segment_source[k]`` is the index of the given segment that edge k is
         (a piece of)."""
         return segments_of(self.segment_keys)
+
+    def segment_rows(self, pairs) -> np.ndarray:
+        """(k,) the rows of :attr:`segments` of the node pairs ``pairs`` (k, 2), either
+        order; -1 for a pair that is not a segment."""
+        keys = pair_keys(pairs)
+        if not self.segment_keys.size:
+            return np.full(keys.size, -1, dtype=np.int64)
+        rows = np.searchsorted(self.segment_keys, keys).clip(0, self.segment_keys.size - 1)
+        return np.where(self.segment_keys[rows] == keys, rows, -1)
 
     def reorder_triangles(self, order) -> None:
         """Renumber the triangles in place: new triangle r is old ``order[r]``."""

@@ -468,11 +468,9 @@ class SinkingPlate:
         rows = tri.segment_rows(err.crossing)
         if (rows < 0).any() or (tri.segment_source[rows] >= self.outline_segments).any():
             return False
-        why = self.outlines.pinch(self.lm, int(rows[0]), int(rows[1]),
-                                  self.cfg.outline_spacing * self.cfg.plate_thickness)
+        why = self._cut(int(rows[0]), int(rows[1]))
         if why is None:
             import warnings
-            self._pinches += 1
             warnings.warn(f"step {self.lm.step + 1} at t = {self.lm.time:.6g}: {err}; the "
                           f"plate is cut there and the step tried again", RuntimeWarning,
                           stacklevel=3)
@@ -631,13 +629,18 @@ class SinkingPlate:
         if closing is None:
             return
         why = ("one would pass through the other, which the mesh cannot follow"
-               if not closing.outline else
-               self.outlines.pinch(self.lm, closing.first, closing.second,
-                                   self.cfg.outline_spacing * self.cfg.plate_thickness))
+               if not closing.outline else self._cut(closing.first, closing.second))
         if why is not None:
             self._closing = closing
             raise RuntimeError(f"{closing.message}: {why}")
-        self._pinches += 1
+
+    def _cut(self, first: int, second: int):
+        """Cut the plate where its outline's segments ``first`` and ``second`` meet
+        (:meth:`PlateOutlines.pinch`), counted; None, or why not."""
+        why = self.outlines.pinch(self.lm, first, second,
+                                  self.cfg.outline_spacing * self.cfg.plate_thickness)
+        self._pinches += why is None
+        return why
 
     # -- outputs ----------------------------------------------------------------
     def write_output(self, spaces=None, r=None, plate=None) -> str:

@@ -10,6 +10,8 @@ skipped.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import sys
 import warnings
 
@@ -97,6 +99,7 @@ def interpolate(args) -> int:
 def sinking_plate(args) -> int:
     from dataclasses import fields as dfields
 
+    from ..parallel.petsc import PetscUnavailableError
     from .sinking_plate import PlateConfig, SinkingPlate, load_config, stored_config
 
     given = {f.name: getattr(args, f.name) for f in dfields(PlateConfig)
@@ -108,8 +111,23 @@ def sinking_plate(args) -> int:
             cfg = load_config(args.config, given)
         sim = (SinkingPlate.restart(args.output, cfg) if args.restart
                else SinkingPlate(cfg, args.output))
-    except (ValueError, OSError) as err:
+    except (ValueError, OSError, PetscUnavailableError) as err:
         _fail(f"sinking-plate: {err}")
+    with _silent(not sim.root):  # over MPI: rank 0 speaks for all
+        return _run_plate(sim, cfg, args)
+
+
+def _silent(on: bool):
+    """A context that discards standard output and error if ``on``."""
+    stack = contextlib.ExitStack()
+    if on:
+        stack.enter_context(contextlib.redirect_stdout(io.StringIO()))
+        stack.enter_context(contextlib.redirect_stderr(io.StringIO()))
+    return stack
+
+
+def _run_plate(sim, cfg, args) -> int:
+    """Run the constructed ``sim``: progress, the one-line stop, the files written."""
     print(f"sinking plate: {sim.lm.nodes.shape[0]} nodes, {sim.lm.triangles.shape[0]} "
           f"triangles, t = {sim.lm.time:g} -> {cfg.end_time:g}; output in {args.output}")
     if not kernels_cached():

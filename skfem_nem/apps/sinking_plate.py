@@ -58,6 +58,7 @@ from ..models.rheology import (Material, PicardNotConverged, from_ip_field, seco
                                to_ip_field, vep_step)
 from ..models.stokes import outline_flux, stokes_spaces
 from ..models.stokes_solvers import SOLVERS
+from ..parallel.petsc import ranks_differing, world
 
 __all__ = ["PlateConfig", "SinkingPlate", "load_config", "run", "stored_config"]
 
@@ -164,10 +165,6 @@ class PlateConfig:
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got "
                              f"{self.solver!r}")
-        if self.solver == "petsc":
-            raise ValueError("solver 'petsc' is not supported by the sinking plate yet (every "
-                             "MPI rank would write the outputs; see docs/parallel.md, what is "
-                             "left): use 'schur' or 'fgmres'")
         if self.integration not in ("smoothed", "gauss"):
             raise ValueError(f"integration must be 'smoothed' or 'gauss', got "
                              f"{self.integration!r}")
@@ -220,7 +217,8 @@ HELP = {
     'picard_tol': 'Picard tolerance of the plastic iterations',
     'solver': 'Stokes solver of the Picard iterations: "schur" (sparse LU of the viscous '
               'block, pressure CG), "fgmres" (AMG-preconditioned flexible GMRES, linear cost '
-              'and memory), "schur-amg", "minres" or "direct"',
+              'and memory), "schur-amg", "minres", "direct", or "petsc" (PETSc over MPI: '
+              'mpiexec -n N skfem-nem sinking-plate --solver petsc; rank 0 writes)',
     'checkpoint_every': 'write a checkpoint every this many steps',
     'segments': 'keep the plate outline and the layer interface (a line of nodes) as edges '
                 'of the mesh: a constrained Delaunay triangulation, constrained '
@@ -363,6 +361,8 @@ class SinkingPlate:
     def __init__(self, cfg: PlateConfig, out, _state=None):
         cfg.validate()
         self.cfg = cfg
+        # over MPI (solver "petsc") every rank computes the whole run, rank 0 writes
+        self.rank, self.ranks = world() if cfg.solver == "petsc" else (0, 1)
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         # a film that closes within any step (_stable_dt), dealt with before the next
@@ -643,7 +643,31 @@ class SinkingPlate:
         return why
 
     # -- outputs ----------------------------------------------------------------
+    @property
+    def solution(self):
+        """The Stokes solution of the last step (None before the first step)."""
+        last = getattr(self, "_last", None)
+        return None if last is None else last[1].solution
+
+    @property
+    def root(self) -> bool:
+        """True on the rank that writes outputs, checkpoints and figures (rank 0)."""
+        return self.rank == 0
+
+    def check_replicated(self) -> None:
+        """``RuntimeError`` if the ranks' meshes differ (nodes, triangles or clock):
+        the replicated evolution must stay the same on every rank."""
+        lm = self.lm
+        differ = ranks_differing((lm.nodes, lm.triangles, np.array([lm.time])))
+        if differ:
+            raise RuntimeError(f"the mesh of rank(s) {differ} differs from rank 0's after "
+                               f"step {lm.step}: the evolution is no longer replicated")
+
     def write_output(self, spaces=None, r=None, plate=None) -> str:
+        """Write the next ``plate_NNNNN.vtu`` and add it to ``plate.pvd`` (rank 0
+        only; other ranks return ``""``); returns its name."""
+        if not self.root:
+            return ""
         c = self.cfg
         lm = self.lm
         name = f"plate_{self.outputs:05d}.vtu"
@@ -674,6 +698,9 @@ class SinkingPlate:
         return name
 
     def checkpoint(self) -> None:
+        """``checkpoint.npz`` and ``checkpoint.json`` (rank 0 only)."""
+        if not self.root:
+            return
         self.lm.save(self.out / "checkpoint.npz")
         meta = {"config": asdict(self.cfg), "next_output": self.next_output,
                 "dt_next": self.dt_next, "outputs": self.outputs,
@@ -700,15 +727,16 @@ class SinkingPlate:
         diagnostics CSV path."""
         c = self.cfg
         lm = self.lm
-        log = CSVLog(self.out / "diagnostics.csv", keep_until=lm.time if lm.step else None)
-        self._pvd = PVDWriter(self.out / "plate.pvd", keep_until=lm.time if lm.step else None)
+        keep = lm.time if lm.step else None
+        log = CSVLog(self.out / "diagnostics.csv", keep_until=keep) if self.root else None
+        self._pvd = PVDWriter(self.out / "plate.pvd", keep_until=keep) if self.root else None
         if lm.step == 0:
             self.write_output()
             # an early snapshot (t = 1, the paper's first panel), then every interval
             self.next_output = min(1.0, c.output_interval)
             self.checkpoint()
         bar = None
-        if progress:
+        if progress and self.root:
             from tqdm import tqdm
             bar = tqdm(total=c.end_time, initial=lm.time, unit="t", desc="sinking plate",
                        bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]"
@@ -722,7 +750,10 @@ class SinkingPlate:
                 if self.next_output - lm.time - dt < 1e-9 * c.max_dt:
                     dt = self.next_output - lm.time
                 row = self.step(dt)
-                log.append(row)
+                if self.ranks > 1:
+                    self.check_replicated()
+                if log is not None:
+                    log.append(row)
                 steps += 1
                 if lm.time >= self.next_output * (1 - 1e-12) or lm.time >= c.end_time * (1 - 1e-12):
                     self.write_output(*self._last)
@@ -743,8 +774,9 @@ class SinkingPlate:
     # -- figures ----------------------------------------------------------------
     def figures(self) -> list:
         """fig6.png, plate_strain.png and diagnostics.png in the output folder
-        (:func:`~skfem_nem.apps.plate_figures.plate_figures`); returns their paths."""
-        return plate_figures(self)
+        (:func:`~skfem_nem.apps.plate_figures.plate_figures`; rank 0 only); returns
+        their paths."""
+        return plate_figures(self) if self.root else []
 
 
 def run(cfg: PlateConfig, out="out/sinking-plate", restart: bool = False,

@@ -28,7 +28,7 @@ import scipy.sparse as sp
 
 __all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debian_petsc_dir",
            "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
-           "default_options", "default_split", "row_range"]
+           "default_options", "default_split", "row_range", "ranks_differing", "world"]
 
 PETSC_INSTALL_HINT = (
     "petsc4py and mpi4py are needed for the parallel solvers. PyPI has PETSc only as a "
@@ -200,17 +200,31 @@ def default_options(prefix: str, defaults: dict) -> Iterator[None]:
 def check_replicated(A: sp.spmatrix, comm=None, what: str = "matrix") -> None:
     """``ValueError`` if the ranks do not hold the same sparse matrix ``A`` (naming
     the ranks that differ from rank 0): the serial assembly must be replicated."""
-    PETSc = import_petsc()
-    comm = PETSc.COMM_WORLD if comm is None else comm
-    if comm.getSize() == 1:
-        return
     A = sp.csr_matrix(A)
-    h = hashlib.sha1()
-    for part in (np.asarray(A.shape), A.indptr, A.indices, A.data):
-        h.update(np.ascontiguousarray(part).tobytes())
-    digests = comm.tompi4py().allgather(h.hexdigest())
-    differ = [r for r, d in enumerate(digests) if d != digests[0]]
+    differ = ranks_differing((np.asarray(A.shape), A.indptr, A.indices, A.data), comm)
     if differ:
         raise ValueError(f"the {what} differs between rank 0 and rank(s) {differ}: the "
                          f"serial assembly must give the same system on every rank (seed "
                          f"random node sets)")
+
+
+def ranks_differing(arrays: Sequence[np.ndarray], comm=None) -> list:
+    """The ranks whose ``arrays`` (shapes, types and bytes) differ from rank 0's, by
+    a hash gathered to every rank (the same list on every rank; empty on one rank)."""
+    PETSc = import_petsc()
+    comm = PETSc.COMM_WORLD if comm is None else comm
+    if comm.getSize() == 1:
+        return []
+    h = hashlib.sha1()
+    for part in arrays:
+        part = np.ascontiguousarray(part)
+        h.update(f"{part.dtype.str}{part.shape}".encode())
+        h.update(part.tobytes())
+    digests = comm.tompi4py().allgather(h.hexdigest())
+    return [r for r, d in enumerate(digests) if d != digests[0]]
+
+
+def world() -> Tuple[int, int]:
+    """This process's rank and the number of ranks in PETSc's ``COMM_WORLD``."""
+    comm = import_petsc().COMM_WORLD
+    return comm.getRank(), comm.getSize()

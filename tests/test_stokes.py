@@ -209,3 +209,39 @@ def test_constraint_with_a_right_side(solver):
         solve_stokes(sp_, 1.0, f, constraints=(C, np.nan))
     with pytest.raises(ValueError, match="pair"):
         solve_stokes(sp_, 1.0, f, constraints=(C, [0.0], 1))
+
+
+@pytest.mark.parametrize("method", ["nem", "nem-projection", "taylor-hood"])
+def test_restricted_spaces_add_up_to_the_whole_system(method):
+    """Distributed assembly's premise: the systems assembled on the triangles of each
+    part of a partition add up to the whole system (viscosity given at the quadrature
+    points of all triangles, as the Picard iterations give it)."""
+    from skfem_nem.models.stokes import assemble_stokes
+    mesh = delaunay_mesh(box_nodes(200, seed=2))
+    spaces = stokes_spaces(mesh, method)
+    ex = SolCx(1.0, 1e3)
+    eta = ex.viscosity(spaces.quadrature_points)
+    whole = assemble_stokes(spaces, eta, ex.force)
+    parts = np.array_split(np.random.default_rng(0).permutation(mesh.nelements), 3)
+    shares = [assemble_stokes(spaces.restricted(p), eta, ex.force) for p in parts]
+    for name in ("A", "B", "S", "Mp", "m", "f", "g"):
+        total = sum(getattr(s, name) for s in shares)
+        ref = getattr(whole, name)
+        diff = total - ref
+        diff = abs(diff).max() if hasattr(diff, "nnz") else np.abs(diff).max()
+        scale = abs(ref).max() if hasattr(ref, "nnz") else np.abs(ref).max()
+        assert diff <= 1e-13 * max(scale, 1.0), (name, diff)
+    sub = spaces.restricted(parts[0])
+    assert np.array_equal(sub.elements, np.sort(parts[0]))
+    assert sub.quadrature_points.shape[1] == parts[0].size
+    assert sub.n_velocity == spaces.n_velocity and sub.n_pressure == spaces.n_pressure
+
+
+def test_restricted_spaces_check_their_elements():
+    spaces = stokes_spaces(delaunay_mesh(box_nodes(60, seed=2)))
+    ne = spaces.mesh.nelements
+    for bad in ([], [0, ne], [-1, 2]):
+        with pytest.raises(ValueError, match=f"non-empty subset of the {ne} triangles"):
+            spaces.restricted(bad)
+    with pytest.raises(ValueError, match="already restricted"):
+        spaces.restricted([0, 1]).restricted([0])

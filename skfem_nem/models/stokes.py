@@ -78,17 +78,25 @@ solve to the next.
 Module layout
 -------------
 This module holds what knows about the discretisation: the spaces, the
-forms, the assembly (with the static condensation of the bubbles) and the
-wall conditions. The solvers are plain linear algebra on the assembled
-blocks and live in :mod:`skfem_nem.models.stokes_solvers`, which never
-imports this module; :func:`solve_stokes` here imposes the walls,
+forms and the assembly (with the static condensation of the bubbles). The
+walls and constraints on the velocity dofs live in
+:mod:`skfem_nem.models.stokes_walls`; the solvers are plain linear algebra
+on the assembled blocks and live in :mod:`skfem_nem.models.stokes_solvers`,
+which never imports this module. :func:`solve_stokes` here imposes the walls,
 prescribed velocities and extra constraints, hands the reduced saddle-point
 problem to the chosen solver and maps its solution back.
+
+Distributed assembly
+--------------------
+With ``solver="petsc"`` on several MPI ranks each rank assembles only its strip
+of triangles (:meth:`StokesSpaces.restricted`, the shares adding up to the
+whole system) and PETSc sums the rows each rank owns; the mesh stays the same
+on every rank (``docs/parallel.md``).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Optional, Sequence, Tuple, Union
+from typing import Callable, NamedTuple, Optional, Sequence, Union
 
 import numpy as np
 import scipy.sparse as sp
@@ -99,6 +107,8 @@ from skfem.refdom import RefTri
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from ..basis import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
+from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, outline_flux,
+                           wall_dofs, walls_fix_pressure)
 from .stokes_solvers import (SOLVERS, SaddlePointProblem, SaddlePointSolution, StokesCache,
                              check_solver)
 
@@ -140,6 +150,8 @@ class StokesSpaces:
     pbasis: Basis
     p0basis: Basis
     bbasis: Optional[Basis] = None
+    #: the triangles these bases integrate over (None: all), see :meth:`restricted`
+    elements: Optional[np.ndarray] = None
 
     @property
     def n_velocity(self) -> int:
@@ -160,6 +172,31 @@ class StokesSpaces:
     def quadrature_points(self) -> np.ndarray:
         """Global coordinates of the quadrature points, (2, ne, nq)."""
         return np.asarray(self.pbasis.global_coordinates())
+
+    def restricted(self, elements: np.ndarray) -> "StokesSpaces":
+        """The same spaces (same dofs, quadrature and integration) integrating over
+        the triangles ``elements`` only: :func:`assemble_stokes` on them gives those
+        triangles' share of every block, and the shares of a partition of the
+        triangles add up to the whole system (distributed assembly). Coefficients
+        given at the quadrature points of all triangles are taken at these."""
+        elements = np.unique(np.asarray(elements, dtype=np.int64))
+        if elements.size == 0 or elements[0] < 0 or elements[-1] >= self.mesh.nelements:
+            raise ValueError(f"elements must be a non-empty subset of the "
+                             f"{self.mesh.nelements} triangles, got {elements.size} index(es)"
+                             f" in [{elements.min(initial=0)}, {elements.max(initial=0)}]")
+        if self.elements is not None:
+            raise ValueError("these spaces are already restricted: restrict the whole ones")
+        quad = self.pbasis.quadrature
+
+        def sub(basis):
+            if basis is None:
+                return None
+            if isinstance(basis, NaturalNeighbourBasis):
+                return basis.with_elements(elements)
+            return Basis(self.mesh, basis.elem, quadrature=quad, elements=elements)
+
+        return StokesSpaces(self.mesh, self.method, sub(self.ubasis), sub(self.pbasis),
+                            sub(self.p0basis), sub(self.bbasis), elements)
 
 
 @dataclass
@@ -286,6 +323,8 @@ def quadrature_values(spaces: StokesSpaces, value: Field, name: str,
     x = spaces.quadrature_points
     ne, nq = x.shape[1:]
     nn = spaces.mesh.p.shape[1]
+    if spaces.elements is not None and not callable(value):
+        value = _at_elements(np.asarray(value, dtype=float), spaces, shape)
     if callable(value):
         v = np.asarray(value(x), dtype=float)
         where = "quadrature point"
@@ -318,108 +357,11 @@ def quadrature_values(spaces: StokesSpaces, value: Field, name: str,
     return np.ascontiguousarray(v)
 
 
-def wall_dofs(spaces: StokesSpaces, free_slip: Union[str, Sequence[str], None] = "all",
-              no_slip: Union[str, Sequence[str], None] = None, tol: float = 1e-9) -> np.ndarray:
-    """Velocity dofs fixed to zero by wall conditions.
-
-    ``free_slip`` / ``no_slip``: ``"all"`` (every boundary facet), a list of
-    boundary names of the mesh (``mesh.boundaries``), or None. Free slip
-    fixes the normal component and needs axis-aligned walls; a tilted
-    boundary facet raises ``ValueError`` naming it.
-    """
-    mesh = spaces.mesh
-    ub = spaces.ubasis
-
-    def facets(spec, what):
-        if spec is None:
-            return np.zeros(0, dtype=np.int64)
-        if isinstance(spec, str) and spec == "all":
-            return mesh.boundary_facets()
-        names = [spec] if isinstance(spec, str) else list(spec)
-        bnd = mesh.boundaries or {}
-        out = []
-        for nm in names:
-            if nm not in bnd:
-                raise ValueError(f"{what}: the mesh has no boundary named {nm!r} "
-                                 f"(it has {sorted(bnd)})")
-            out.append(np.asarray(bnd[nm]))
-        return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
-
-    fixed = []
-    ns = facets(no_slip, "no_slip")
-    if ns.size:
-        fixed.append(ub.get_dofs(ns).all())
-    fs = facets(free_slip, "free_slip")
-    fs = np.setdiff1d(fs, ns)
-    if fs.size:
-        p = mesh.p[:, mesh.facets[:, fs]]  # (2, 2, nf)
-        d = p[:, 1] - p[:, 0]
-        L = np.hypot(*d)
-        vert = np.abs(d[0]) <= tol * L  # wall x = const: fix u^1
-        horiz = np.abs(d[1]) <= tol * L  # wall y = const: fix u^2
-        bad = ~(vert | horiz)
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"free slip needs axis-aligned walls: boundary facet {int(fs[k])} "
-                             f"from {p[:, 0, k].tolist()} to {p[:, 1, k].tolist()} is tilted "
-                             f"({int(bad.sum())} such facet(s))")
-        if vert.any():
-            fixed.append(ub.get_dofs(fs[vert]).all("u^1"))
-        if horiz.any():
-            fixed.append(ub.get_dofs(fs[horiz]).all("u^2"))
-    if not fixed:
-        return np.zeros(0, dtype=np.int64)
-    return np.unique(np.concatenate(fixed))
-
-
-def boundary_flux(spaces: StokesSpaces) -> sp.csr_matrix:
-    """(np, nu) matrix of ``oint q_i (u . n) ds`` over the boundary facets.
-
-    Exact: on convex-hull edges both the natural-neighbour velocity and the
-    P1 pressure are linear between the edge's two nodes (Simpson weights).
-    """
-    mesh, ub, pb = spaces.mesh, spaces.ubasis, spaces.pbasis
-    bf = mesh.boundary_facets()
-    a, b = mesh.facets[:, bf]
-    d = mesh.p[:, b] - mesh.p[:, a]
-    mid = 0.5 * (mesh.p[:, a] + mesh.p[:, b])
-    c = mesh.p[:, mesh.t[:, mesh.f2t[0, bf]]].mean(axis=1)
-    n = np.array([d[1], -d[0]])                       # normal times length
-    n *= np.where(np.einsum("ij,ij->j", n, mid - c) < 0, -1.0, 1.0)  # outward
-    pn = pb.dofs.nodal_dofs[0]
-    un = ub.dofs.nodal_dofs
-    rows, cols, vals = [], [], []
-    for qi, qj in ((a, a), (a, b), (b, a), (b, b)):
-        w = np.where(qi == qj, 1.0 / 3.0, 1.0 / 6.0)   # int phi_i phi_j ds / length
-        for comp in (0, 1):
-            rows.append(pn[qi])
-            cols.append(un[comp, qj])
-            vals.append(w * n[comp])
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                         shape=(pb.N, ub.N))
-
-
-def outline_flux(spaces: StokesSpaces, outline: np.ndarray) -> sp.csr_matrix:
-    """(1, nu) row: the flux of the nodal velocities out of a closed polygon.
-
-    ``outline`` (k,) node indices in order around the polygon (either
-    orientation). The flux is that of the velocity interpolated linearly
-    between the outline nodes, i.e. the rate of change of the polygon's
-    area when its nodes move with their velocities; constraining it to zero
-    keeps a material region bounded by nodes incompressible as a whole.
-    """
-    outline = np.asarray(outline, dtype=np.int64)
-    P = spaces.mesh.p.T[outline]
-    Q = np.roll(P, -1, axis=0)
-    orient = np.sign(0.5 * np.sum(P[:, 0] * Q[:, 1] - Q[:, 0] * P[:, 1]))
-    d = Q - P
-    n = orient * np.c_[d[:, 1], -d[:, 0]]          # outward normal times length
-    nd = spaces.ubasis.dofs.nodal_dofs
-    nxt = np.roll(outline, -1)
-    cols = np.concatenate([nd[0, outline], nd[1, outline], nd[0, nxt], nd[1, nxt]])
-    vals = 0.5 * np.concatenate([n[:, 0], n[:, 1], n[:, 0], n[:, 1]])
-    return sp.csr_matrix((vals, (np.zeros(cols.size, dtype=np.int64), cols)),
-                         shape=(1, spaces.n_velocity))
+def _at_elements(v: np.ndarray, spaces: StokesSpaces, shape: tuple) -> np.ndarray:
+    """A coefficient given at the quadrature points of all triangles, taken at those of
+    restricted ``spaces`` (other forms are returned as they are)."""
+    full = shape + (spaces.mesh.nelements, spaces.pbasis.quadrature[1].size)
+    return v[..., spaces.elements, :] if v.shape == full else v
 
 
 def _stabilisation(spaces: StokesSpaces, inv_eta: np.ndarray) -> sp.csr_matrix:
@@ -430,8 +372,10 @@ def _stabilisation(spaces: StokesSpaces, inv_eta: np.ndarray) -> sp.csr_matrix:
     C = weighted_mass.assemble(pb, p0, c=np.ones_like(inv_eta))
     area = np.asarray(C.sum(axis=1)).ravel()         # |K|
     W0 = np.asarray(weighted_mass.assemble(p0, c=inv_eta).diagonal())  # int_K w
-    Di = sp.diags(1.0 / area)
-    S = Mw - C.T @ Di @ Cw - Cw.T @ Di @ C + C.T @ sp.diags(W0 / area ** 2) @ C
+    # (restricted spaces: the other triangles have no area here, and no entries)
+    inv_area = np.divide(1.0, area, out=np.zeros_like(area), where=area > 0)
+    Di = sp.diags(inv_area)
+    S = Mw - C.T @ Di @ Cw - Cw.T @ Di @ C + C.T @ sp.diags(W0 * inv_area ** 2) @ C
     return ((S + S.T) * 0.5).tocsr()
 
 
@@ -595,8 +539,11 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         Velocity dof vector (ordered as ``spaces.ubasis``), pressure dof
         vector (mean zero if fixed so), iteration count and relative
         residual; ``info["reaction"]`` (nu,) the forces the constrained dofs
-        exert on the fluid (zero elsewhere), ``info["fixed"]`` those dofs, and
-        ``info["bubble"]`` the condensed bubble dofs (``spaces.bbasis``).
+        exert on the fluid (zero elsewhere), ``info["fixed"]`` those dofs,
+        ``info["bubble"]`` the condensed bubble dofs (``spaces.bbasis``), and
+        ``info["assembled_triangles"]`` the triangles this process assembled
+        (all of them; with ``solver="petsc"`` on several MPI ranks its strip, the
+        ranks sharing the assembly; 0 for a given ``system``).
 
     Raises
     ------
@@ -607,15 +554,44 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     check_solver(solver, cache)
     if not (np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive number, got {tol}")
-    sys_ = assemble_stokes(spaces, eta, f, tau0) if system is None else system
-    D, uD = _fixed_velocity(spaces, free_slip, no_slip, prescribed)
+    share, part = None, None
+    if system is None:
+        part, share = _distributed(spaces, solver)
+        sys_ = assemble_stokes(part, eta, f, tau0)
+    else:
+        sys_ = system
+    D, uD = fixed_velocity(spaces, free_slip, no_slip, prescribed)
     if pressure_mean is None:
-        pressure_mean = _walls_fix_pressure(spaces, D)
-    red = _reduce(spaces, sys_, D, uD, pressure_mean, constraints)
-    info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean}
+        pressure_mean = walls_fix_pressure(spaces, D)
+    red = _reduce(spaces, sys_, D, uD, pressure_mean, constraints, share)
+    info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean,
+            "assembled_triangles": (0 if part is None else spaces.mesh.nelements
+                                    if part.elements is None else int(part.elements.size))}
     x = SOLVERS[solver](red.problem, tol, maxiter, info,
                         **({} if cache is None else {"cache": cache}))
     return _stokes_solution(spaces, sys_, red, x, solver, info)
+
+
+class _Share(NamedTuple):
+    """A distributed assembly: this MPI rank's share of the system, whether it is rank
+    0 (which alone adds what is not assembled over triangles: the constraint rows),
+    and the sum of a vector over the ranks."""
+
+    root: bool
+    total: Callable[[np.ndarray], np.ndarray]
+
+
+def _distributed(spaces: StokesSpaces, solver: str):
+    """The spaces to assemble on and the :class:`_Share`: for solver ``"petsc"`` on
+    several MPI ranks, this rank's strip of triangles (distributed assembly); else
+    all of ``spaces`` and None."""
+    if solver != "petsc":
+        return spaces, None
+    from ..parallel.petsc import owned_elements, summed, world
+    mine = owned_elements(spaces.mesh)
+    if mine is None:
+        return spaces, None
+    return spaces.restricted(mine), _Share(world()[0] == 0, summed)
 
 
 @dataclass
@@ -628,93 +604,50 @@ class _Reduced:
     fixed: np.ndarray               # fixed velocity dofs
     u0: np.ndarray                  # (nu,) their values (zero elsewhere)
     n_pressure: int                 # pressure dofs (without the k multipliers)
+    share: Optional[_Share] = None  # distributed assembly: the blocks are a share
 
 
-def _fixed_velocity(spaces: StokesSpaces, free_slip, no_slip,
-                    prescribed: Optional[tuple]) -> Tuple[np.ndarray, np.ndarray]:
-    """Velocity dofs fixed by the walls and ``prescribed``, and their values."""
-    nu = spaces.n_velocity
-    D = wall_dofs(spaces, free_slip, no_slip)
-    uD = np.zeros(nu)
-    if prescribed is not None:
-        pd_, pv = prescribed
-        pd_ = np.asarray(pd_, dtype=np.int64).ravel()
-        pv = np.broadcast_to(np.asarray(pv, dtype=float), pd_.shape)
-        if pd_.size and (pd_.min() < 0 or pd_.max() >= nu):
-            raise ValueError(f"prescribed dof {int(pd_[(pd_ < 0) | (pd_ >= nu)][0])} is not a "
-                             f"velocity dof (0..{nu - 1})")
-        if not np.isfinite(pv).all():
-            raise ValueError(f"prescribed velocity of dof {int(pd_[~np.isfinite(pv)][0])} is "
-                             f"not finite")
-        D = np.union1d(D, pd_)
-        uD[pd_] = pv
-    return D, uD
-
-
-def _walls_fix_pressure(spaces: StokesSpaces, D: np.ndarray) -> bool:
-    """True if every boundary node has a fixed velocity component (no open
-    boundary: the pressure is then determined only up to a constant)."""
-    nd = spaces.ubasis.dofs.nodal_dofs
-    bn = np.unique(spaces.mesh.facets[:, spaces.mesh.boundary_facets()])
-    fixed_ = np.zeros(spaces.n_velocity, dtype=bool)
-    fixed_[D] = True
-    return bool(np.all(fixed_[nd[0, bn]] | fixed_[nd[1, bn]]))
-
-
-def _with_constraints(sys_: StokesSystem, A: sp.csr_matrix, constraints, nu: int):
+def _with_constraints(sys_: StokesSystem, A: sp.csr_matrix, constraints, nu: int,
+                      share: Optional[_Share] = None):
     """``B``, ``g``, ``m``, ``S`` and the pressure preconditioner diagonal, with
-    the rows of the extra constraints ``C u = c`` appended as multipliers."""
+    the rows of the extra constraints ``C u = c`` appended as multipliers (by rank
+    0 alone in a distributed assembly: the others append zero rows)."""
     B = sys_.B.tocsr()
     g = np.zeros(sys_.B.shape[0]) if sys_.g is None else sys_.g
     m, S = sys_.m, sys_.S
     dp = np.asarray(sys_.Mp.sum(axis=1)).ravel()  # lumped 1/eta-weighted mass
     if constraints is None:
         return B, g, m, S, dp
-    C, c = _constraint_rows(constraints, nu)
+    C, c = constraint_rows(constraints, nu)
     k = C.shape[0]
     # Jacobi estimate of C A^-1 C^T for the multipliers' preconditioner
-    dcc = np.asarray(C.multiply(C) @ (1.0 / A.diagonal())).ravel()
+    diag = A.diagonal() if share is None else share.total(A.diagonal())
+    dcc = np.asarray(C.multiply(C) @ (1.0 / diag)).ravel()
+    if share is not None and not share.root:
+        C, c, dcc = sp.csr_matrix(C.shape), 0 * c, 0 * dcc
     return (sp.vstack([B, C]).tocsr(), np.concatenate([g, c]),
             np.concatenate([m, np.zeros(k)]), sp.block_diag([S, sp.csr_matrix((k, k))]).tocsr(),
             np.concatenate([dp, dcc]))
 
 
-def _constraint_rows(constraints, nu: int) -> Tuple[sp.csr_matrix, np.ndarray]:
-    """``(C, c)`` of the extra constraints ``C u = c`` given as a (k, nu) sparse
-    matrix C (then c = 0) or a pair ``(C, c)``; ``ValueError`` naming what is wrong."""
-    if isinstance(constraints, tuple):
-        if len(constraints) != 2:
-            raise ValueError(f"constraints must be a matrix C or a pair (C, c), got a "
-                             f"tuple of {len(constraints)}")
-        C, c = sp.csr_matrix(constraints[0]), np.asarray(constraints[1], dtype=float)
-    else:
-        C = sp.csr_matrix(constraints)
-        c = np.zeros(C.shape[0])
-    if C.shape[1] != nu:
-        raise ValueError(f"constraints have {C.shape[1]} columns, the velocity {nu} dofs")
-    c = c.reshape(-1) if c.ndim else np.full(C.shape[0], float(c))
-    if c.shape != (C.shape[0],) or not np.isfinite(c).all():
-        raise ValueError(f"the constraints' right side must be {C.shape[0]} finite "
-                         f"value(s), got {c.tolist()}")
-    return C, c
-
-
 def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndarray,
-            pressure_mean: bool, constraints) -> _Reduced:
+            pressure_mean: bool, constraints, share: Optional[_Share] = None) -> _Reduced:
     """The saddle-point problem on the free velocity dofs (fixed values moved
     to the right side)."""
     nu = spaces.n_velocity
     free = np.setdiff1d(np.arange(nu), D)
     Afull = sys_.A.tocsr()
-    Bfull, g0, mvec, Sb, dp = _with_constraints(sys_, Afull, constraints, nu)
-    area = float(mvec.sum())
+    Bfull, g0, mvec, Sb, dp = _with_constraints(sys_, Afull, constraints, nu, share)
+    sums = np.array([sys_.Mp.diagonal().sum(), mvec.sum()])
+    mass, area = sums if share is None else share.total(sums)
     # the mean pressure is fixed by a rank-one term c m m^T of the size of 1/eta
-    c = float(sys_.Mp.diagonal().sum()) / area ** 2 if pressure_mean else 0.0
+    c = float(mass) / area ** 2 if pressure_mean else 0.0
     problem = SaddlePointProblem(
         A=Afull[free][:, free].tocsc(), B=Bfull[:, free].tocsr(), S=Sb,
         f=sys_.f[free] - Afull[free][:, D] @ uD[D], g=g0 - Bfull[:, D] @ uD[D], m=mvec,
-        dp=dp, mean_weight=c, pressure_mean=pressure_mean, ubasis=spaces.ubasis, free=free)
-    return _Reduced(problem, Afull, Bfull, D, uD, spaces.n_pressure)
+        dp=dp, mean_weight=c, pressure_mean=pressure_mean, ubasis=spaces.ubasis, free=free,
+        total=None if share is None else share.total)
+    return _Reduced(problem, Afull, Bfull, D, uD, spaces.n_pressure, share)
 
 
 def _stokes_solution(spaces: StokesSpaces, sys_: StokesSystem, red: _Reduced,
@@ -724,7 +657,8 @@ def _stokes_solution(spaces: StokesSpaces, sys_: StokesSystem, red: _Reduced,
     u = red.u0.copy()
     u[red.problem.free] = x.u
     p = x.p
-    r = red.A @ u + red.B.T @ p - sys_.f
+    whole = red.problem.whole
+    r = whole(red.A @ u + red.B.T @ p - sys_.f)
     reaction = np.zeros(spaces.n_velocity)
     reaction[red.fixed] = r[red.fixed]
     info["reaction"] = reaction
@@ -732,7 +666,7 @@ def _stokes_solution(spaces: StokesSpaces, sys_: StokesSystem, red: _Reduced,
     p = p[:red.n_pressure]
     if sys_.bubble is not None:
         Ainv, Abn, Bb, fb = sys_.bubble
-        info["bubble"] = Ainv @ (fb - Abn @ u - Bb.T @ p)
+        info["bubble"] = whole(Ainv @ (fb - Abn @ u - Bb.T @ p))
     return StokesSolution(spaces, u, p, solver, x.iterations, x.residual, info)
 
 

@@ -108,6 +108,13 @@ class SaddlePointProblem:
     pressure_mean: bool     # fix the pressure by its mean (zero)
     ubasis: object          # velocity basis, for the rigid-body modes of AMG
     free: np.ndarray        # free velocity dofs of ubasis
+    # distributed assembly: the blocks and vectors are this MPI rank's share, and this
+    # sums a vector over the ranks (only solver "petsc" takes such a problem); None: whole
+    total: Optional[Callable[[np.ndarray], np.ndarray]] = None
+
+    def whole(self, v: np.ndarray) -> np.ndarray:
+        """``v`` summed over the ranks if the problem is a share, else ``v``."""
+        return v if self.total is None else self.total(v)
 
     @property
     def n_velocity(self) -> int:
@@ -122,24 +129,27 @@ class SaddlePointProblem:
     @property
     def area(self) -> float:
         """Integral of the pressure basis functions: the domain's area."""
-        return float(self.m.sum())
+        return float(self.whole(self.m).sum())
 
     def residual(self, xu: np.ndarray, xp: np.ndarray) -> float:
         """Relative residual of the whole system (the mean-pressure
         multiplier's share removed from the continuity rows)."""
-        r1 = self.A @ xu + self.B.T @ xp - self.f
-        r2 = self.B @ xu - self.S @ xp - self.g
+        r1 = self.whole(self.A @ xu + self.B.T @ xp - self.f)
+        r2 = self.whole(self.B @ xu - self.S @ xp - self.g)
+        m = self.whole(self.m)
         if self.pressure_mean:
-            r2 = r2 - self.m * ((self.m @ r2) / (self.m @ self.m))
-        return float(np.sqrt(r1 @ r1 + r2 @ r2) / max(np.linalg.norm(self.f),
-                                                      np.linalg.norm(self.g), 1e-300))
+            r2 = r2 - m * ((m @ r2) / (m @ m))
+        return float(np.sqrt(r1 @ r1 + r2 @ r2) / max(np.linalg.norm(self.whole(self.f)),
+                                                      np.linalg.norm(self.whole(self.g)),
+                                                      1e-300))
 
     def mean_free(self, p: np.ndarray) -> np.ndarray:
         """``p`` shifted to mean zero if the mean pressure is fixed (the pressures
         only: the constraint multipliers, where ``m`` is zero, keep their values)."""
         if not self.pressure_mean:
             return p
-        return p - (self.m @ p) / self.area * (self.m != 0)
+        m = self.whole(self.m)
+        return p - (m @ p) / m.sum() * (m != 0)
 
 
 class SaddlePointSolution(NamedTuple):
@@ -590,18 +600,19 @@ def solve_petsc(problem: SaddlePointProblem, tol: float, maxiter: int,
     (:func:`skfem_nem.parallel.solve_saddle_petsc`): the same block upper-triangular
     preconditioner, GAMG with the rigid-body modes on the viscous block, the lumped
     1/eta-weighted pressure mass for the Schur complement, the constant pressure as
-    the null space when the mean is fixed. The problem is the same on every rank
-    (assembled serially, replicated); each rank owns a strip of the domain
-    (:func:`strip_order`) and every rank gets the whole solution. Options: PETSc's,
+    the null space when the mean is fixed. The problem is either the same on every
+    rank or (``problem.total`` set) this rank's share of a distributed assembly; each
+    rank owns the rows of a strip of the domain (:func:`strip_order`) and every rank
+    gets the whole solution. Options: PETSc's,
     prefix ``-stokes_``. Records ``info["ranks"]``, ``info["ksp_reason"]`` and
     ``info["viscous_pc"]`` (the viscous block's preconditioner)."""
     from ..parallel import solve_saddle_petsc
-    pressure = problem.m != 0                       # not the constraint multipliers
+    pressure = problem.whole(problem.m) != 0        # not the constraint multipliers
     res = solve_saddle_petsc(
         problem.A, problem.B, -problem.S, problem.f, problem.g, -problem.dp, tol, maxiter,
         modes=rigid_modes(problem.ubasis, problem.free),
         pressure_null=pressure.astype(float) if problem.pressure_mean else None,
-        order=strip_order(problem))
+        order=strip_order(problem), summed=problem.total is not None)
     info.update(ranks=res.ranks, ksp_reason=res.reason, viscous_pc=res.viscous_pc)
     p = problem.mean_free(res.p)
     return SaddlePointSolution(res.u, p, res.krylov_iterations, problem.residual(res.u, p))
@@ -616,8 +627,9 @@ def strip_order(problem: SaddlePointProblem) -> np.ndarray:
     ub = problem.ubasis
     xu = np.asarray(ub.doflocs)[0, problem.free]
     nodes = np.asarray(ub.mesh.p)[0]
-    npr = int(np.count_nonzero(problem.m))
-    if npr == nodes.size and np.all(problem.m[:npr] != 0):
+    m = problem.whole(problem.m)
+    npr = int(np.count_nonzero(m))
+    if npr == nodes.size and np.all(m[:npr] != 0):
         xp = np.concatenate([nodes, np.full(problem.n_pressure - npr, np.inf)])
     else:
         xp = np.full(problem.n_pressure, np.inf)

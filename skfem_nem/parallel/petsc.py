@@ -28,7 +28,8 @@ import scipy.sparse as sp
 
 __all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debian_petsc_dir",
            "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
-           "default_options", "default_split", "row_range", "ranks_differing", "world"]
+           "default_options", "default_split", "row_range", "ranks_differing", "world",
+           "rows_to_petsc", "summed_rows", "summed", "owned_elements"]
 
 PETSC_INSTALL_HINT = (
     "petsc4py and mpi4py are needed for the parallel solvers. PyPI has PETSc only as a "
@@ -126,13 +127,53 @@ def csr_to_petsc(A: sp.spmatrix, comm=None, owned: Optional[Sequence[int]] = Non
     if n != m:
         raise ValueError(f"csr_to_petsc needs a square matrix, got shape {A.shape}")
     r0, r1 = row_range(n, comm, owned)
-    block = A[r0:r1]
+    return rows_to_petsc(A[r0:r1], n, comm)
+
+
+def rows_to_petsc(block: sp.spmatrix, n: int, comm):
+    """This rank's block of rows (``block``, in CSR, all ``n`` columns) of an ``n`` by
+    ``n`` matrix as a PETSc AIJ matrix, preallocated exactly from the block's pattern;
+    the columns are split like the rows."""
+    PETSc = import_petsc()
+    block = sp.csr_matrix(block)
     block.sort_indices()
+    k = block.shape[0]
     csr = (block.indptr.astype(PETSc.IntType), block.indices.astype(PETSc.IntType),
            np.asarray(block.data, dtype=PETSc.ScalarType))
-    M = PETSc.Mat().createAIJ(size=((r1 - r0, n), (r1 - r0, n)), csr=csr, comm=comm)
+    M = PETSc.Mat().createAIJ(size=((k, n), (k, n)), csr=csr, comm=comm)
     M.assemble()
     return M
+
+
+def summed_rows(part: sp.spmatrix, comm, owned: Optional[Sequence[int]] = None):
+    """This rank's rows (:func:`row_range`) of the sum over the ranks of ``part``, each
+    rank's share of a matrix assembled in parts (its own triangles): every rank sends
+    each other rank the rows it owns and adds what it receives, so no rank ever holds
+    more than its share and its own rows."""
+    part = sp.csr_matrix(part)
+    n = part.shape[0]
+    size = comm.getSize()
+    counts = default_split(n, size) if owned is None else list(owned)
+    ends = np.cumsum([0] + counts)
+    blocks = [part[a:b] for a, b in zip(ends[:-1], ends[1:])]
+    got = comm.tompi4py().alltoall(blocks)
+    total = got[0]
+    for b in got[1:]:
+        total = total + b
+    return sp.csr_matrix(total)
+
+
+def summed(values: np.ndarray, comm=None) -> np.ndarray:
+    """The sum over the ranks of ``values`` (the same shape on every rank), on every rank."""
+    PETSc = import_petsc()
+    comm = PETSc.COMM_WORLD if comm is None else comm
+    values = np.ascontiguousarray(values, dtype=float)
+    if comm.getSize() == 1:
+        return values.copy()
+    out = np.empty_like(values)
+    from mpi4py import MPI
+    comm.tompi4py().Allreduce(values, out, op=MPI.SUM)
+    return out
 
 
 def vector(values: np.ndarray, comm=None, owned: Optional[Sequence[int]] = None):
@@ -228,3 +269,18 @@ def world() -> Tuple[int, int]:
     """This process's rank and the number of ranks in PETSc's ``COMM_WORLD``."""
     comm = import_petsc().COMM_WORLD
     return comm.getRank(), comm.getSize()
+
+
+def owned_elements(mesh) -> Optional[np.ndarray]:
+    """This rank's share of the triangles of ``mesh`` for distributed assembly: the
+    triangles sorted by the first coordinate of their centroids and split into
+    consecutive blocks of (nearly) equal size, so each rank assembles a strip of the
+    domain (as the rows are split, :func:`skfem_nem.models.stokes_solvers.strip_order`).
+    None on a single rank (every triangle)."""
+    rank, size = world()
+    if size == 1:
+        return None
+    x = np.asarray(mesh.p)[0, np.asarray(mesh.t)].mean(axis=0)
+    order = np.argsort(x, kind="stable")
+    ends = np.cumsum([0] + default_split(order.size, size))
+    return np.sort(order[ends[rank]:ends[rank + 1]])

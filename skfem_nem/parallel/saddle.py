@@ -31,7 +31,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .petsc import (check_replicated, csr_to_petsc, default_options, default_split, destroying,
-                    gather, import_petsc, row_range, vector)
+                    gather, import_petsc, row_range, rows_to_petsc, summed_rows, vector)
+from .petsc import summed as summed_vector
 from .solver import converged_or_raise, null_space
 
 __all__ = ["SaddleResult", "solve_saddle_petsc", "saddle_defaults", "split_counts"]
@@ -75,14 +76,18 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
                        modes: Optional[np.ndarray] = None,
                        pressure_null: Optional[np.ndarray] = None,
                        order: Optional[np.ndarray] = None,
-                       prefix: str = "stokes_") -> SaddleResult:
+                       prefix: str = "stokes_", summed: bool = False) -> SaddleResult:
     """Solve the block system of the module docstring on PETSc's ``COMM_WORLD``.
 
     ``schur_diagonal`` (len(g),) approximates the Schur complement ``C - B A^-1 B^T``
     (negative); ``modes`` (len(f), k) are the near null space of ``A``;
     ``pressure_null`` (len(g),) spans the null space of the whole matrix in the second
     block, if it has one; ``order`` renumbers the unknowns (new ``i`` is old
-    ``order[i]``) before the rows are split. Stops on the relative residual ``tol`` of
+    ``order[i]``) before the rows are split. With ``summed``, the blocks and the vectors
+    ``f``, ``g`` and ``schur_diagonal`` are this rank's share (its triangles' part of a
+    distributed assembly), and the system is their sum over the ranks: each rank's
+    rows are gathered from the others' shares (:func:`summed_rows`); otherwise they are
+    the whole system, the same on every rank. Stops on the relative residual ``tol`` of
     the whole system; ``RuntimeError`` naming PETSc's reason if it does not converge.
     """
     PETSc = import_petsc()
@@ -97,10 +102,15 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
         raise ValueError(f"order must be a permutation of the {n} unknowns")
     K = K[perm][:, perm]
-    check_replicated(K, comm, "saddle-point matrix")
+    if summed:
+        f, g, schur_diagonal = (summed_vector(v, comm) for v in (f, g, schur_diagonal))
+        Kmat = rows_to_petsc(summed_rows(K, comm), n, comm)
+    else:
+        check_replicated(K, comm, "saddle-point matrix")
+        Kmat = csr_to_petsc(K, comm)
     velocity = perm < n1
     r0, r1 = row_range(n, comm)
-    with destroying(csr_to_petsc(K, comm), vector(np.concatenate([f, g])[perm], comm)) as objs:
+    with destroying(Kmat, vector(np.concatenate([f, g])[perm], comm)) as objs:
         Kmat, rhs = objs
         x = rhs.duplicate()
         objs.append(x)

@@ -111,3 +111,30 @@ def test_open_top_without_a_pressure_null_space(square, agree):
     s = solve_stokes(open_top, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL, **kw)
     got = agree((s.info["pressure_mean"], rel(s.u, serial.u), rel(s.p, serial.p)))
     assert all(not mean and du < AGREEMENT and dp < AGREEMENT for mean, du, dp in got), got
+
+
+def test_each_rank_assembles_its_strip_of_triangles(square, comm, agree):
+    """Distributed assembly: the ranks' triangles partition the mesh in strips of nearly
+    equal size, and the solution equals that of the whole system given on every rank."""
+    from skfem_nem.models.stokes import assemble_stokes
+    from skfem_nem.parallel.petsc import owned_elements
+    spaces, _ = square
+    ex = SolCx(1.0, 1e6)
+    mine = owned_elements(spaces.mesh)
+    mine = np.arange(spaces.mesh.nelements) if mine is None else mine
+    s = solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL)
+    whole = assemble_stokes(spaces, ex.viscosity, ex.force)
+    given = solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL,
+                         system=whole)
+    xc = spaces.mesh.p[0, spaces.mesh.t[:, mine]].mean(axis=0)
+    got = agree((mine.tolist(), float(xc.min()), float(xc.max()),
+                 s.info["assembled_triangles"], given.info["assembled_triangles"],
+                 rel(s.u, given.u), rel(s.p, given.p)))
+    owned = [g[0] for g in got]
+    assert sorted(sum(owned, [])) == list(range(spaces.mesh.nelements))  # a partition
+    assert max(map(len, owned)) - min(map(len, owned)) <= 1
+    for (a, _, hi, n, n_given, du, dp), (_, lo, _, _, _, _, _) in zip(got, got[1:]):
+        assert hi <= lo  # strips in order along x
+    for a, _, _, n, n_given, du, dp in got:
+        assert n == len(a) and n_given == 0
+        assert du < AGREEMENT and dp < AGREEMENT, (du, dp)

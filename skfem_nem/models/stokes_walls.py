@@ -1,0 +1,179 @@
+"""Walls, prescribed velocities and extra linear constraints of the Stokes problem.
+
+Kept apart from :mod:`skfem_nem.models.stokes` (spaces, forms, assembly, the solve)
+because these are conditions on the velocity dofs, read from the mesh's boundary and
+from the caller's outlines, and need nothing of the assembly: which dofs the walls fix
+(:func:`wall_dofs`), the exact boundary term of the integration by parts of the
+divergence (:func:`boundary_flux`), and the net flux through a material outline
+(:func:`outline_flux`), a constraint row that keeps a region bounded by nodes
+incompressible as a whole.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import scipy.sparse as sp
+
+if TYPE_CHECKING:  # (only for annotations: stokes imports this module)
+    from .stokes import StokesSpaces
+
+__all__ = ["wall_dofs", "boundary_flux", "outline_flux", "fixed_velocity",
+           "walls_fix_pressure", "constraint_rows"]
+
+
+def wall_dofs(spaces: StokesSpaces, free_slip: Union[str, Sequence[str], None] = "all",
+              no_slip: Union[str, Sequence[str], None] = None, tol: float = 1e-9) -> np.ndarray:
+    """Velocity dofs fixed to zero by wall conditions.
+
+    ``free_slip`` / ``no_slip``: ``"all"`` (every boundary facet), a list of
+    boundary names of the mesh (``mesh.boundaries``), or None. Free slip
+    fixes the normal component and needs axis-aligned walls; a tilted
+    boundary facet raises ``ValueError`` naming it.
+    """
+    mesh = spaces.mesh
+    ub = spaces.ubasis
+
+    def facets(spec, what):
+        if spec is None:
+            return np.zeros(0, dtype=np.int64)
+        if isinstance(spec, str) and spec == "all":
+            return mesh.boundary_facets()
+        names = [spec] if isinstance(spec, str) else list(spec)
+        bnd = mesh.boundaries or {}
+        out = []
+        for nm in names:
+            if nm not in bnd:
+                raise ValueError(f"{what}: the mesh has no boundary named {nm!r} "
+                                 f"(it has {sorted(bnd)})")
+            out.append(np.asarray(bnd[nm]))
+        return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+
+    fixed = []
+    ns = facets(no_slip, "no_slip")
+    if ns.size:
+        fixed.append(ub.get_dofs(ns).all())
+    fs = facets(free_slip, "free_slip")
+    fs = np.setdiff1d(fs, ns)
+    if fs.size:
+        p = mesh.p[:, mesh.facets[:, fs]]  # (2, 2, nf)
+        d = p[:, 1] - p[:, 0]
+        L = np.hypot(*d)
+        vert = np.abs(d[0]) <= tol * L  # wall x = const: fix u^1
+        horiz = np.abs(d[1]) <= tol * L  # wall y = const: fix u^2
+        bad = ~(vert | horiz)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"free slip needs axis-aligned walls: boundary facet {int(fs[k])} "
+                             f"from {p[:, 0, k].tolist()} to {p[:, 1, k].tolist()} is tilted "
+                             f"({int(bad.sum())} such facet(s))")
+        if vert.any():
+            fixed.append(ub.get_dofs(fs[vert]).all("u^1"))
+        if horiz.any():
+            fixed.append(ub.get_dofs(fs[horiz]).all("u^2"))
+    if not fixed:
+        return np.zeros(0, dtype=np.int64)
+    return np.unique(np.concatenate(fixed))
+
+
+def boundary_flux(spaces: StokesSpaces) -> sp.csr_matrix:
+    """(np, nu) matrix of ``oint q_i (u . n) ds`` over the boundary facets.
+
+    Exact: on convex-hull edges both the natural-neighbour velocity and the
+    P1 pressure are linear between the edge's two nodes (Simpson weights).
+    """
+    mesh, ub, pb = spaces.mesh, spaces.ubasis, spaces.pbasis
+    bf = mesh.boundary_facets()
+    if spaces.elements is not None:  # restricted spaces: their triangles' facets
+        bf = bf[np.isin(mesh.f2t[0, bf], spaces.elements)]
+    a, b = mesh.facets[:, bf]
+    d = mesh.p[:, b] - mesh.p[:, a]
+    mid = 0.5 * (mesh.p[:, a] + mesh.p[:, b])
+    c = mesh.p[:, mesh.t[:, mesh.f2t[0, bf]]].mean(axis=1)
+    n = np.array([d[1], -d[0]])                       # normal times length
+    n *= np.where(np.einsum("ij,ij->j", n, mid - c) < 0, -1.0, 1.0)  # outward
+    pn = pb.dofs.nodal_dofs[0]
+    un = ub.dofs.nodal_dofs
+    rows, cols, vals = [], [], []
+    for qi, qj in ((a, a), (a, b), (b, a), (b, b)):
+        w = np.where(qi == qj, 1.0 / 3.0, 1.0 / 6.0)   # int phi_i phi_j ds / length
+        for comp in (0, 1):
+            rows.append(pn[qi])
+            cols.append(un[comp, qj])
+            vals.append(w * n[comp])
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(pb.N, ub.N))
+
+
+def outline_flux(spaces: StokesSpaces, outline: np.ndarray) -> sp.csr_matrix:
+    """(1, nu) row: the flux of the nodal velocities out of a closed polygon.
+
+    ``outline`` (k,) node indices in order around the polygon (either
+    orientation). The flux is that of the velocity interpolated linearly
+    between the outline nodes, i.e. the rate of change of the polygon's
+    area when its nodes move with their velocities; constraining it to zero
+    keeps a material region bounded by nodes incompressible as a whole.
+    """
+    outline = np.asarray(outline, dtype=np.int64)
+    P = spaces.mesh.p.T[outline]
+    Q = np.roll(P, -1, axis=0)
+    orient = np.sign(0.5 * np.sum(P[:, 0] * Q[:, 1] - Q[:, 0] * P[:, 1]))
+    d = Q - P
+    n = orient * np.c_[d[:, 1], -d[:, 0]]          # outward normal times length
+    nd = spaces.ubasis.dofs.nodal_dofs
+    nxt = np.roll(outline, -1)
+    cols = np.concatenate([nd[0, outline], nd[1, outline], nd[0, nxt], nd[1, nxt]])
+    vals = 0.5 * np.concatenate([n[:, 0], n[:, 1], n[:, 0], n[:, 1]])
+    return sp.csr_matrix((vals, (np.zeros(cols.size, dtype=np.int64), cols)),
+                         shape=(1, spaces.n_velocity))
+
+
+def fixed_velocity(spaces: StokesSpaces, free_slip, no_slip,
+                    prescribed: Optional[tuple]) -> Tuple[np.ndarray, np.ndarray]:
+    """Velocity dofs fixed by the walls and ``prescribed``, and their values."""
+    nu = spaces.n_velocity
+    D = wall_dofs(spaces, free_slip, no_slip)
+    uD = np.zeros(nu)
+    if prescribed is not None:
+        pd_, pv = prescribed
+        pd_ = np.asarray(pd_, dtype=np.int64).ravel()
+        pv = np.broadcast_to(np.asarray(pv, dtype=float), pd_.shape)
+        if pd_.size and (pd_.min() < 0 or pd_.max() >= nu):
+            raise ValueError(f"prescribed dof {int(pd_[(pd_ < 0) | (pd_ >= nu)][0])} is not a "
+                             f"velocity dof (0..{nu - 1})")
+        if not np.isfinite(pv).all():
+            raise ValueError(f"prescribed velocity of dof {int(pd_[~np.isfinite(pv)][0])} is "
+                             f"not finite")
+        D = np.union1d(D, pd_)
+        uD[pd_] = pv
+    return D, uD
+
+
+def walls_fix_pressure(spaces: StokesSpaces, D: np.ndarray) -> bool:
+    """True if every boundary node has a fixed velocity component (no open
+    boundary: the pressure is then determined only up to a constant)."""
+    nd = spaces.ubasis.dofs.nodal_dofs
+    bn = np.unique(spaces.mesh.facets[:, spaces.mesh.boundary_facets()])
+    fixed_ = np.zeros(spaces.n_velocity, dtype=bool)
+    fixed_[D] = True
+    return bool(np.all(fixed_[nd[0, bn]] | fixed_[nd[1, bn]]))
+
+
+def constraint_rows(constraints, nu: int) -> Tuple[sp.csr_matrix, np.ndarray]:
+    """``(C, c)`` of the extra constraints ``C u = c`` given as a (k, nu) sparse
+    matrix C (then c = 0) or a pair ``(C, c)``; ``ValueError`` naming what is wrong."""
+    if isinstance(constraints, tuple):
+        if len(constraints) != 2:
+            raise ValueError(f"constraints must be a matrix C or a pair (C, c), got a "
+                             f"tuple of {len(constraints)}")
+        C, c = sp.csr_matrix(constraints[0]), np.asarray(constraints[1], dtype=float)
+    else:
+        C = sp.csr_matrix(constraints)
+        c = np.zeros(C.shape[0])
+    if C.shape[1] != nu:
+        raise ValueError(f"constraints have {C.shape[1]} columns, the velocity {nu} dofs")
+    c = c.reshape(-1) if c.ndim else np.full(C.shape[0], float(c))
+    if c.shape != (C.shape[0],) or not np.isfinite(c).all():
+        raise ValueError(f"the constraints' right side must be {C.shape[0]} finite "
+                         f"value(s), got {c.tolist()}")
+    return C, c

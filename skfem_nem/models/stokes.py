@@ -501,17 +501,10 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     free_slip, no_slip
         Walls (see :func:`wall_dofs`); default free slip everywhere.
     solver
-        ``"schur"`` (default): sparse Cholesky-ordered LU of the viscous
-        block and preconditioned conjugate gradients on the pressure Schur
-        complement (preconditioner: the 1/eta-weighted, lumped pressure
-        mass); ``"schur-amg"``: the same outer iteration with the viscous
-        block solved by AMG-preconditioned CG instead of a factorisation
-        (memory linear in the problem size, for large problems);
-        ``"direct"``: sparse LU of the whole saddle-point system;
-        ``"minres"``: MINRES with an AMG (pyamg) V-cycle on the viscous
-        block and the lumped 1/eta-weighted pressure mass; ``"fgmres"``: flexible GMRES
-        with a block-triangular AMG preconditioner (memory and cost per iteration
-        linear in the unknowns); ``"petsc"``: the same on PETSc over MPI (optional).
+        ``"schur"`` (default, LU of the viscous block and CG on the pressure
+        Schur complement), ``"schur-amg"``, ``"direct"``, ``"minres"``,
+        ``"fgmres"`` (memory linear in the unknowns) or ``"petsc"`` (MPI,
+        distributed assembly): see :mod:`skfem_nem.models.stokes_solvers`.
     tol, maxiter
         Relative tolerance and iteration limit of the iterative parts.
     system
@@ -554,19 +547,13 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     check_solver(solver, cache)
     if not (np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive number, got {tol}")
-    share, part = None, None
-    if system is None:
-        part, share = _distributed(spaces, solver)
-        sys_ = assemble_stokes(part, eta, f, tau0)
-    else:
-        sys_ = system
+    sys_, share, assembled = _system(spaces, solver, system, eta, f, tau0)
     D, uD = fixed_velocity(spaces, free_slip, no_slip, prescribed)
     if pressure_mean is None:
         pressure_mean = walls_fix_pressure(spaces, D)
     red = _reduce(spaces, sys_, D, uD, pressure_mean, constraints, share)
     info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean,
-            "assembled_triangles": (0 if part is None else spaces.mesh.nelements
-                                    if part.elements is None else int(part.elements.size))}
+            "assembled_triangles": assembled}
     x = SOLVERS[solver](red.problem, tol, maxiter, info,
                         **({} if cache is None else {"cache": cache}))
     return _stokes_solution(spaces, sys_, red, x, solver, info)
@@ -579,6 +566,16 @@ class _Share(NamedTuple):
 
     root: bool
     total: Callable[[np.ndarray], np.ndarray]
+
+
+def _system(spaces: StokesSpaces, solver: str, system: Optional[StokesSystem], eta, f, tau0):
+    """The system to solve (``system``, or assembled: whole, or this rank's share), the
+    :class:`_Share` of a distributed assembly (or None) and the triangles assembled."""
+    if system is not None:
+        return system, None, 0
+    part, share = _distributed(spaces, solver)
+    n = spaces.mesh.nelements if part.elements is None else int(part.elements.size)
+    return assemble_stokes(part, eta, f, tau0), share, n
 
 
 def _distributed(spaces: StokesSpaces, solver: str):

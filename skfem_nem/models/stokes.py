@@ -150,7 +150,7 @@ class StokesSpaces:
     pbasis: Basis
     p0basis: Basis
     bbasis: Optional[Basis] = None
-    #: the triangles these bases integrate over (None: all), see :meth:`restricted`
+    # the triangles these bases integrate over (None: all), see restricted()
     elements: Optional[np.ndarray] = None
 
     @property

@@ -6,11 +6,16 @@ finds a Debian PETSc that is installed but not on the path and otherwise raises 
 error naming the installation route. Everything else in :mod:`skfem_nem.parallel` is
 built on the few conversions here.
 
-The matrices are assembled serially and replicated on every rank for now: each rank
-inserts only its own block of rows (PETSc's default split of the rows, or the split the
-caller gives), so the distributed matrix is the serial one. :func:`check_replicated`
-verifies that the ranks really hold the same matrix (a random node set drawn without a
-seed would differ). PETSc objects are destroyed explicitly (:func:`destroying`): left to
+A matrix reaches PETSc in one of two ways. Replicated: every rank holds the whole
+matrix and inserts only its own block of rows (PETSc's default split of the rows, or the
+split the caller gives); :func:`check_replicated` verifies that the ranks really hold the
+same matrix (a random node set drawn without a seed would differ). Distributed: every
+rank holds only its share (the part its own triangles assembled, :func:`owned_elements`)
+and :func:`summed_rows` sends each rank the rows it owns from every other share; the
+owned rows then come in as one CSR block, which preallocates the MPIAIJ matrix exactly.
+The mesh itself is the same on every rank (:func:`ranks_differing` checks it).
+
+PETSc objects are destroyed explicitly (:func:`destroying`): left to
 the garbage collector, a parallel object's destruction is a collective call made at
 different times on different ranks, which can hang or mix messages at exit.
 """

@@ -9,7 +9,8 @@ from helpers import square_nodes
 from test_evolution_segments import (assert_same_state, check_chain, check_constrained,
                                      outlined_square, saved_state)
 from skfem_nem import LagrangianMesh
-from skfem_nem.apps.plate_outlines import PINCH_FRACTION, PlateOutlines, polygon_area_centroid
+from skfem_nem.apps.plate_outlines import (PINCH_FRACTION, WELD_FRACTION, PlateOutlines,
+                                           polygon_area_centroid)
 from skfem_nem.apps.plate_time_step import ClosingFilm
 from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate
 from skfem_nem.geometry.nodesets import polyline_nodes
@@ -147,15 +148,15 @@ def test_a_plate_is_cut_in_two_at_its_neck(neck):
     np.testing.assert_allclose(lm.ip_integral("one"), area, rtol=1e-13)
 
 
-def test_no_cut_where_the_plate_folds_onto_itself_or_two_pieces_meet(tmp_path):
-    """Faces meeting from outside (the arms of a U) or segments of two pieces: the reason
-    comes back, nothing changes."""
+def test_no_cut_where_the_plate_folds_around_much_fluid_or_two_pieces_meet(tmp_path):
+    """Faces meeting from outside (the arms of a U) half way up, around fluid of 0.85% of
+    the plate's area, or segments of two pieces: the reason comes back, nothing changes."""
     lm, loop = dumbbell(0.0, gap=0.02)
-    outlines = PlateOutlines([loop], [1.0])
+    outlines = PlateOutlines([loop], [abs(polygon_area_centroid(lm.nodes[loop])[0])])
     before = saved_state(lm, tmp_path / "before.npz")
-    rows = pair_rows(lm, [loop[[i, (i + 1) % len(loop)]] for i in _arms(lm, loop)])
+    rows = pair_rows(lm, [loop[[i, (i + 1) % len(loop)]] for i in _arms(lm, loop, 0.55)])
     why = outlines.pinch(lm, *rows, SPACING)
-    assert "folds onto itself" in why
+    assert "folds onto itself" in why and "more than WELD_FRACTION" in why
     assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
     assert len(outlines.loops) == 1
     lm, loop = dumbbell(0.02)
@@ -168,8 +169,9 @@ def test_no_cut_where_the_plate_folds_onto_itself_or_two_pieces_meet(tmp_path):
     assert_same_state(saved_state(lm, tmp_path / "after2.npz"), before)
 
 
-def _arms(lm, loop):
-    """Positions of the two segments facing each other across the U's gap, half way up."""
+def _arms(lm, loop, y):
+    """Positions of the two segments facing each other across the U's gap, nearest
+    height ``y``."""
     P = lm.nodes[loop]
     Q = np.roll(P, -1, axis=0)
     mid = 0.5 * (P + Q)
@@ -177,8 +179,36 @@ def _arms(lm, loop):
     out = []
     for x in (0.49, 0.51):
         cand = np.flatnonzero(vertical & (np.abs(mid[:, 0] - x) < 1e-9))
-        out.append(cand[np.argmin(np.abs(mid[cand, 1] - 0.55))])
+        out.append(cand[np.argmin(np.abs(mid[cand, 1] - y))])
     return out
+
+
+def test_a_small_fold_is_closed_and_its_fluid_joins_the_plate():
+    """The arms of a U meeting from outside just above the bottom of its slot: the plate
+    keeps the outer loop (one piece, the same reference area), the pocket's segments are
+    released (its nodes on no segment, inside the plate), every segment an edge, the mesh
+    constrained Delaunay, the ip integrals kept."""
+    lm, loop = dumbbell(0.0, gap=0.02)
+    P = lm.nodes
+    A0 = abs(polygon_area_centroid(P[loop])[0])
+    outlines = PlateOutlines([loop], [A0])
+    before = lm.ip_integral("one")
+    rows = pair_rows(lm, [loop[[i, (i + 1) % len(loop)]] for i in _arms(lm, loop, 0.4875)])
+    # the slot's nodes below the two that meet (at y = 0.475 or 0.5)
+    meet = [loop[i + (P[loop[i], 1] > P[loop[(i + 1) % len(loop)], 1])]
+            for i in _arms(lm, loop, 0.4875)]
+    pocket = [n for n in loop if abs(P[n, 0] - 0.5) < 0.011 and P[n, 1] < P[meet[0], 1] - 1e-9]
+    assert outlines.pinch(lm, *rows, SPACING) is None
+    check_constrained(lm)
+    assert len(outlines.loops) == 1 and outlines.areas0 == [A0]
+    o = outlines.loops[0]
+    check_chain(lm, o, closed=True)
+    assert lm.triangulation.segments.shape[0] == len(o) == len(loop) - len(pocket)
+    assert not set(pocket) & set(lm.triangulation.segments.ravel())
+    assert outlines.inside(lm.nodes, lm.nodes[pocket]).all()
+    area = abs(polygon_area_centroid(lm.nodes[o])[0])
+    assert 0 < area / A0 - 1 <= WELD_FRACTION          # the pocket joined the plate
+    np.testing.assert_allclose(lm.ip_integral("one"), before, rtol=1e-13)
 
 
 def test_the_sinking_plate_goes_on_in_two_pieces(tmp_path):

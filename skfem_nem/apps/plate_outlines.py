@@ -38,7 +38,7 @@ __all__ = ["PlateOutlines", "polygon_area_centroid", "PINCH_FRACTION", "WELD_FRA
 PINCH_FRACTION = 0.25
 #: a fold is closed (its pocket of fluid joins the plate) only if the pocket's area is at
 #: most this fraction of the piece's reference area: half the 1% to which the plate's
-#: area is held, and far above the slivers a closing film leaves (1e-4 measured)
+#: area is held (the area constraint then squeezes the pocket out)
 WELD_FRACTION = 0.005
 
 

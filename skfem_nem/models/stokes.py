@@ -588,7 +588,12 @@ def _distributed(spaces: StokesSpaces, solver: str):
     mine = owned_elements(spaces.mesh)
     if mine is None:
         return spaces, None
-    return spaces.restricted(mine), _Share(world()[0] == 0, summed)
+    # kept with the spaces: the Picard iterations of a step solve on the same strip
+    cache = spaces.__dict__.setdefault("_cache", {})
+    key = ("strip", mine.tobytes())
+    if key not in cache:
+        cache[key] = spaces.restricted(mine)
+    return cache[key], _Share(world()[0] == 0, summed)
 
 
 @dataclass

@@ -71,3 +71,18 @@ def test_rank_zero_alone_writes(comm, agree, shared_dir):
         # one row per step (a second writer would append its own), one snapshot each
         assert c == 0 and steps == ["1", "2", "3"], (c, steps)
         assert files == ["plate_00000.vtu", "plate_00001.vtu"] and checkpoint and figure
+
+
+def test_a_mesh_that_differs_between_ranks_stops_the_run(comm, agree, shared_dir):
+    """The replicated evolution is checked after every step: a mesh advanced on the last
+    rank alone (its clock ahead) is reported on every rank, naming that rank."""
+    if comm.getSize() < 2:
+        pytest.skip("needs two ranks: one rank always agrees with itself")
+    sim = SinkingPlate(PlateConfig(nodes=NODES, solver="petsc"), shared_dir("differ"))
+    sim.check_replicated()                            # the same mesh everywhere
+    if comm.getRank() == comm.getSize() - 1:
+        sim.lm.advance(lambda x: np.zeros_like(x), 1e-3)
+    with pytest.raises(RuntimeError) as err:
+        sim.check_replicated()
+    got = agree(str(err.value))
+    assert all(f"rank(s) [{comm.getSize() - 1}] differs from rank 0" in m for m in got)

@@ -1,8 +1,9 @@
 """Solvers on PETSc over MPI (optional: needs petsc4py and mpi4py, see docs/parallel.md).
 
 Between the basis and the models: it turns scipy matrices assembled by scikit-fem (the
-same on every rank for now) into distributed PETSc matrices, solves them with PETSc's
-Krylov methods and multigrid, and gathers the solution to every rank. Importing this
+whole matrix on every rank, or each rank's share of a distributed assembly over its own
+strip of triangles) into distributed PETSc matrices, solves them with PETSc's Krylov
+methods and multigrid, and gathers the solution to every rank. Importing this
 package does not import petsc4py; the first solve does, and raises
 :class:`PetscUnavailableError` naming the installation route if it is missing.
 """

@@ -7,7 +7,8 @@ models and knows no Stokes problem. It solves the plain block system ::
     [A  B^T] [u]   [f]
     [B  C  ] [p] = [g]
 
-given as scipy blocks (the same on every rank), with the preconditioner of the serial
+given as scipy blocks (the same on every rank, or each rank's share of a distributed
+assembly), with the preconditioner of the serial
 ``"fgmres"`` solver translated into PETSc's terms: the block upper triangle
 ``[[A, B^T], [0, S_hat]]^-1`` (``-pc_fieldsplit_schur_fact_type upper``), the viscous
 block ``A`` approximated by two conjugate-gradient steps preconditioned by algebraic

@@ -15,14 +15,15 @@ from typing import TYPE_CHECKING, Optional, Sequence, Tuple, Union
 import numpy as np
 import scipy.sparse as sp
 
-if TYPE_CHECKING:  # (only for annotations: stokes imports this module)
-    from . import stokes
+if TYPE_CHECKING:  # (only for annotations)
+    from . import stokes_bases
 
 __all__ = ["wall_dofs", "boundary_flux", "outline_flux", "fixed_velocity",
            "walls_fix_pressure", "constraint_rows"]
 
 
-def wall_dofs(spaces: stokes.StokesSpaces, free_slip: Union[str, Sequence[str], None] = "all",
+def wall_dofs(spaces: stokes_bases.StokesSpaces,
+              free_slip: Union[str, Sequence[str], None] = "all",
               no_slip: Union[str, Sequence[str], None] = None, tol: float = 1e-9) -> np.ndarray:
     """Velocity dofs fixed to zero by wall conditions.
 
@@ -76,7 +77,7 @@ def wall_dofs(spaces: stokes.StokesSpaces, free_slip: Union[str, Sequence[str], 
     return np.unique(np.concatenate(fixed))
 
 
-def boundary_flux(spaces: stokes.StokesSpaces) -> sp.csr_matrix:
+def boundary_flux(spaces: stokes_bases.StokesSpaces) -> sp.csr_matrix:
     """(np, nu) matrix of ``oint q_i (u . n) ds`` over the boundary facets.
 
     Exact: on convex-hull edges both the natural-neighbour velocity and the
@@ -105,7 +106,7 @@ def boundary_flux(spaces: stokes.StokesSpaces) -> sp.csr_matrix:
                          shape=(pb.N, ub.N))
 
 
-def outline_flux(spaces: stokes.StokesSpaces, outline: np.ndarray) -> sp.csr_matrix:
+def outline_flux(spaces: stokes_bases.StokesSpaces, outline: np.ndarray) -> sp.csr_matrix:
     """(1, nu) row: the flux of the nodal velocities out of a closed polygon.
 
     ``outline`` (k,) node indices in order around the polygon (either
@@ -128,7 +129,7 @@ def outline_flux(spaces: stokes.StokesSpaces, outline: np.ndarray) -> sp.csr_mat
                          shape=(1, spaces.n_velocity))
 
 
-def fixed_velocity(spaces: stokes.StokesSpaces, free_slip, no_slip,
+def fixed_velocity(spaces: stokes_bases.StokesSpaces, free_slip, no_slip,
                     prescribed: Optional[tuple]) -> Tuple[np.ndarray, np.ndarray]:
     """Velocity dofs fixed by the walls and ``prescribed``, and their values."""
     nu = spaces.n_velocity
@@ -149,7 +150,7 @@ def fixed_velocity(spaces: stokes.StokesSpaces, free_slip, no_slip,
     return D, uD
 
 
-def walls_fix_pressure(spaces: stokes.StokesSpaces, D: np.ndarray) -> bool:
+def walls_fix_pressure(spaces: stokes_bases.StokesSpaces, D: np.ndarray) -> bool:
     """True if every boundary node has a fixed velocity component (no open
     boundary: the pressure is then determined only up to a constant)."""
     nd = spaces.ubasis.dofs.nodal_dofs

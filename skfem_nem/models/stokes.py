@@ -512,8 +512,10 @@ def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndar
     free = np.setdiff1d(np.arange(nu), D)
     Afull = sys_.A.tocsr()
     Bfull, g0, mvec, Sb, dp = _with_constraints(sys_, Afull, constraints, nu, share)
-    sums = np.array([sys_.Mp.diagonal().sum(), mvec.sum()])
-    mass, area = sums if share is None else share.total(sums)
+    mass = sys_.Mp.diagonal().sum()
+    if share is not None:  # the pressure integrals whole, summed once for every use
+        mvec, mass = share.total(mvec), share.total(np.array([mass]))[0]
+    area = mvec.sum()
     # the mean pressure is fixed by a rank-one term c m m^T of the size of 1/eta
     c = float(mass) / area ** 2 if pressure_mean else 0.0
     problem = SaddlePointProblem(

@@ -108,8 +108,9 @@ class SaddlePointProblem:
     pressure_mean: bool     # fix the pressure by its mean (zero)
     ubasis: object          # velocity basis, for the rigid-body modes of AMG
     free: np.ndarray        # free velocity dofs of ubasis
-    # distributed assembly: the blocks and vectors are this MPI rank's share, and this
-    # sums a vector over the ranks (only solver "petsc" takes such a problem); None: whole
+    # distributed assembly: the blocks, f, g and dp are this MPI rank's share (m is
+    # whole), and this sums a vector over the ranks (only solver "petsc" takes such a
+    # problem); None: all whole
     total: Optional[Callable[[np.ndarray], np.ndarray]] = None
 
     def whole(self, v: np.ndarray) -> np.ndarray:
@@ -129,14 +130,14 @@ class SaddlePointProblem:
     @property
     def area(self) -> float:
         """Integral of the pressure basis functions: the domain's area."""
-        return float(self.whole(self.m).sum())
+        return float(self.m.sum())
 
     def residual(self, xu: np.ndarray, xp: np.ndarray) -> float:
         """Relative residual of the whole system (the mean-pressure
         multiplier's share removed from the continuity rows)."""
         r1 = self.whole(self.A @ xu + self.B.T @ xp - self.f)
         r2 = self.whole(self.B @ xu - self.S @ xp - self.g)
-        m = self.whole(self.m)
+        m = self.m
         if self.pressure_mean:
             r2 = r2 - m * ((m @ r2) / (m @ m))
         return float(np.sqrt(r1 @ r1 + r2 @ r2) / max(np.linalg.norm(self.whole(self.f)),
@@ -148,8 +149,7 @@ class SaddlePointProblem:
         only: the constraint multipliers, where ``m`` is zero, keep their values)."""
         if not self.pressure_mean:
             return p
-        m = self.whole(self.m)
-        return p - (m @ p) / m.sum() * (m != 0)
+        return p - (self.m @ p) / self.area * (self.m != 0)
 
 
 class SaddlePointSolution(NamedTuple):
@@ -607,7 +607,7 @@ def solve_petsc(problem: SaddlePointProblem, tol: float, maxiter: int,
     prefix ``-stokes_``. Records ``info["ranks"]``, ``info["ksp_reason"]`` and
     ``info["viscous_pc"]`` (the viscous block's preconditioner)."""
     from ..parallel import solve_saddle_petsc
-    pressure = problem.whole(problem.m) != 0        # not the constraint multipliers
+    pressure = problem.m != 0                       # not the constraint multipliers
     res = solve_saddle_petsc(
         problem.A, problem.B, -problem.S, problem.f, problem.g, -problem.dp, tol, maxiter,
         modes=rigid_modes(problem.ubasis, problem.free),
@@ -627,7 +627,7 @@ def strip_order(problem: SaddlePointProblem) -> np.ndarray:
     ub = problem.ubasis
     xu = np.asarray(ub.doflocs)[0, problem.free]
     nodes = np.asarray(ub.mesh.p)[0]
-    m = problem.whole(problem.m)
+    m = problem.m
     npr = int(np.count_nonzero(m))
     if npr == nodes.size and np.all(m[:npr] != 0):
         xp = np.concatenate([nodes, np.full(problem.n_pressure - npr, np.inf)])

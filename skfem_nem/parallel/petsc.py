@@ -33,8 +33,8 @@ import scipy.sparse as sp
 
 __all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debian_petsc_dir",
            "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
-           "default_options", "default_split", "row_range", "ranks_differing", "world",
-           "rows_to_petsc", "summed_rows", "summed", "owned_elements"]
+           "default_options", "default_split", "split_bounds", "row_range", "ranks_differing",
+           "world", "rows_to_petsc", "summed_rows", "summed", "owned_elements"]
 
 PETSC_INSTALL_HINT = (
     "petsc4py and mpi4py are needed for the parallel solvers. PyPI has PETSc only as a "
@@ -112,13 +112,18 @@ def default_split(n: int, size: int) -> list:
 def row_range(n: int, comm, owned: Optional[Sequence[int]] = None) -> Tuple[int, int]:
     """This rank's rows ``[r0, r1)`` of ``n``: from ``owned`` (rows per rank) if given,
     else PETSc's default split (as equal as possible, lower ranks taking the rest)."""
-    size, rank = comm.getSize(), comm.getRank()
+    return split_bounds(n, comm.getSize(), owned)[comm.getRank()]
+
+
+def split_bounds(n: int, size: int, owned: Optional[Sequence[int]] = None) -> list:
+    """Every rank's ``(start, end)`` of ``n`` rows: from ``owned`` (rows per rank) if
+    given, else PETSc's default split (:func:`default_split`)."""
     owned = default_split(n, size) if owned is None else [int(k) for k in owned]
     if len(owned) != size or sum(owned) != n or min(owned) < 0:
         raise ValueError(f"owned must give {size} non-negative row counts adding up to {n}, "
                          f"got {owned}")
-    r0 = sum(owned[:rank])
-    return r0, r0 + owned[rank]
+    ends = np.cumsum([0] + owned).tolist()
+    return list(zip(ends[:-1], ends[1:]))
 
 
 def csr_to_petsc(A: sp.spmatrix, comm=None, owned: Optional[Sequence[int]] = None):
@@ -156,11 +161,7 @@ def summed_rows(part: sp.spmatrix, comm, owned: Optional[Sequence[int]] = None):
     each other rank the rows it owns and adds what it receives, so no rank ever holds
     more than its share and its own rows."""
     part = sp.csr_matrix(part)
-    n = part.shape[0]
-    size = comm.getSize()
-    counts = default_split(n, size) if owned is None else list(owned)
-    ends = np.cumsum([0] + counts)
-    blocks = [part[a:b] for a, b in zip(ends[:-1], ends[1:])]
+    blocks = [part[a:b] for a, b in split_bounds(part.shape[0], comm.getSize(), owned)]
     got = comm.tompi4py().alltoall(blocks)
     total = got[0]
     for b in got[1:]:
@@ -287,5 +288,5 @@ def owned_elements(mesh) -> Optional[np.ndarray]:
         return None
     x = np.asarray(mesh.p)[0, np.asarray(mesh.t)].mean(axis=0)
     order = np.argsort(x, kind="stable")
-    ends = np.cumsum([0] + default_split(order.size, size))
-    return np.sort(order[ends[rank]:ends[rank + 1]])
+    a, b = split_bounds(order.size, size)[rank]
+    return np.sort(order[a:b])

@@ -31,8 +31,8 @@ from typing import NamedTuple, Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .petsc import (check_replicated, csr_to_petsc, default_options, default_split, destroying,
-                    gather, import_petsc, row_range, rows_to_petsc, summed_rows, vector)
+from .petsc import (check_replicated, csr_to_petsc, default_options, destroying, gather,
+                    import_petsc, row_range, rows_to_petsc, split_bounds, summed_rows, vector)
 from .petsc import summed as summed_vector
 from .solver import converged_or_raise, null_space
 
@@ -68,8 +68,7 @@ def saddle_defaults(tol: float, maxiter: int) -> dict:
 def split_counts(mask: np.ndarray, size: int) -> list:
     """How many of the rows marked by ``mask`` each of ``size`` ranks owns under
     PETSc's default split of ``mask.size`` rows."""
-    ends = np.cumsum([0] + default_split(mask.size, size))
-    return [int(np.count_nonzero(mask[a:b])) for a, b in zip(ends[:-1], ends[1:])]
+    return [int(np.count_nonzero(mask[a:b])) for a, b in split_bounds(mask.size, size)]
 
 
 def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.ndarray,

@@ -99,6 +99,12 @@ def dumbbell(neck, gap=None, seed=0):
         corners = [[0.2, 0.35], [0.8, 0.35], [0.8, 0.65], [0.5 + gap / 2, 0.65],
                    [0.5 + gap / 2, 0.45], [0.5 - gap / 2, 0.45], [0.5 - gap / 2, 0.65],
                    [0.2, 0.65]]
+    return outlined(corners, seed)
+
+
+def outlined(corners, seed=0):
+    """The polygon of ``corners`` as a loop of segments, random nodes around; the mesh
+    and the loop."""
     ring = polyline_nodes(corners, SPACING, closed=True)
     p = square_nodes(300, 16, seed, jitter=0.3, margin=0.01)
     d, _ = cKDTree(ring).query(p)
@@ -209,6 +215,62 @@ def test_a_small_fold_is_closed_and_its_fluid_joins_the_plate():
     area = abs(polygon_area_centroid(lm.nodes[o])[0])
     assert 0 < area / A0 - 1 <= WELD_FRACTION          # the pocket joined the plate
     np.testing.assert_allclose(lm.ip_integral("one"), before, rtol=1e-13)
+
+
+def _loop_segment(lm, loop, a, b):
+    """Row of the loop's segment from the node nearest ``a`` to the node nearest ``b``
+    (within 1e-3), and its position in the loop."""
+    P = lm.nodes[loop]
+    i = int(np.argmin(np.hypot(*(P - a).T)))
+    j = (i + 1) % len(loop)
+    assert np.allclose(P[i], a, atol=1e-3) and np.allclose(P[j], b, atol=1e-3)
+    return pair_rows(lm, [loop[[i, j]]])[0], i
+
+
+# a sliver of fluid (the bottom of a U's slot) and one of plate (a spike on its top)
+# (the slot narrows to its bottom, so its bottom nodes are the two nearest each other)
+SPIKES = {"crack": ([[0.2, 0.35], [0.8, 0.35], [0.8, 0.65], [0.51, 0.65], [0.505, 0.45],
+                     [0.495, 0.45], [0.49, 0.65], [0.2, 0.65]],
+                    [(0.5056, 0.4722), (0.505, 0.45)], [(0.495, 0.45), (0.4944, 0.4722)]),
+          "spike": ([[0.2, 0.35], [0.8, 0.35], [0.8, 0.65], [0.505, 0.65], [0.5, 0.67],
+                     [0.495, 0.65], [0.2, 0.65]],
+                    [(0.505, 0.65), (0.5, 0.67)], [(0.5, 0.67), (0.495, 0.65)])}
+
+
+@pytest.mark.parametrize("kind", sorted(SPIKES))
+def test_a_spike_is_closed_across_its_base(kind, tmp_path):
+    """Faces of the loop meeting a node or two apart along it (no cut or weld leaves
+    three nodes on each side): the short arc's segments are released, the nodes at its
+    tip removed, a segment joins its ends; one loop, the same reference area, every
+    segment an edge, the mesh constrained Delaunay, the ip integrals kept. Where the
+    sliver is more than WELD_FRACTION of the reference area, nothing changes."""
+    corners, first, second = SPIKES[kind]
+    lm, loop = outlined(corners)
+    P = lm.nodes
+    A0 = abs(polygon_area_centroid(P[loop])[0])
+    (r0, i), (r1, j) = (_loop_segment(lm, loop, *f) for f in (first, second))
+    tip = loop[i + 1:j + 1]
+    assert 1 <= len(tip) <= 2
+    sliver = abs(polygon_area_centroid(P[loop[i:j + 2]])[0])
+    small = PlateOutlines([loop], [0.99 * sliver / WELD_FRACTION])
+    before = saved_state(lm, tmp_path / "before.npz")
+    assert "more than WELD_FRACTION" in small.pinch(lm, r0, r1, SPACING)
+    assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
+    outlines = PlateOutlines([loop], [A0])
+    n, area = lm.nodes.shape[0], lm.ip_integral("one")
+    ends = lm.nodes[[loop[i], loop[j + 1]]]
+    assert outlines.pinch(lm, r0, r1, SPACING) is None
+    check_constrained(lm)
+    assert len(outlines.loops) == 1 and outlines.areas0 == [A0]
+    o = outlines.loops[0]
+    check_chain(lm, o, closed=True)
+    assert lm.nodes.shape[0] == n - len(tip) and len(o) == len(loop) - len(tip)
+    assert lm.triangulation.segments.shape[0] == len(o)
+    k = int(np.flatnonzero(np.hypot(*(lm.nodes[o] - ends[0]).T) == 0)[0])
+    np.testing.assert_array_equal(lm.nodes[o[[k, (k + 1) % len(o)]]], ends)
+    change = abs(polygon_area_centroid(lm.nodes[o])[0]) - A0
+    assert change == pytest.approx(sliver if kind == "crack" else -sliver, rel=1e-12)
+    np.testing.assert_allclose(lm.ip_integral("one"), area, rtol=1e-13)
 
 
 def test_the_sinking_plate_goes_on_in_two_pieces(tmp_path):

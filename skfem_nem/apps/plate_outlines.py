@@ -20,6 +20,12 @@ of the loop between the nodes that met, the one around the pocket is released (i
 fluid joins the plate) and the other, closed by a segment between those two nodes, is
 the plate's loop. The pocket is at most :data:`WELD_FRACTION` of the piece's area (the area
 constraint then squeezes it out over the next steps); a larger fold stops the run.
+
+Where the two faces that meet are a node or two apart along the loop (a spike: a sliver
+of plate, or a crack of fluid, thinner than the mesh resolves, closing within one step),
+neither a cut nor a weld leaves three nodes on each side. The spike is closed instead:
+the short arc between the two segments is released, the nodes at its tip removed, and a
+segment joins its ends; the sliver is at most :data:`WELD_FRACTION` of the piece's area.
 """
 from __future__ import annotations
 
@@ -135,7 +141,7 @@ class PlateOutlines:
         o, P = self.loops[k], lm.nodes
         plan = _cut(P, o, p, q)
         if plan is None:
-            return "a piece would keep fewer than three nodes"
+            return self._trim(lm, k, p, q)
         # a neck leaves two pieces turning the way the plate does; where the plate folds
         # onto itself (its faces meet from outside) one of them is the fluid it encloses
         turn = np.sign(polygon_area_centroid(P[o])[0])
@@ -158,13 +164,43 @@ class PlateOutlines:
             return (f"the plate folds onto itself (its faces meet from outside) around "
                     f"fluid of {ratio:.2%} of its area (more than WELD_FRACTION), which "
                     f"the model does not follow")
+        why = self._close(lm, k, inner, outer, remove=())
+        return None if why is None else f"the fold cannot be closed ({why})"
+
+    def _trim(self, lm, k, p, q) -> Optional[str]:
+        """Close a spike of piece ``k``: its segments at positions p and q of the loop
+        meet a node or two apart along it (a sliver of plate, or of fluid, thinner than
+        the mesh resolves). The short arc between them is released, the nodes inside it
+        removed (kept if they cannot go), and a segment joins its ends."""
+        o, P = self.loops[k], lm.nodes
+        n = len(o)
+        if (q - p) % n > (p - q) % n:
+            p, q = q, p
+        inner = [o[(p + m) % n] for m in range((q - p) % n + 2)]   # o[p] ... o[q + 1]
+        outer = [o[(q + 1 + m) % n] for m in range(n - len(inner) + 2)]
+        if len(outer) < 3:
+            return "a piece would keep fewer than three nodes"
+        ratio = abs(polygon_area_centroid(P[inner])[0]) / self.areas0[k]
+        if ratio > WELD_FRACTION:
+            return (f"two faces of the plate meet around a sliver of {ratio:.2%} of its "
+                    f"area (more than WELD_FRACTION), which the model does not follow")
+        why = self._close(lm, k, inner, outer, remove=inner[1:-1])
+        if why is not None:
+            why = self._close(lm, k, inner, outer, remove=())
+        return None if why is None else f"the spike cannot be closed ({why})"
+
+    def _close(self, lm, k, inner, outer, remove) -> Optional[str]:
+        """Release the segments along the arc ``inner`` of loop ``k``, join its ends by
+        a segment and make ``outer`` (the rest of the loop, from the end of ``inner``
+        to its start) the loop, removing the nodes ``remove``. None, or why not (the
+        mesh and the loops then unchanged)."""
         tri = lm.triangulation
         rows = tri.segment_rows(np.c_[inner[:-1], inner[1:]])
         try:
             new = lm.reconnect_segments(rows, [[outer[-1], outer[0]]],
-                                        tri.segment_source[rows[:1]])
+                                        tri.segment_source[rows[:1]], remove=remove)
         except ValueError as err:
-            return f"the fold cannot be closed ({err})"
+            return str(err)
         self.loops = [new[np.asarray(outer if m == k else o)]
                       for m, o in enumerate(self.loops)]
         return None

@@ -243,3 +243,17 @@ def test_segment_rows_find_segments_by_their_nodes():
     np.testing.assert_array_equal(tri.segment_rows(S[:, ::-1]), np.arange(S.shape[0]))
     assert tri.segment_rows([[poly[0], poly[5]]]).tolist() == [-1]
     assert LagrangianMesh(nodes).triangulation.segment_rows(S[:2]).tolist() == [-1, -1]
+
+
+@pytest.mark.parametrize("m", [3, 4, 40])
+def test_a_loop_of_one_source_is_walked_the_short_way(m):
+    """A closed polygon whose segments all carry one source (as after cuts and closures
+    of a loop) is a loop of that source: each of its sides is walked the short way, so
+    the polyline through its nodes lists each node once, in either direction."""
+    nodes, segs, _, _ = outlined_square(300, 3, m=m)
+    lm = LagrangianMesh(nodes, segments=segs)
+    tri = lm.triangulation
+    poly = nodes.shape[0] - 25 - m + np.arange(m)
+    tri.set_segments(tri.segments, np.where(np.arange(len(segs)) < m, 7, tri.segment_source))
+    for order in (poly, poly[::-1]):
+        np.testing.assert_array_equal(lm.polyline(order, closed=True), order)

@@ -21,11 +21,13 @@ fluid joins the plate) and the other, closed by a segment between those two node
 the plate's loop. The pocket is at most :data:`WELD_FRACTION` of the piece's area (the area
 constraint then squeezes it out over the next steps); a larger fold stops the run.
 
-Where the two faces that meet are a node or two apart along the loop (a spike: a sliver
+Where the two faces that meet are a few nodes apart along the loop (a spike: a sliver
 of plate, or a crack of fluid, thinner than the mesh resolves, closing within one step),
-neither a cut nor a weld leaves three nodes on each side. The spike is closed instead:
-the short arc between the two segments is released, the nodes at its tip removed, and a
-segment joins its ends; the sliver is at most :data:`WELD_FRACTION` of the piece's area.
+a cut would leave a piece of fewer than three nodes or one of at most
+:data:`WELD_FRACTION` of the plate's area, a sliver squeezed again in the next steps. The
+spike is closed instead: the arc around it is released, the nodes at its tip removed,
+and a segment joins its ends; the sliver is at most :data:`WELD_FRACTION` of the piece's
+area.
 """
 from __future__ import annotations
 
@@ -145,8 +147,11 @@ class PlateOutlines:
         # a neck leaves two pieces turning the way the plate does; where the plate folds
         # onto itself (its faces meet from outside) one of them is the fluid it encloses
         turn = np.sign(polygon_area_centroid(P[o])[0])
-        if any(polygon_area_centroid(P[piece])[0] * turn <= 0 for piece in plan[:2]):
+        areas = [polygon_area_centroid(P[piece])[0] * turn for piece in plan[:2]]
+        if min(areas) <= 0:
             return self._weld(lm, k, plan, turn)
+        if min(areas) <= WELD_FRACTION * self.areas0[k]:
+            return self._trim(lm, k, p, q)       # a sliver, not a piece worth following
         return self._apply(lm, k, plan, spacing)
 
     def _weld(self, lm, k, plan, turn: float) -> Optional[str]:
@@ -169,18 +174,22 @@ class PlateOutlines:
 
     def _trim(self, lm, k, p, q) -> Optional[str]:
         """Close a spike of piece ``k``: its segments at positions p and q of the loop
-        meet a node or two apart along it (a sliver of plate, or of fluid, thinner than
-        the mesh resolves). The short arc between them is released, the nodes inside it
-        removed (kept if they cannot go), and a segment joins its ends."""
+        meet a few nodes apart along it (a sliver of plate, or of fluid, thinner than
+        the mesh resolves). Of the two arcs between them, the one around the smaller
+        area is released, the nodes inside it removed (kept if they cannot go), and a
+        segment joins its ends."""
         o, P = self.loops[k], lm.nodes
         n = len(o)
-        if (q - p) % n > (p - q) % n:
-            p, q = q, p
-        inner = [o[(p + m) % n] for m in range((q - p) % n + 2)]   # o[p] ... o[q + 1]
-        outer = [o[(q + 1 + m) % n] for m in range(n - len(inner) + 2)]
-        if len(outer) < 3:
+        arcs = []
+        for s, t in ((p, q), (q, p)):
+            inner = [o[(s + m) % n] for m in range((t - s) % n + 2)]   # o[s] ... o[t + 1]
+            outer = [o[(t + 1 + m) % n] for m in range(n - len(inner) + 2)]
+            if len(outer) >= 3:
+                arcs.append((abs(polygon_area_centroid(P[inner])[0]), inner, outer))
+        if not arcs:
             return "a piece would keep fewer than three nodes"
-        ratio = abs(polygon_area_centroid(P[inner])[0]) / self.areas0[k]
+        area, inner, outer = min(arcs, key=lambda arc: arc[0])
+        ratio = area / self.areas0[k]
         if ratio > WELD_FRACTION:
             return (f"two faces of the plate meet around a sliver of {ratio:.2%} of its "
                     f"area (more than WELD_FRACTION), which the model does not follow")

@@ -472,7 +472,8 @@ class SinkingPlate:
         if why is None:
             import warnings
             warnings.warn(f"step {self.lm.step + 1} at t = {self.lm.time:.6g}: {err}; the "
-                          f"plate is cut there (a fold: closed) and the step tried again",
+                          f"plate is cut there (a fold or a spike: closed) and the step "
+                          f"tried again",
                           RuntimeWarning, stacklevel=3)
         return why is None
 

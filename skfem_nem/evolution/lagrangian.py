@@ -569,7 +569,10 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
 
     @staticmethod
     def _walk(nb, a, b, s):
-        """The path from a to b along the segments of source s, or None."""
+        """The shortest path from a to b along the segments of source s, or None (both
+        ways are tried: segments given the same source when a loop was cut or closed
+        can close a loop of their own)."""
+        best = None
         for first in nb.get((a, s), []):
             path = [a, first]
             while path[-1] != b and len(path) <= len(nb):
@@ -577,9 +580,9 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
                 if not step:
                     break
                 path.append(step[0])
-            if path[-1] == b:
-                return path
-        return None
+            if path[-1] == b and (best is None or len(path) < len(best)):
+                best = path
+        return best
 
     # -- checkpoints -------------------------------------------------------------
     def save(self, path) -> None:

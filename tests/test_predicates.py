@@ -450,3 +450,27 @@ def test_sign_variants_classroom_example():
         for j in range(64):
             p = (0.5 + i * eps, 0.5 + j * eps, 12.0, 12.0, 24.0, 24.0)
             assert sign(orient2d_sign(*p)) == sign(exact_orient(*p))
+
+
+def test_coordinates_compile_first_in_a_fresh_process(tmp_path):
+    """A process whose first kernel is the coordinates' query block (compiled without
+    reference counting), e.g. a run restarted from a checkpoint, with an empty numba
+    cache: the exact predicates it calls were compiled with reference counting at
+    import, so it compiles and the coordinates are a partition of unity."""
+    import os
+    import subprocess
+    import sys
+
+    from skfem_nem import LagrangianMesh
+    nodes = np.random.default_rng(4).random((60, 2))
+    LagrangianMesh(nodes).save(tmp_path / "mesh.npz")
+    code = ("import numpy as np\n"
+            "from skfem_nem import LagrangianMesh, natural_neighbour_coordinates\n"
+            f"lm = LagrangianMesh.load({str(tmp_path / 'mesh.npz')!r})\n"
+            "phi = natural_neighbour_coordinates(lm.triangulation, np.array([[0.4, 0.6]]))\n"
+            "print(phi.sum())\n")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert abs(float(out.stdout.split()[-1]) - 1.0) < 1e-12

@@ -443,7 +443,16 @@ def _on_lattice(x1, y1, x2, y2, x3, y3, bits, min_exp, max_exp):
     return True
 
 
-@njit(cache=True)
+# The exact stages allocate their work space. They are compiled when this module is
+# imported (eager signatures), with reference counting: a kernel compiled without it
+# (``_nrt=False``, e.g. the coordinates' query block) would otherwise compile them in
+# its own mode the first time it calls them, where allocation is refused, and fail
+# in a process that had not yet used them (a run restarted from a checkpoint).
+_EXACT_ORIENT2D = "float64(" + ", ".join(["float64"] * 6) + ")"
+_EXACT_INCIRCLE = "float64(" + ", ".join(["float64"] * 8) + ")"
+
+
+@njit(_EXACT_ORIENT2D, cache=True)
 def _orient2d_exact(ax, ay, bx, by, cx, cy):
     """Exact ``orient2d`` as ``[ab] + [bc] + [ca]``, rounded to a float."""
     acx, acxt = _two_diff(ax, cx)
@@ -501,7 +510,7 @@ def _lifted_term(px, py, minor, nminor, sign, tmp, out):
     return _expansion_sum(xx, nxx, yy, nyy, out)
 
 
-@njit(cache=True)
+@njit(_EXACT_INCIRCLE, cache=True)
 def _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy):
     """Exact ``incircle`` by Laplace expansion of the 4x4 lifted determinant.
 

@@ -184,15 +184,23 @@ def solve_direct(problem: SaddlePointProblem, tol: float, maxiter: int,
 
 
 def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
-                info: dict) -> SaddlePointSolution:
-    """Sparse LU of the viscous block, pressure CG on the Schur complement."""
+                info: dict, cache: Optional[StokesCache] = None) -> SaddlePointSolution:
+    """Sparse LU of the viscous block, pressure CG on the Schur complement. With a
+    ``cache`` (a :class:`StokesCache`), the CG starts from the pressure of the last
+    solve where the sizes agree and it is a better start than zero (the Picard
+    iterations of a time step), and keeps this solve's; ``info["warm_start"]``."""
     try:
         lu = spla.splu(problem.A, permc_spec="MMD_AT_PLUS_A",
                        options=dict(SymmetricMode=True))
     except RuntimeError as err:
         raise RuntimeError(f"the viscous block is singular ({err}): check the wall "
                            f"conditions (a rigid-body motion left free?)") from None
-    return schur_pressure_cg(problem, lu, tol, maxiter)
+    n1 = problem.n_velocity
+    x0 = None if cache is None else cache.start(n1 + problem.n_pressure)
+    sol = schur_pressure_cg(problem, lu, tol, maxiter, None if x0 is None else x0[n1:], info)
+    if cache is not None:
+        cache.record(np.concatenate([sol.u, sol.p]), sol.iterations, False)
+    return sol
 
 
 class AMGViscousSolve:
@@ -227,10 +235,12 @@ def solve_schur_amg(problem: SaddlePointProblem, tol: float, maxiter: int,
     return schur_pressure_cg(problem, lu, tol, maxiter)
 
 
-def schur_pressure_cg(problem: SaddlePointProblem, lu, tol: float,
-                      maxiter: int) -> SaddlePointSolution:
+def schur_pressure_cg(problem: SaddlePointProblem, lu, tol: float, maxiter: int,
+                      p0: Optional[np.ndarray] = None,
+                      info: Optional[dict] = None) -> SaddlePointSolution:
     """Pressure CG on ``B A^-1 B^T + S + c m m^T`` with ``lu.solve`` applying
-    ``A^-1``; preconditioner: ``1 / dp``."""
+    ``A^-1``; preconditioner: ``1 / dp``. ``p0``: a start, taken if its residual is
+    below the right side's (recorded in ``info["warm_start"]``)."""
     B, S, m, c = problem.B, problem.S, problem.m, problem.mean_weight
     npr, fu = problem.n_pressure, problem.f
     count = [0]
@@ -241,7 +251,10 @@ def schur_pressure_cg(problem: SaddlePointProblem, lu, tol: float,
     Sop = spla.LinearOperator((npr, npr), matvec=schur, dtype=float)
     Pp = spla.LinearOperator((npr, npr), matvec=lambda q: q / problem.dp, dtype=float)
     g = B @ lu.solve(fu) - problem.g
-    p, flag = spla.cg(Sop, g, M=Pp, rtol=tol, maxiter=maxiter,
+    warm = p0 is not None and _norm(g - schur(p0)) < _norm(g)
+    if info is not None:
+        info["warm_start"] = warm
+    p, flag = spla.cg(Sop, g, x0=p0 if warm else None, M=Pp, rtol=tol, maxiter=maxiter,
                       callback=lambda *_: count.__setitem__(0, count[0] + 1))
     if flag != 0:
         r = np.linalg.norm(schur(p) - g) / max(np.linalg.norm(g), 1e-300)
@@ -432,8 +445,8 @@ def rigid_modes(ubasis, free: np.ndarray) -> np.ndarray:
 
 @dataclass
 class StokesCache:
-    """What solver ``"fgmres"`` keeps from one solve to the next: the AMG
-    hierarchy of the viscous block and the last solution.
+    """What solvers ``"fgmres"`` and ``"schur"`` keep from one solve to the next:
+    the AMG hierarchy of the viscous block (``"fgmres"``) and the last solution.
 
     Pass one object to a sequence of solves of similar problems (the Picard
     iterations of a time step, successive time steps). The hierarchy is
@@ -642,7 +655,7 @@ SOLVERS: Dict[str, Callable[..., SaddlePointSolution]] = {
 """The solvers of :func:`skfem_nem.models.stokes.solve_stokes` by name, each
 ``(problem, tol, maxiter, info) -> SaddlePointSolution``."""
 
-CACHED_SOLVERS = ("fgmres",)
+CACHED_SOLVERS = ("schur", "fgmres")
 """The solvers that take a ``cache=`` (:class:`StokesCache`) keyword."""
 
 

@@ -68,3 +68,25 @@ def test_first_run_notice(tmp_path, monkeypatch, capsys):
     assert main(["sinking-plate", "-o", str(tmp_path / "run2"), "--nodes", "300",
                  "--end-time", "1", "--quiet"]) == 0
     assert "compiling" not in capsys.readouterr().out
+
+
+def test_sinking_plate_help_states_each_default_once(capsys):
+    """Every parameter's help names its built-in default once; nothing says
+    "default: None" (the command line's marker for "not given") or a flag's False."""
+    from dataclasses import fields
+
+    from skfem_nem.apps.sinking_plate import PlateConfig
+    with pytest.raises(SystemExit) as exc:
+        main(["sinking-plate", "--help"])
+    assert exc.value.code == 0
+    text = re.sub(r"\s+", " ", capsys.readouterr().out)
+    assert "default: None" not in text and "default: False" not in text
+    assert "(default: out/sinking-plate)" in text
+    section = text.split("parameters (nondimensional):")[1]
+    # one block per option: "--flag METAVAR help" or "--flag, --no-flag help"
+    blocks = re.split(r" (?=--[a-z-]+ [A-Z_]{2,} |--[a-z-]+, --no-)", " " + section)
+    for f in fields(PlateConfig):
+        flag = "--" + f.name.replace("_", "-")
+        part, = [b for b in blocks if b.startswith(flag + " ") or b.startswith(flag + ",")]
+        assert part.count("(default") == 1 and f"(default {getattr(PlateConfig, f.name)})" \
+            in part, (flag, part)

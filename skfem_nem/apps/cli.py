@@ -193,6 +193,17 @@ def _restart_config(args, given, stored_config):
     return cfg
 
 
+class _DefaultsHelp(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows an option's default where it says something: not for flags, nor for the
+    plate's parameters, which default to None on the command line (None: not given, the
+    configuration decides) and say their built-in default themselves."""
+
+    def _get_help_string(self, action):
+        if action.default is None or action.nargs == 0 or "(default" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
+
+
 def _add_plate_parser(sub):
     from dataclasses import fields as dfields
 
@@ -205,7 +216,7 @@ def _add_plate_parser(sub):
         "parameter has a built-in default; a TOML file (--config, keys as below with "
         "underscores, optionally under a [sinking-plate] table) and the options below "
         "override them, the options last.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        formatter_class=_DefaultsHelp)
     sp.add_argument("-o", "--output", default="out/sinking-plate", help="output folder")
     sp.add_argument("--config", help="TOML file with parameters")
     sp.add_argument("--restart", action="store_true",

@@ -186,6 +186,10 @@ def test_bad_configuration(tmp_path, capsys):
                                            str(tmp_path / "y"), "--quiet"])
     assert "plate_z" in user_error(capsys, ["sinking-plate", "-o", str(tmp_path / "x"),
                                             "--plate-z", "0.99", "--quiet"])
+    assert "seed must be a non-negative integer, got -1" in user_error(
+        capsys, ["sinking-plate", "-o", str(tmp_path / "x"), "--seed", "-1", "--quiet"])
+    assert "--max-steps must be a non-negative integer, got -3" in user_error(
+        capsys, ["sinking-plate", "-o", str(tmp_path / "x"), "--max-steps", "-3", "--quiet"])
     assert not (tmp_path / "x").exists()   # rejected before anything runs
     assert not (tmp_path / "y").exists()
     assert "no checkpoint" in user_error(capsys, ["sinking-plate", "-o", str(tmp_path / "none"),

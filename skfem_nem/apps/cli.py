@@ -104,6 +104,9 @@ def sinking_plate(args) -> int:
 
     given = {f.name: getattr(args, f.name) for f in dfields(PlateConfig)
              if getattr(args, f.name) is not None}
+    if args.max_steps is not None and args.max_steps < 0:
+        _fail(f"sinking-plate: --max-steps must be a non-negative integer, got "
+              f"{args.max_steps}")
     try:
         if args.restart:
             cfg = _restart_config(args, given, stored_config)

@@ -156,8 +156,8 @@ class PlateConfig:
         for name in ("segments", "merge", "keep_area"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
-        if not isinstance(self.seed, int):
-            raise ValueError(f"seed must be an integer, got {self.seed!r}")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
         if not (isinstance(self.inject, (int, float)) and (self.inject == 0 or self.inject > 1)):
             raise ValueError(f"inject must be 0 (off) or a factor above 1, got {self.inject!r}")
         if self.remap not in ("conservative", "average"):
@@ -725,7 +725,9 @@ class SinkingPlate:
     # -- the loop ---------------------------------------------------------------
     def run(self, progress: bool = True, max_steps: Optional[int] = None) -> Path:
         """Advance to ``end_time`` (or ``max_steps`` more steps); returns the
-        diagnostics CSV path."""
+        diagnostics CSV path. ``ValueError`` for a negative ``max_steps``."""
+        if max_steps is not None and (not isinstance(max_steps, int) or max_steps < 0):
+            raise ValueError(f"max_steps must be a non-negative integer, got {max_steps!r}")
         c = self.cfg
         lm = self.lm
         keep = lm.time if lm.step else None

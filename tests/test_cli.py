@@ -44,6 +44,13 @@ def test_interpolate_errors(tmp_path, capsys):
         ["interpolate", str(tmp_path / "bad.csv"), str(tmp_path / "q.csv")])
     assert "cannot read nodes" in user_error(
         ["interpolate", str(tmp_path / "missing.csv"), str(tmp_path / "q.csv")])
+    (tmp_path / "nan.csv").write_text("x,y,f\n0,0,1\n1,0,nan\n0,1,1\n")
+    (tmp_path / "q1.csv").write_text("0.2,0.2\n")
+    assert "line 2 holds a value that is not finite" in user_error(
+        ["interpolate", str(tmp_path / "nan.csv"), str(tmp_path / "q1.csv")])
+    out = tmp_path / "no" / "such" / "folder" / "o.csv"
+    assert "cannot write output file" in user_error(
+        ["interpolate", str(tmp_path / "n.csv"), str(tmp_path / "q1.csv"), "-o", str(out)])
 
 
 def test_first_run_notice(tmp_path, monkeypatch, capsys):

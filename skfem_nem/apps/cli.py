@@ -53,6 +53,9 @@ def _read_csv(path: str, min_cols: int, what: str) -> np.ndarray:
         except ValueError:
             _fail(f"{what} file {path!r}: data line {k} is not numeric: "
                              f"{ln.strip()!r}")
+        if not np.isfinite(rows[-1]).all():
+            _fail(f"{what} file {path!r}: data line {k} holds a value that is not finite: "
+                  f"{ln.strip()!r}")
     if not rows:
         _fail(f"{what} file {path!r} holds no data")
     ncol = {len(r) for r in rows}
@@ -91,7 +94,10 @@ def interpolate(args) -> int:
     if args.gradient:
         names += [f"d_value{j}_dx" for j in range(k)] + [f"d_value{j}_dy" for j in range(k)]
     table = np.column_stack([queries] + cols)
-    np.savetxt(args.output, table, delimiter=",", header=",".join(names), comments="")
+    try:
+        np.savetxt(args.output, table, delimiter=",", header=",".join(names), comments="")
+    except OSError as err:
+        _fail(f"cannot write output file {args.output!r}: {err.strerror}")
     print(f"wrote {table.shape[0]} interpolated point(s) to {args.output}")
     return 0
 

@@ -16,6 +16,13 @@ resumed: finished runs are read back, not redone) and the markdown table is prin
     python benchmarks/robustness.py [--nodes 300 1000 3000] [--seeds 0 1 2 3 4]
         [--plate-density 1.5 3] [--yield-stress 0.05 0.3] [--eta-lower 1 100]
         [--jobs 2] [--end-time 1000] [--out out/robustness]
+
+A study spread over several folders (runs on several machines, or continued from a
+stop's checkpoint) is reported as one with ``--report``: the CSVs given are merged (the
+first that holds a setting gives its row) and the summary by node count and lower-layer
+viscosity (the table of ``docs/sinking_plate.md``) and the whole table are printed::
+
+    python benchmarks/robustness.py --report continued/robustness.csv out/robustness.csv
 """
 from __future__ import annotations
 
@@ -161,6 +168,49 @@ def summary(rows) -> str:
             f"{max(dev) if dev else float('nan'):.2e}")
 
 
+def merged(paths) -> list:
+    """The rows of the study CSVs ``paths``, one per setting (the first file that holds
+    it gives the row), sorted by setting."""
+    rows = {}
+    for path in paths:
+        for name, row in read_done(Path(path)).items():
+            rows.setdefault(name, row)
+    return sorted(rows.values(), key=lambda r: tuple(float(r[k]) for k in COLUMNS[:5]))
+
+
+def grid_summary(rows) -> str:
+    """Markdown table: per node count and lower-layer viscosity, the runs measured (of the
+    grid's 20: seeds x densities x yield stresses), completed, the largest plate-area
+    deviation, the smallest angle, outline crossings, most pieces and retried steps."""
+    groups = {}
+    for r in rows:
+        groups.setdefault((int(r["nodes"]), float(r["eta_lower"])), []).append(r)
+    per = len(GRID["seeds"]) * len(GRID["plate_density"]) * len(GRID["yield_stress"])
+    lines = [f"| nodes | eta_lower | runs measured (of {per}) | completed | largest area "
+             f"deviation | smallest angle (deg) | outline crossings | most pieces | retried "
+             f"steps |", "|" + "---|" * 9]
+    for (n, e), rs in sorted(groups.items()):
+        lines.append(
+            f"| {n:,} | {e:g} | {len(rs)} | {sum(str(r['completed']) == 'True' for r in rs)} "
+            f"| {max(float(r['max_area_deviation']) for r in rs):.1e} "
+            f"| {min(float(r['min_angle']) for r in rs):.2g} "
+            f"| {max(int(r['outline_crossings']) for r in rs)} "
+            f"| {max(int(r.get('pieces') or 1) for r in rs)} "
+            f"| {sum(int(r['retries']) for r in rs)} |")
+    return "\n".join(lines)
+
+
+def report(paths) -> list:
+    """Print the merged study of the CSVs ``paths``: summary, whole table, counts."""
+    rows = merged(paths)
+    print(grid_summary(rows))
+    print()
+    print(table(rows))
+    print()
+    print(summary(rows))
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--nodes", type=int, nargs="+", default=GRID["nodes"])
@@ -171,7 +221,11 @@ def main(argv=None):
     ap.add_argument("--end-time", type=float, default=1000.0)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default="out/robustness")
+    ap.add_argument("--report", nargs="+", metavar="CSV",
+                    help="merge these study CSVs and print their tables (runs nothing)")
     args = ap.parse_args(argv)
+    if args.report:
+        return report(args.report)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     log = out / "robustness.csv"

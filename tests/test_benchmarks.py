@@ -345,3 +345,35 @@ def test_robustness_study_rows_table_and_resume(tmp_path, capsys):
     stopped = bench._safe_run({"nodes": 300, "seed": 0, "plate_density": 1.5,
                                "yield_stress": 0.3, "eta_lower": -1.0}, 6.0, str(tmp_path))
     assert stopped["completed"] is False and "eta_lower" in stopped["stop"]
+
+
+def test_robustness_report_merges_studies(tmp_path, capsys):
+    """``--report``: rows of several study CSVs merged (the first file holding a setting
+    gives its row), summarised per node count and lower-layer viscosity; nothing run."""
+    import csv
+    bench = load_benchmark("robustness")
+
+    def row(nodes, seed, eta, completed=True, dev=1e-3, angle=0.5, pieces=1, retries=0):
+        return {"nodes": nodes, "seed": seed, "plate_density": 1.5, "yield_stress": 0.3,
+                "eta_lower": eta, "completed": completed, "t_reached": 1000.0, "steps": 200,
+                "max_area_deviation": dev, "outline_crossings": 0, "min_angle": angle,
+                "final_nodes": nodes, "injected": 1, "removed": 0, "merged": 0,
+                "retries": retries, "pieces": pieces, "seconds": 1.0, "stop": ""}
+
+    def write(path, rows):
+        with open(path, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=bench.COLUMNS)
+            w.writeheader()
+            w.writerows(rows)
+
+    write(tmp_path / "a.csv", [row(300, 0, 1.0, dev=2e-3, pieces=3, retries=4)])
+    write(tmp_path / "b.csv", [row(300, 0, 1.0, completed=False, dev=0.5),
+                               row(300, 1, 1.0, angle=1e-9, retries=1),
+                               row(1000, 0, 100.0, dev=1e-5)])
+    rows = bench.main(["--report", str(tmp_path / "a.csv"), str(tmp_path / "b.csv"),
+                       "--out", str(tmp_path / "unused")])
+    assert len(rows) == 3 and not (tmp_path / "unused").exists()
+    out = capsys.readouterr().out
+    assert "| 300 | 1 | 2 | 2 | 2.0e-03 | 1e-09 | 0 | 3 | 5 |" in out
+    assert "| 1,000 | 100 | 1 | 1 | 1.0e-05 | 0.5 | 0 | 1 | 0 |" in out
+    assert "3 of 3 runs completed" in out

@@ -39,8 +39,8 @@ import numpy as np
 
 COLUMNS = ["nodes", "seed", "plate_density", "yield_stress", "eta_lower", "completed",
            "t_reached", "steps", "max_area_deviation", "outline_crossings", "min_angle",
-           "final_nodes", "injected", "removed", "merged", "retries", "pieces", "seconds",
-           "stop"]
+           "final_nodes", "injected", "removed", "merged", "retries", "inverted",
+           "non_delaunay", "pieces", "seconds", "stop"]
 GRID = {"nodes": [300, 1000, 3000], "seeds": [0, 1, 2, 3, 4], "plate_density": [1.5, 3.0],
         "yield_stress": [0.05, 0.3], "eta_lower": [1.0, 100.0]}
 
@@ -88,9 +88,16 @@ def run_one(setting, end_time: float, out: str) -> dict:
                min_angle=float(d["min_angle"].min()), final_nodes=int(d["nodes"][-1]),
                injected=int(d["injected"].sum()), removed=int(d["removed"].sum()),
                merged=int(d["merged"].sum()), retries=int(d["retries"].sum()),
-               pieces=len(sim.outlines.loops),
+               **mesh_checks(d), pieces=len(sim.outlines.loops),
                seconds=round(seconds, 1), stop=stop)
     return row
+
+
+def mesh_checks(d) -> dict:
+    """The most inverted triangles and non-Delaunay edges at the end of any step, from a
+    run's diagnostics columns ``d``."""
+    return {"inverted": int(d["inverted_triangles"].max()),
+            "non_delaunay": int(d["non_delaunay_edges"].max())}
 
 
 def _safe_run(setting, end_time, out):
@@ -174,8 +181,24 @@ def merged(paths) -> list:
     rows = {}
     for path in paths:
         for name, row in read_done(Path(path)).items():
-            rows.setdefault(name, row)
+            if name not in rows:
+                rows[name] = _with_mesh_checks(row, Path(path).parent / name)
     return sorted(rows.values(), key=lambda r: tuple(float(r[k]) for k in COLUMNS[:5]))
+
+
+def _with_mesh_checks(row: dict, folder: Path) -> dict:
+    """``row``, with the columns its study's CSV predates read from the run's folder:
+    the mesh checks from its diagnostics, the pieces from its last checkpoint (left
+    empty if the run's folder is not there)."""
+    import json
+    row = dict(row)
+    if row.get("inverted", "") == "" and (folder / "diagnostics.csv").exists():
+        from skfem_nem.apps.output import read_csv_columns
+        row.update(mesh_checks(read_csv_columns(folder / "diagnostics.csv")))
+    if row.get("pieces", "") == "" and (folder / "checkpoint.json").exists():
+        meta = json.loads((folder / "checkpoint.json").read_text())
+        row["pieces"] = len(meta.get("outlines", [None]))   # before breakup: one outline
+    return row
 
 
 def grid_summary(rows) -> str:
@@ -187,17 +210,26 @@ def grid_summary(rows) -> str:
         groups.setdefault((int(r["nodes"]), float(r["eta_lower"])), []).append(r)
     per = len(GRID["seeds"]) * len(GRID["plate_density"]) * len(GRID["yield_stress"])
     lines = [f"| nodes | eta_lower | runs measured (of {per}) | completed | largest area "
-             f"deviation | smallest angle (deg) | outline crossings | most pieces | retried "
-             f"steps |", "|" + "---|" * 9]
+             f"deviation | smallest angle (deg) | outline crossings | inverted, non-Delaunay "
+             f"| most pieces | retried steps |", "|" + "---|" * 10]
     for (n, e), rs in sorted(groups.items()):
         lines.append(
             f"| {n:,} | {e:g} | {len(rs)} | {sum(str(r['completed']) == 'True' for r in rs)} "
             f"| {max(float(r['max_area_deviation']) for r in rs):.1e} "
             f"| {min(float(r['min_angle']) for r in rs):.2g} "
-            f"| {max(int(r['outline_crossings']) for r in rs)} "
+            f"| {max(int(r['outline_crossings']) for r in rs)} | {_checked(rs)} "
             f"| {max(int(r.get('pieces') or 1) for r in rs)} "
             f"| {sum(int(r['retries']) for r in rs)} |")
     return "\n".join(lines)
+
+
+def _checked(rows) -> str:
+    """Most inverted triangles and non-Delaunay edges over the rows, and how many rows
+    are unchecked (their run's diagnostics missing)."""
+    known = [r for r in rows if str(r.get("inverted", "")) != ""]
+    text = (f"{max(int(r['inverted']) for r in known)}, "
+            f"{max(int(r['non_delaunay']) for r in known)}") if known else "-"
+    return text if len(known) == len(rows) else f"{text} ({len(rows) - len(known)} unchecked)"
 
 
 def report(paths) -> list:

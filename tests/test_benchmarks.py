@@ -325,6 +325,7 @@ def test_robustness_study_rows_table_and_resume(tmp_path, capsys):
         assert r["t_reached"] == pytest.approx(6.0) and r["steps"] >= 2
         assert 0 <= r["max_area_deviation"] < 1e-2 and r["outline_crossings"] == 0
         assert r["min_angle"] > 0 and r["final_nodes"] > 300 and r["pieces"] == 1
+        assert r["inverted"] == 0 and r["non_delaunay"] == 0
     out = capsys.readouterr().out
     assert "| 300 | 0 | 3 | 0.3 | 1 | True | 6 |" in out
     assert "2 of 2 runs completed" in out
@@ -366,14 +367,22 @@ def test_robustness_report_merges_studies(tmp_path, capsys):
             w.writeheader()
             w.writerows(rows)
 
-    write(tmp_path / "a.csv", [row(300, 0, 1.0, dev=2e-3, pieces=3, retries=4)])
+    first = row(300, 0, 1.0, dev=2e-3, pieces=3, retries=4)
+    write(tmp_path / "a.csv", [{**first, "inverted": 0, "non_delaunay": 0}])
     write(tmp_path / "b.csv", [row(300, 0, 1.0, completed=False, dev=0.5),
-                               row(300, 1, 1.0, angle=1e-9, retries=1),
+                               {**row(300, 1, 1.0, angle=1e-9, retries=1), "pieces": ""},
                                row(1000, 0, 100.0, dev=1e-5)])
+    # a study written before the mesh checks: read from the run's diagnostics if there
+    run = tmp_path / bench.name_of(row(300, 1, 1.0))
+    run.mkdir()
+    (run / "diagnostics.csv").write_text("time,inverted_triangles,non_delaunay_edges\n"
+                                         "1,0,0\n2,0,2\n")
+    (run / "checkpoint.json").write_text('{"outlines": [[0, 1, 2], [3, 4, 5]]}')
     rows = bench.main(["--report", str(tmp_path / "a.csv"), str(tmp_path / "b.csv"),
                        "--out", str(tmp_path / "unused")])
     assert len(rows) == 3 and not (tmp_path / "unused").exists()
     out = capsys.readouterr().out
-    assert "| 300 | 1 | 2 | 2 | 2.0e-03 | 1e-09 | 0 | 3 | 5 |" in out
-    assert "| 1,000 | 100 | 1 | 1 | 1.0e-05 | 0.5 | 0 | 1 | 0 |" in out
+    assert "| 300 | 1 | 2 | 2 | 2.0e-03 | 1e-09 | 0 | 0, 2 | 3 | 5 |" in out
+    assert [str(r["pieces"]) for r in rows] == ["3", "2", "1"]   # the 2 from the checkpoint
+    assert "| 1,000 | 100 | 1 | 1 | 1.0e-05 | 0.5 | 0 | - (1 unchecked) | 1 | 0 |" in out
     assert "3 of 3 runs completed" in out

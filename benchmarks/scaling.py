@@ -14,9 +14,12 @@ stopped and reported as such; a size whose reference solve takes longer than
 that is skipped with the solvers that follow it.
 
 **Sinking plate**: ``skfem-nem sinking-plate --nodes N --max-steps 3 --solver S``
-in a subprocess for each ``N`` and solver; the mean ``solve_seconds`` (spaces,
-assembly and Picard solves) and ``step_seconds`` of steps 2 and 3 (step 1
-compiles kernels), best of ``--repeat``, and the plate depth after step 3.
+in a subprocess for each ``N`` and solver; the mean seconds of steps 2 and 3 (step 1
+compiles kernels) split as the diagnostics split them (basis, Stokes assembly and
+linear solver summed over the Picard iterations, the mesh's evolution, the whole
+step), best of ``--repeat``; the step's microseconds per node and their ratio to the
+first size's (linear cost: 1), Picard iterations, the plate depth after step 3 and the
+peak memory of the run's process.
 
 Prints markdown tables. Quick run::
 
@@ -132,38 +135,57 @@ def solcx_table(sizes, contrasts, solvers, repeat, max_seconds, maxiter):
                       f"{r['peak_mb']:.0f} |", flush=True)
 
 
+#: the parts of a plate step in its diagnostics, in the order of the table
+STEP_PARTS = ("basis", "assembly", "solver", "evolution", "step")
+
+
 def plate_run(n, solver, out):
-    """One 3-step sinking-plate run; (solve s, step s, Picard iterations, depth)."""
-    cmd = [sys.executable, "-c", "import sys; from skfem_nem.apps.cli import main; "
-           "sys.exit(main(sys.argv[1:]))", "sinking-plate", "--nodes", str(n),
-           "--max-steps", "3", "--solver", solver, "-o", out, "--quiet"]
-    subprocess.run(cmd, check=True, capture_output=True)
+    """One 3-step sinking-plate run: the mean seconds of steps 2-3 per part of
+    :data:`STEP_PARTS`, the nodes, Picard iterations, the depth after step 3 and the
+    peak resident memory (MB) of the run's process."""
+    cmd = [sys.executable, "-c", "import resource, sys; from skfem_nem.apps.cli import main; "
+           "rc = main(sys.argv[1:]); print('PEAK_KB', resource.getrusage("
+           "resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(rc)",
+           "sinking-plate", "--nodes", str(n), "--max-steps", "3", "--solver", solver,
+           "-o", out, "--quiet"]
+    done = subprocess.run(cmd, check=True, capture_output=True, text=True)
+    peak = float(done.stderr.split("PEAK_KB")[-1].split()[0]) / 1024
     with open(Path(out) / "diagnostics.csv") as fh:
         rows = list(csv.DictReader(fh))
     later = rows[1:] or rows
-    return (np.mean([float(r["solve_seconds"]) for r in later]),
-            np.mean([float(r["step_seconds"]) for r in later]),
-            sum(int(r["picard_iterations"]) for r in rows), float(rows[-1]["plate_depth"]))
+    seconds = {p: np.mean([float(r[f"{p}_seconds"]) for r in later]) for p in STEP_PARTS}
+    return {"seconds": seconds, "nodes": int(rows[-1]["nodes"]), "peak_mb": peak,
+            "picard": sum(int(r["picard_iterations"]) for r in rows),
+            "depth": float(rows[-1]["plate_depth"])}
 
 
 def plate_table(sizes, solvers, repeat):
-    """Markdown rows of the sinking-plate study."""
-    print("\nSinking plate, 3 steps: mean solve / step seconds of steps 2-3 (best of "
-          f"{repeat}), Picard iterations, plate depth after step 3\n")
-    print("| nodes | solver | solve s | step s | Picard its | plate depth | solve / "
-          f"{solvers[0]} |")
-    print("|---|---|---|---|---|---|---|")
+    """Markdown rows of the sinking-plate study: the step split into its parts, and
+    the step's seconds per node against the first size's."""
+    print("\nSinking plate, 3 steps: mean seconds of steps 2-3 (best of "
+          f"{repeat}) for the basis, the Stokes assembly and the linear solver (summed over "
+          "the Picard iterations), the mesh's evolution and the whole step; Picard "
+          "iterations, plate depth after step 3, peak memory\n")
+    print("| drawn nodes | nodes | solver | basis s | assembly s | solver s | evolution s | "
+          "step s | step us per node | vs first | Picard its | plate depth | peak MB |")
+    print("|---" * 13 + "|")
+    first = {}
     for n in sizes:
-        first = None
         for solver in solvers:
             best = None
             for _ in range(repeat):
                 with tempfile.TemporaryDirectory() as tmp:
                     r = plate_run(n, solver, tmp)
-                best = r if best is None or r[0] < best[0] else best
-            first = best[0] if first is None else first
-            print(f"| {n} | {solver} | {best[0]:.2f} | {best[1]:.2f} | {best[2]} | "
-                  f"{best[3]:.6f} | {best[0] / first:.2f} |", flush=True)
+                if best is None or r["seconds"]["step"] < best["seconds"]["step"]:
+                    best = r
+            s = best["seconds"]
+            per_node = s["step"] / best["nodes"] * 1e6
+            first.setdefault(solver, per_node)
+            print(f"| {n} | {best['nodes']} | {solver} | {s['basis']:.2f} | "
+                  f"{s['assembly']:.2f} | {s['solver']:.2f} | {s['evolution']:.2f} | "
+                  f"{s['step']:.2f} | {per_node:.0f} | {per_node / first[solver]:.2f} | "
+                  f"{best['picard']} | {best['depth']:.6f} | {best['peak_mb']:.0f} |",
+                  flush=True)
 
 
 def main(argv=None):

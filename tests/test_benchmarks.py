@@ -386,3 +386,24 @@ def test_robustness_report_merges_studies(tmp_path, capsys):
     assert [str(r["pieces"]) for r in rows] == ["3", "2", "1"]   # the 2 from the checkpoint
     assert "| 1,000 | 100 | 1 | 1 | 1.0e-05 | 0.5 | 0 | - (1 unchecked) | 1 | 0 |" in out
     assert "3 of 3 runs completed" in out
+
+
+# --------------------------------------------------------------------------
+# scaling: the sinking plate's step split into its parts
+# --------------------------------------------------------------------------
+
+def test_scaling_plate_table_splits_the_step(capsys):
+    """One 300-node plate (3 steps, in a subprocess): a row whose parts add up to at most
+    the step, its seconds per node (ratio 1 for the first size), the nodes, Picard
+    iterations and the peak memory of the run."""
+    bench = load_benchmark("scaling")
+    bench.main(["--sizes", "--plate-nodes", "300", "--plate-solvers", "schur",
+                "--repeat", "1"])
+    row = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("| 300 |")]
+    assert len(row) == 1
+    cells = [c.strip() for c in row[0].strip("|").split("|")]
+    assert len(cells) == 13 and cells[2] == "schur" and int(cells[1]) > 300
+    basis, assembly, solver, evolution, step = (float(c) for c in cells[3:8])
+    assert 0 < basis + assembly + solver + evolution <= step + 0.02   # 2-digit rounding
+    assert float(cells[8]) == pytest.approx(step / int(cells[1]) * 1e6, rel=0.1, abs=10)
+    assert cells[9] == "1.00" and int(cells[10]) >= 3 and float(cells[12]) > 50

@@ -229,6 +229,12 @@ def test_command_line_short_run(tmp_path):
     # the default: outline and interface as segments, merging, the area kept
     cfg = meta["config"]
     assert cfg["segments"] is True and cfg["merge"] is True and cfg["keep_area"] is True
+    # each step's seconds split: the parts within the Picard loop within the step
+    d = read_csv_columns(out / "diagnostics.csv")
+    parts = d["basis_seconds"] + d["assembly_seconds"] + d["solver_seconds"]
+    assert (d["assembly_seconds"] > 0).all() and (d["solver_seconds"] > 0).all()
+    assert (parts <= d["solve_seconds"]).all()
+    assert (d["solve_seconds"] + d["evolution_seconds"] <= d["step_seconds"]).all()
     sim = SinkingPlate.restart(out)
     assert sim.lm.triangulation.segment_keys.size > 0
     assert np.count_nonzero(sim.lm.node_fields["z0"] == sim.cfg.interface_z) > 100

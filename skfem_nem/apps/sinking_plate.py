@@ -510,6 +510,7 @@ class SinkingPlate:
         gauss = c.integration == "gauss"
         spaces = stokes_spaces(lm.mesh, "nem", npoints=3 if gauss else None,
                                integration=c.integration)
+        t_basis = _time.perf_counter() - t0
         mat, force, plate = self.materials(spaces)
         tau_old = from_ip_field(lm.ip_fields["stress"])
         ps_old = lm.ip_fields["plastic_strain"]
@@ -542,6 +543,7 @@ class SinkingPlate:
             self._give_back_area()
         # the next step's dt from this step's velocity
         self.dt_next = self._stable_dt(v)
+        t_evolution = _time.perf_counter() - t0 - t_solve
         A, cen = self.plate_area_centroid()
         tauII = second_invariant(r.tau)
         row = {"step": lm.step, "time": lm.time, "dt": dt,
@@ -562,7 +564,9 @@ class SinkingPlate:
                "removed": rep["removed"], "merged": rep["merged"],
                "nodes": lm.nodes.shape[0], "min_angle": rep["min_angle"],
                "picard_iterations": r.iterations, "solver_iterations": r.solution.iterations,
-               "solve_seconds": t_solve, "step_seconds": _time.perf_counter() - t0}
+               "basis_seconds": t_basis, "assembly_seconds": r.seconds["assembly"],
+               "solver_seconds": r.seconds["solver"], "solve_seconds": t_solve,
+               "evolution_seconds": t_evolution, "step_seconds": _time.perf_counter() - t0}
         self._last = (spaces, r, plate)
         return row
 

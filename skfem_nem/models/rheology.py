@@ -452,6 +452,9 @@ class VEPStep:
         Picard iterations and the final relative velocity change.
     history
         Relative velocity change of each iteration.
+    seconds
+        Time the Picard iterations spent in the Stokes ``"assembly"`` and in the
+        linear ``"solver"`` (summed over the iterations).
     """
 
     tau: np.ndarray
@@ -465,6 +468,7 @@ class VEPStep:
     iterations: int
     residual: float
     history: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
 
 
 def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: float,
@@ -596,6 +600,7 @@ class _PicardResult:
     iterations: int
     residual: float
     history: list
+    seconds: dict
 
 
 def _checked_stress(spaces: StokesSpaces, tau_old, dt, rotation: str) -> np.ndarray:
@@ -657,11 +662,14 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
     iterate until the relative velocity change is below ``tol``; ``solve``:
     the solver keywords of :func:`solve_stokes_bc`."""
     history = []
+    seconds = {"assembly": 0.0, "solver": 0.0}
     res, weight, du_last = np.inf, 1.0, None
     for it in range(1, maxiter + 1):
         tau0 = (eta_eff * st.chi)[None, None] * st.rotated(G)
         sol = solve_stokes_bc(spaces, eta_eff, st.load, tau0, *walls, constraints=constraints,
                               **solve)
+        for part in seconds:
+            seconds[part] += sol.info[f"{part}_seconds"]
         G = velocity_gradient(spaces, sol)
         eps = strain_rate(G)
         eta_new = _plastic_viscosity(st, eps, G)
@@ -685,7 +693,7 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
         raise PicardNotConverged(f"visco-elasto-plastic Picard iterations did not converge: "
                                  f"{maxiter} iterations, relative velocity change {res:.3e} > "
                                  f"tol {tol:.1e} (raise maxiter or min_viscosity, or shorten dt)")
-    return _PicardResult(sol, G, eps, eta_eff, it, res, history)
+    return _PicardResult(sol, G, eps, eta_eff, it, res, history, seconds)
 
 
 def _vep_result(st: _StepSetup, pic: _PicardResult) -> VEPStep:
@@ -704,4 +712,4 @@ def _vep_result(st: _StepSetup, pic: _PicardResult) -> VEPStep:
                    plastic_strain_rate=pl, plastic_rate_II=plII,
                    plastic_strain=st.plastic_strain + st.dt * plII, eta_eff=pic.eta_eff,
                    yielded=factor < 1.0, iterations=pic.iterations, residual=pic.residual,
-                   history=pic.history)
+                   history=pic.history, seconds=pic.seconds)

@@ -96,6 +96,7 @@ on every rank (``docs/parallel.md``).
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple, Optional, Sequence, Union
 
@@ -396,7 +397,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         e.g. the net flux through a material outline (:func:`outline_flux`).
     cache
         A :class:`StokesCache` shared by solves with ``solver="fgmres"`` (AMG
-        hierarchy and start vector); ``ValueError`` with other solvers.
+        hierarchy and start vector) or ``"schur"`` (start vector); ``ValueError``
+        with other solvers.
 
     Returns
     -------
@@ -408,7 +410,9 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         ``info["bubble"]`` the condensed bubble dofs (``spaces.bbasis``), and
         ``info["assembled_triangles"]`` the triangles this process assembled
         (all of them; with ``solver="petsc"`` on several MPI ranks its strip, the
-        ranks sharing the assembly; 0 for a given ``system``).
+        ranks sharing the assembly; 0 for a given ``system``);
+        ``info["assembly_seconds"]`` (assembly and boundary conditions) and
+        ``info["solver_seconds"]`` (the linear solve) the time each took.
 
     Raises
     ------
@@ -419,15 +423,18 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     check_solver(solver, cache)
     if not (np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive number, got {tol}")
+    t0 = time.perf_counter()
     sys_, share, assembled = _system(spaces, solver, system, eta, f, tau0)
     D, uD = fixed_velocity(spaces, free_slip, no_slip, prescribed)
     if pressure_mean is None:
         pressure_mean = walls_fix_pressure(spaces, D)
     red = _reduce(spaces, sys_, D, uD, pressure_mean, constraints, share)
+    t1 = time.perf_counter()
     info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean,
-            "assembled_triangles": assembled}
+            "assembled_triangles": assembled, "assembly_seconds": t1 - t0}
     x = SOLVERS[solver](red.problem, tol, maxiter, info,
                         **({} if cache is None else {"cache": cache}))
+    info["solver_seconds"] = time.perf_counter() - t1
     return _stokes_solution(spaces, sys_, red, x, solver, info)
 
 

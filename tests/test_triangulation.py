@@ -343,3 +343,32 @@ def test_batch_queries_on_a_side_straight_to_round_off(seed, k):
     # (not asserted: linear precision there; a side node inside the hull by an ulp makes
     # triangles 1e-16 thin, and the areas of a point between them are ill-conditioned)
     assert np.allclose(batch.sum(axis=1), 1.0) and (batch >= -1e-12).all()
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2 ** 16), n=st.integers(30, 120), k=st.integers(1, 12))
+def test_stars_and_edges_stay_exact_through_vertex_removals(seed, n, k):
+    """After vertices are taken out one by one (the triangle kept per vertex as a hint
+    goes stale), every interior vertex's star is the walk from its lowest-numbered
+    triangle, as a fresh search gives it, and the edges are the unique sorted vertex
+    pairs of the triangles."""
+    from skfem_nem.geometry.stars import star_of
+    rng = np.random.default_rng(seed)
+    tri = Triangulation(rng.random((n, 2)))
+    removed = set()
+    for v in rng.permutation(n).tolist():
+        if len(removed) == k:
+            break
+        try:
+            tri.remove_vertex(v)
+        except ValueError:      # on the hull and not removable
+            continue
+        removed.add(v)
+    T = tri.triangles
+    for v in set(range(n)) - removed:
+        first = int(np.flatnonzero((T == v).any(axis=1))[0])
+        ref, closed = star_of(T, tri.neighbours, v, first)
+        if closed:
+            np.testing.assert_array_equal(tri.star(v), ref)
+    e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
+    np.testing.assert_array_equal(tri.edges, np.unique(e, axis=0))

@@ -464,7 +464,7 @@ class NodeRemoval:
     def _merge(self, order):
         tri = self.triangulation
         n = tri.npoints
-        E = tri.edges
+        ptr, adj = _neighbour_lists(tri.edges, n)
         blocked = np.zeros(n, dtype=bool)
         alive = np.ones(n, dtype=bool)
         removed = merged = 0
@@ -476,7 +476,8 @@ class NodeRemoval:
                 continue
             self._take_out(v, merge)
             alive[v] = False
-            blocked[E[(E == v).any(axis=1)].ravel()] = True
+            blocked[v] = True                       # and its neighbours before the merges
+            blocked[adj[ptr[v]:ptr[v + 1]]] = True
             removed += merge is None
             merged += merge is not None
         tri.make_delaunay(on_flips=self._on_flips)
@@ -577,3 +578,12 @@ class NodeRemoval:
                 fold.append((ang, v))
         fold = np.array([v for _, v in sorted(fold)], dtype=np.int64)
         return np.r_[fold, crowded[~np.isin(crowded, fold)]]
+
+
+def _neighbour_lists(E: np.ndarray, n: int):
+    """CSR neighbour lists of the n nodes from the edges E (k, 2): node v's neighbours
+    are ``adj[ptr[v]:ptr[v + 1]]``."""
+    ends = np.r_[E[:, 0], E[:, 1]]
+    order = np.argsort(ends, kind="stable")
+    adj = np.r_[E[:, 1], E[:, 0]][order]
+    return np.searchsorted(ends[order], np.arange(n + 1)), adj

@@ -279,7 +279,11 @@ class Triangulation:
         T = self.triangles
         e = np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]])
         e.sort(axis=1)
-        return np.unique(e, axis=0)
+        n = np.int64(max(self.npoints, 1))
+        # one integer key per edge: a 1-D unique (a sort) instead of the much slower
+        # row-wise unique; the keys sort as the pairs do
+        keys = np.unique(e[:, 0].astype(np.int64) * n + e[:, 1])
+        return np.stack([keys // n, keys % n], axis=1)
 
     @property
     def segments(self) -> np.ndarray:
@@ -578,17 +582,31 @@ class Triangulation:
         return fan_of(self.triangles, self.neighbours, v, self._first_with(v))
 
     def _first_with(self, v: int) -> int:
-        hit = np.flatnonzero((self.triangles == v).any(axis=1))
-        if not hit.size:
+        """A triangle with vertex v. A triangle per vertex is kept as a hint, checked on
+        use and rebuilt (one pass over the triangles) when it no longer holds v: a
+        sequence of local operations (removing many vertices one by one) then costs
+        time in proportion to their number, not to the mesh size each."""
+        hint = getattr(self, "_hint", None)
+        if hint is not None and v < hint.size:
+            t = hint[v]
+            if 0 <= t < self.ntriangles and (self.triangles[t] == v).any():
+                return int(t)
+        T = self.triangles
+        hint = np.full(self.npoints, -1, dtype=np.int64)
+        hint[T.ravel()[::-1]] = np.repeat(np.arange(T.shape[0]), 3)[::-1]
+        self._hint = hint
+        if v >= hint.size or hint[v] < 0:
             raise ValueError(f"node {v} is in no triangle")
-        return int(hit[0])
+        return int(hint[v])
 
     def _around(self, v: int):
-        """``(triangles, closed)``: v's star, or its fan if v is on the hull."""
+        """``(triangles, closed)``: v's star, from its lowest-numbered triangle (the
+        same whichever triangle the walk starts from), or its fan if v is on the hull."""
         t0 = self._first_with(v)
         star, closed = star_of(self.triangles, self.neighbours, v, t0)
-        return (star, True) if closed else (fan_of(self.triangles, self.neighbours, v, t0),
-                                            False)
+        if closed:
+            return np.roll(star, -int(np.argmin(star))), True
+        return fan_of(self.triangles, self.neighbours, v, t0), False
 
     def _straight(self, v: int, fan) -> bool:
         """Whether the hull node v lies exactly between the two ends of its ``fan``."""

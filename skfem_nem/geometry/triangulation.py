@@ -280,8 +280,7 @@ class Triangulation:
         e = np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]])
         e.sort(axis=1)
         n = np.int64(max(self.npoints, 1))
-        # one integer key per edge: a 1-D unique (a sort) instead of the much slower
-        # row-wise unique; the keys sort as the pairs do
+        # a key per edge, sorted as the pairs: a 1-D unique, much faster than by rows
         keys = np.unique(e[:, 0].astype(np.int64) * n + e[:, 1])
         return np.stack([keys // n, keys % n], axis=1)
 
@@ -582,10 +581,8 @@ class Triangulation:
         return fan_of(self.triangles, self.neighbours, v, self._first_with(v))
 
     def _first_with(self, v: int) -> int:
-        """A triangle with vertex v. A triangle per vertex is kept as a hint, checked on
-        use and rebuilt (one pass over the triangles) when it no longer holds v: a
-        sequence of local operations (removing many vertices one by one) then costs
-        time in proportion to their number, not to the mesh size each."""
+        """A triangle with vertex v, from a hint per vertex checked on use and rebuilt
+        when stale: removing vertices one by one costs no scan of the mesh each."""
         hint = getattr(self, "_hint", None)
         if hint is not None and v < hint.size:
             t = hint[v]

@@ -396,9 +396,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         imposed by Lagrange multipliers (returned in ``info["multipliers"]``);
         e.g. the net flux through a material outline (:func:`outline_flux`).
     cache
-        A :class:`StokesCache` shared by solves with ``solver="fgmres"`` (AMG
-        hierarchy and start vector) or ``"schur"`` (start vector); ``ValueError``
-        with other solvers.
+        A :class:`StokesCache` shared by solves with ``solver="schur"`` (start
+        vector) or ``"fgmres"`` (and AMG hierarchy); ``ValueError`` with others.
 
     Returns
     -------
@@ -409,10 +408,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         exert on the fluid (zero elsewhere), ``info["fixed"]`` those dofs,
         ``info["bubble"]`` the condensed bubble dofs (``spaces.bbasis``), and
         ``info["assembled_triangles"]`` the triangles this process assembled
-        (all of them; with ``solver="petsc"`` on several MPI ranks its strip, the
-        ranks sharing the assembly; 0 for a given ``system``);
-        ``info["assembly_seconds"]`` (assembly and boundary conditions) and
-        ``info["solver_seconds"]`` (the linear solve) the time each took.
+        (all of them; with ``solver="petsc"`` on several MPI ranks its strip; 0 for a
+        given ``system``); ``info["assembly_seconds"]``, ``info["solver_seconds"]``.
 
     Raises
     ------

@@ -277,12 +277,9 @@ class Triangulation:
     def edges(self) -> np.ndarray:
         """(ne, 2) unique edges, each sorted (i < j), lexicographically ordered."""
         T = self.triangles
-        e = np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]])
-        e.sort(axis=1)
-        n = np.int64(max(self.npoints, 1))
-        # a key per edge, sorted as the pairs: a 1-D unique, much faster than by rows
-        keys = np.unique(e[:, 0].astype(np.int64) * n + e[:, 1])
-        return np.stack([keys // n, keys % n], axis=1)
+        # the segments' edge keys (sorted as the pairs): a 1-D unique, faster than by rows
+        return segments_of(np.unique(pair_keys(np.concatenate(
+            [T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]))))
 
     @property
     def segments(self) -> np.ndarray:

@@ -328,7 +328,8 @@ def test_crossings_count_within_and_between_outlines():
 def test_a_step_whose_faces_would_cross_cuts_the_plate_there(tmp_path):
     """Every try of a step fails because two faces of the plate would cross (within a
     relocation): the plate is cut there, with a warning, and the step goes on; where one
-    of the two is the interface, the step fails as before."""
+    of the two is the interface, the interface segment is released instead (the outline
+    kept whole) and the step goes on."""
     from skfem_nem.evolution import StepTooLong
     cfg = PlateConfig(nodes=300, end_time=6.0, max_dt=2.0, output_interval=6.0)
     sim = SinkingPlate(cfg, tmp_path)
@@ -344,7 +345,7 @@ def test_a_step_whose_faces_would_cross_cuts_the_plate_there(tmp_path):
         return real(velocity, dt, **kw)
 
     lm.advance = crossing
-    with pytest.warns(RuntimeWarning, match="the plate is cut there"):
+    with pytest.warns(RuntimeWarning, match="the plate cut there"):
         row = sim.step(2.0)
     assert calls == [2.0, 1.0, 0.5, 0.25, 0.125, 0.125] and row["dt"] == 0.125
     assert len(sim.outlines.loops) == 2 and row["pinches"] == 1 and row["plate_pieces"] == 2
@@ -354,9 +355,75 @@ def test_a_step_whose_faces_would_cross_cuts_the_plate_there(tmp_path):
 
     def interface(velocity, dt, **kw):
         calls.append(dt)
-        raise StepTooLong("segments would cross: reduce dt", crossing=[faces[0], iface])
+        if len(calls) <= 5:
+            raise StepTooLong("segments would cross: reduce dt", crossing=[faces[0], iface])
+        return real(velocity, dt, **kw)
 
     lm.advance = interface
-    with pytest.raises(StepTooLong, match="would cross"), pytest.warns(RuntimeWarning):
-        sim.step(2.0)
-    assert len(calls) == 5 and len(sim.outlines.loops) == 2
+    with pytest.warns(RuntimeWarning, match="interface released"):
+        row = sim.step(2.0)
+    assert len(calls) == 6 and row["segments_released"] >= 1 and row["pinches"] == 1
+    tri = lm.triangulation
+    assert not (tri.segment_rows([iface]) >= 0).any()      # no longer a segment
+    for loop in sim.outlines.loops:                          # the outline is whole
+        assert (tri.segment_rows(np.c_[loop, np.roll(loop, -1)]) >= 0).all()
+
+
+def test_a_closing_interface_film_releases_the_interface(tmp_path):
+    """Two parts of the layer interface found closing within any step (a film of fluid
+    pinched out between them, as where the interface folds onto itself against the bottom
+    wall): the next step releases both segments instead of stopping, also after a restart
+    from the checkpoint a stopped run wrote; counted in that step's row. The outline and
+    the interface closing: only the interface's segment goes."""
+    cfg = PlateConfig(nodes=300, end_time=4.0, max_dt=2.0, output_interval=100.0,
+                      checkpoint_every=100)
+    sim = SinkingPlate(cfg, tmp_path)
+    tri = sim.lm.triangulation
+    rows = np.flatnonzero(tri.segment_source >= sim.outline_segments)[[5, 40]]
+    pair = tri.segments[rows].tolist()
+    sim._closing = ClosingFilm(int(rows[0]), int(rows[1]), False, 1e-13, "two parts close")
+    sim.checkpoint()
+    sim = SinkingPlate.restart(tmp_path)
+    tri, n0 = sim.lm.triangulation, sim.lm.triangulation.segments.shape[0]
+    row = sim.step(2.0)
+    tri = sim.lm.triangulation
+    assert row["segments_released"] == 2 and tri.segments.shape[0] == n0 - 2
+    assert not (tri.segment_rows(pair) >= 0).any() and sim._closing is None
+    check_constrained(sim.lm)
+    outline = np.flatnonzero(tri.segment_source < sim.outline_segments)[0]
+    inner = np.flatnonzero(tri.segment_source >= sim.outline_segments)[0]
+    pair = tri.segments[[outline, inner]].tolist()
+    sim._closing = ClosingFilm(int(outline), int(inner), False, 1e-13, "outline, interface")
+    row = sim.step(2.0)
+    tri = sim.lm.triangulation
+    assert row["segments_released"] >= 1
+    assert tri.segment_rows(pair).tolist()[0] >= 0 and tri.segment_rows(pair).tolist()[1] < 0
+
+
+def test_an_interface_film_is_released_whole():
+    """A hairpin of interface whose arms are 0.01 apart over most of their length (less
+    than a quarter of the spacing 0.1) next to a straight interface line far away: one
+    closing pair releases every facing segment of the arms at once, not those near the
+    bend (neighbours along the line) nor the far line; rows that are all the outline's
+    release nothing. The mesh stays constrained Delaunay."""
+    from skfem_nem.apps.plate_films import release_interface_film
+    from skfem_nem.geometry.polylines import close_segment_pairs
+    xs = np.linspace(0.2, 0.8, 13)
+    arms = np.r_[np.c_[xs, np.full(13, 0.5)], np.c_[xs[::-1], np.full(13, 0.51)]]
+    line = np.c_[xs, np.full(13, 0.2)]
+    p = square_nodes(300, 16, 3, jitter=0.3, margin=0.01)
+    d, _ = cKDTree(np.r_[arms, line]).query(p)
+    p = p[(d > 0.03) | (np.arange(p.shape[0]) < 64)]
+    k0 = p.shape[0]
+    hairpin, pl = k0 + np.arange(26), k0 + 26 + np.arange(13)
+    segs = np.r_[np.c_[hairpin[:-1], hairpin[1:]], np.c_[pl[:-1], pl[1:]]]
+    lm = LagrangianMesh(np.r_[p, arms, line], segments=segs)
+    tri = lm.triangulation
+    face = pair_rows(lm, [(hairpin[5], hairpin[6]), (hairpin[19], hairpin[20])])
+    assert release_interface_film(lm, face, tri.segments.shape[0], 0.1, 0.5) == 0
+    n = release_interface_film(lm, face, 0, 0.1, 0.5)
+    assert 10 < n < 24 and tri.segments.shape[0] == 37 - n
+    i, _, _ = close_segment_pairs(lm.nodes, tri.segments, 0.025, 4)
+    assert i.size == 0                                # no film left
+    assert (tri.segment_rows(np.c_[pl[:-1], pl[1:]].tolist()) >= 0).all()
+    check_constrained(lm)

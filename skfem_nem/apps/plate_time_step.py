@@ -20,12 +20,12 @@ import numpy as np
 from ..evolution.quality import area_shares
 from ..geometry.polylines import close_segment_pairs, segment_gaps
 
-__all__ = ["ClosingFilm", "stable_dt", "velocity_now", "film_dt", "hold_off_walls", "node_spacing",
-           "FILM_FRACTION",
-           "WALL_FRACTION", "FILM_WATCH", "FILM_HALVINGS"]
+__all__ = ["ClosingFilm", "stable_dt", "velocity_now", "film_dt", "film_apart",
+           "hold_off_walls", "node_spacing", "FILM_FRACTION", "WALL_FRACTION", "FILM_WATCH",
+           "FILM_HALVINGS"]
 
 #: an interface segment closer to the plate's outline than this fraction of the outline's
-#: node spacing is released (``SinkingPlate._release_film``): a film thinner than a
+#: node spacing is released (``plate_films``): a film thinner than a
 #: quarter of the spacing has no node inside and closes within a few steps
 FILM_FRACTION = 0.25
 #: a node approaching a wall moves at most this fraction of its distance to it per step
@@ -107,6 +107,13 @@ def stable_dt(lm, v: np.ndarray, c, outline_segments: int):
     return film_dt(lm, v, float(min(c.max_dt, lim.min(), wall.min())), c, outline_segments)
 
 
+def film_apart(cfl: float) -> int:
+    """Segments at most this many apart along a material line are never a film: a step
+    of ``cfl`` spacings brings them within :data:`FILM_WATCH` x cfl spacings of each other
+    anyway."""
+    return 2 * math.ceil(FILM_WATCH * cfl) + 2
+
+
 def film_dt(lm, v: np.ndarray, dt: float, c, outline_segments: int):
     """``dt``, halved until every film between two material lines (segments of ``lm``
     closer than :data:`FILM_WATCH` x cfl outline spacings: outline and interface, the
@@ -120,8 +127,7 @@ def film_dt(lm, v: np.ndarray, dt: float, c, outline_segments: int):
     cuts it in two there; elsewhere it stops)."""
     P, S = lm.nodes, lm.triangulation.segments
     watch = FILM_WATCH * c.cfl * c.outline_spacing * c.plate_thickness
-    apart = 2 * math.ceil(FILM_WATCH * c.cfl) + 2   # closer along a line: no film
-    i, j, gap = close_segment_pairs(P, S, watch, apart)
+    i, j, gap = close_segment_pairs(P, S, watch, film_apart(c.cfl))
     for _ in range(FILM_HALVINGS + 1):
         Q = P + dt * v
         closing = segment_gaps(Q[S[i, 0]], Q[S[i, 1]], Q[S[j, 0]], Q[S[j, 1]]) \

@@ -48,8 +48,8 @@ from ..evolution.lagrangian import LagrangianMesh
 from ..evolution.stepping import StepTooLong
 from ..coordinates import sibson_coordinates
 from ..geometry.nodesets import box_nodes, polyline_nodes
-from ..geometry.polylines import segment_distances
 from .plate_figures import plate_figures
+from .plate_films import release_interface_film, release_near_outline
 from .plate_outlines import PlateOutlines, polygon_area_centroid
 from .plate_time_step import (FILM_FRACTION, WALL_FRACTION, ClosingFilm,  # noqa: F401
                               hold_off_walls, node_spacing, stable_dt)
@@ -368,6 +368,7 @@ class SinkingPlate:
         # a film that closes within any step (_stable_dt), dealt with before the next
         self._closing = None
         self._pinches = 0
+        self._released = 0   # interface segments released before the step (a film closed)
         if _state is not None:
             closing = _state[1].get("closing")
             self._closing = None if closing is None else ClosingFilm(*closing)
@@ -452,29 +453,34 @@ class SinkingPlate:
         times); returns the diagnostics row."""
         self._check_films()
         try:
-            return self._tries(dt, retries)
+            row = self._tries(dt, retries)
         except StepTooLong as err:
-            if cuts < 1 or not self._cut_where_faces_cross(err):
+            if cuts < 1 or not self._resolve_crossing(err):
                 raise
-        return self.step(dt / 2 ** retries, retries, cuts - 1)
+            return self.step(dt / 2 ** retries, retries, cuts - 1)
+        row["segments_released"] += self._released    # (by a film closed before it)
+        self._released = 0
+        return row
 
-    def _cut_where_faces_cross(self, err: StepTooLong) -> bool:
-        """Where a step failed because two segments of the plate's outline would cross
-        (faces a film thinner than the mesh resolves apart, crossing within a
-        relocation), cut the plate there as at a closing film; whether it was cut."""
+    def _resolve_crossing(self, err: StepTooLong) -> bool:
+        """Where a step failed because two material lines would cross (a film thinner
+        than the mesh resolves, crossing within a relocation), deal with it as with a
+        closing film (:meth:`_check_films`): cut the plate there, or release the
+        interface; whether that was done."""
         if err.crossing is None:
             return False
         tri = self.lm.triangulation
         rows = tri.segment_rows(err.crossing)
-        if (rows < 0).any() or (tri.segment_source[rows] >= self.outline_segments).any():
+        if (rows < 0).any():
             return False
-        why = self._cut(int(rows[0]), int(rows[1]))
+        what = ("the interface released there" if (tri.segment_source[rows]
+                >= self.outline_segments).any() else "the plate cut there (a fold or a "
+                "spike: closed)")
+        why = self._close_film(int(rows[0]), int(rows[1]))
         if why is None:
             import warnings
-            warnings.warn(f"step {self.lm.step + 1} at t = {self.lm.time:.6g}: {err}; the "
-                          f"plate is cut there (a fold or a spike: closed) and the step "
-                          f"tried again",
-                          RuntimeWarning, stacklevel=3)
+            warnings.warn(f"step {self.lm.step + 1} at t = {self.lm.time:.6g}: {err}; {what} "
+                          f"and the step tried again", RuntimeWarning, stacklevel=3)
         return why is None
 
     def _tries(self, dt: float, retries: int) -> dict:
@@ -538,7 +544,8 @@ class SinkingPlate:
         # nodes injected on the outline's segments take their places in it
         segments = bool(lm.triangulation.segment_keys.size)
         self.outlines.renumber(lm.node_map, lm if segments else None)
-        released = self._release_film() if segments else 0
+        released = release_near_outline(lm, self.outlines, self.outline_segments,
+                                        self._spacing) if segments else 0
         if rep["merged"] and c.keep_area:
             self._give_back_area()
         # the next step's dt from this step's velocity
@@ -600,23 +607,6 @@ class SinkingPlate:
         except ValueError:
             pass
 
-    def _release_film(self) -> int:
-        """Release the interface segments the plate has come closer to than
-        :data:`FILM_FRACTION` of the outline's node spacing: there the film of upper fluid
-        between plate and interface is squeezed thinner than the mesh resolves, and the
-        interface, kept as edges, would be pushed through the plate's outline within a
-        step. Released, its nodes are ordinary fluid nodes (their initial height still
-        sets their viscosity); returns how many segments were released."""
-        tri, P = self.lm.triangulation, self.lm.nodes
-        rows = np.flatnonzero(tri.segment_source >= self.outline_segments)
-        if not rows.size:
-            return 0
-        seg = tri.segments[rows]
-        o = self.outlines.segment_pairs()
-        gap = segment_distances(P[seg[:, 0]], P[seg[:, 1]], P[o[:, 0]], P[o[:, 1]])
-        h = FILM_FRACTION * self.cfg.outline_spacing * self.cfg.plate_thickness
-        return self.lm.release_segments(rows[gap < h])
-
     def _stable_dt(self, v: np.ndarray) -> float:
         """The next step's dt from this step's nodal velocities v
         (:func:`~skfem_nem.apps.plate_time_step.stable_dt`); a film found closing within
@@ -626,26 +616,36 @@ class SinkingPlate:
 
     def _check_films(self) -> None:
         """What :meth:`_stable_dt` found at the end of the last step, before the next
-        step changes anything: where a film of plate closes within any step as the
-        plate necks, the plate breaks and its outline is cut in two there
-        (:meth:`PlateOutlines.pinch`); any other film closing within any step is a
-        ``RuntimeError`` saying where."""
+        step changes anything: a film closing within any step is closed
+        (:meth:`_close_film`), or, where that cannot be done, a ``RuntimeError`` saying
+        where and why."""
         closing, self._closing = self._closing, None
         if closing is None:
             return
-        why = ("one would pass through the other, which the mesh cannot follow"
-               if not closing.outline else self._cut(closing.first, closing.second))
+        why = self._close_film(closing.first, closing.second)
         if why is not None:
             self._closing = closing
             raise RuntimeError(f"{closing.message}: {why}")
 
-    def _cut(self, first: int, second: int):
-        """Cut the plate where its outline's segments ``first`` and ``second`` meet
-        (:meth:`PlateOutlines.pinch`), counted; None, or why not."""
-        why = self.outlines.pinch(self.lm, first, second,
-                                  self.cfg.outline_spacing * self.cfg.plate_thickness)
+    def _close_film(self, first: int, second: int):
+        """Close the film between rows ``first`` and ``second`` of the mesh's segments:
+        where both are the plate's outline (it necks, folds or spikes) cut it or close
+        the fold (:meth:`PlateOutlines.pinch`, counted); where one is the interface,
+        release the interface there (:func:`~.plate_films.release_interface_film`,
+        counted in the next step's row). None, or why not."""
+        if (self.lm.triangulation.segment_source[[first, second]]
+                >= self.outline_segments).any():
+            self._released += release_interface_film(
+                self.lm, [first, second], self.outline_segments, self._spacing, self.cfg.cfl)
+            return None
+        why = self.outlines.pinch(self.lm, first, second, self._spacing)
         self._pinches += why is None
         return why
+
+    @property
+    def _spacing(self) -> float:
+        """The plate outline's node spacing."""
+        return self.cfg.outline_spacing * self.cfg.plate_thickness
 
     # -- outputs ----------------------------------------------------------------
     @property

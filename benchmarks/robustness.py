@@ -12,10 +12,12 @@ plate ended in (it breaks where it necks through) and the wall time. A run that 
 the study. Each run writes its outputs in its own folder under
 ``--out``; the rows go to ``robustness.csv`` there as runs finish (a study can be
 resumed: finished runs are read back, not redone) and the markdown table is printed.
+With ``--continue-stopped`` the study's stopped runs are continued from the checkpoints
+their stops wrote, with today's code (a run's new row replaces the old one).
 
     python benchmarks/robustness.py [--nodes 300 1000 3000] [--seeds 0 1 2 3 4]
         [--plate-density 1.5 3] [--yield-stress 0.05 0.3] [--eta-lower 1 100]
-        [--jobs 2] [--end-time 1000] [--out out/robustness]
+        [--jobs 2] [--end-time 1000] [--out out/robustness] [--continue-stopped]
 
 A study spread over several folders (runs on several machines, or continued from a
 stop's checkpoint) is reported as one with ``--report``: the CSVs given are merged (the
@@ -60,17 +62,34 @@ def name_of(setting) -> str:
 
 def run_one(setting, end_time: float, out: str) -> dict:
     """One run; returns its row (a stopped run is a row too)."""
-    import warnings
-
-    from skfem_nem.apps.output import read_csv_columns
     from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate
 
     cfg = PlateConfig(end_time=end_time, output_interval=end_time, checkpoint_every=50,
                       **setting)
-    folder = Path(out) / name_of(setting)
     t0 = time.perf_counter()
-    sim = SinkingPlate(cfg, folder)
-    area0, _ = sim.plate_area_centroid()
+    sim = SinkingPlate(cfg, Path(out) / name_of(setting))
+    return _finish(sim, setting, sim.plate_area_centroid()[0], t0)
+
+
+def continue_one(row: dict, end_time: float, out: str) -> dict:
+    """Continue the stopped run of ``row`` from the checkpoint its stop wrote, with
+    today's code, to ``end_time``; returns its new row (the wall time adds up both
+    parts)."""
+    from skfem_nem.apps.sinking_plate import SinkingPlate, stored_config
+
+    setting = setting_of(row)
+    folder = Path(out) / name_of(setting)
+    t0 = time.perf_counter() - float(row.get("seconds") or 0.0)
+    sim = SinkingPlate.restart(folder, stored_config(folder, {"end_time": end_time}))
+    return _finish(sim, setting, sim.plate_area0, t0)
+
+
+def _finish(sim, setting, area0: float, t0: float) -> dict:
+    """Run ``sim`` to its end (or its stop: then a checkpoint) and return its row, the
+    plate's area measured against ``area0``."""
+    import warnings
+
+    from skfem_nem.apps.output import read_csv_columns
     stop = ""
     try:
         with warnings.catch_warnings():
@@ -80,7 +99,7 @@ def run_one(setting, end_time: float, out: str) -> dict:
         stop = (str(err).splitlines() or [type(err).__name__])[0][:160]
         sim.checkpoint()
     seconds = time.perf_counter() - t0
-    d = read_csv_columns(folder / "diagnostics.csv")
+    d = read_csv_columns(sim.out / "diagnostics.csv")
     row = dict(setting)
     row.update(completed=not stop, t_reached=float(sim.lm.time), steps=len(d["time"]),
                max_area_deviation=float(np.abs(d["plate_area"] / area0 - 1).max()),
@@ -100,16 +119,21 @@ def mesh_checks(d) -> dict:
             "non_delaunay": int(d["non_delaunay_edges"].max())}
 
 
-def _safe_run(setting, end_time, out):
+def _safe_run(job, end_time, out):
+    """The row of ``job``: a setting to run, or the row of a stopped run to continue."""
+    setting = job if "completed" not in job else setting_of(job)
     try:
-        return run_one(setting, end_time, out)
+        if job is setting:
+            return run_one(setting, end_time, out)
+        return continue_one(job, end_time, out)
     except Exception:  # a failure before the first step: still a row
         row = dict(setting, completed=False, stop=traceback.format_exc().splitlines()[-1])
         return {k: row.get(k, "") for k in COLUMNS}
 
 
 def _results(todo, args):
-    """The rows of the runs ``todo`` as they finish: in this process for one job, else
+    """The rows of the runs ``todo`` (settings to run, rows of stopped runs to
+    continue: :func:`_safe_run`) as they finish: in this process for one job, else
     in fresh (spawned) processes: forking a process whose numba threads are running
     is not safe."""
     if args.jobs == 1:
@@ -129,10 +153,22 @@ def read_done(path: Path) -> dict:
         return {}
     with open(path) as fh:
         rows = list(csv.DictReader(fh))
-    return {name_of({"nodes": int(r["nodes"]), "seed": int(r["seed"]),
-                     "plate_density": float(r["plate_density"]),
-                     "yield_stress": float(r["yield_stress"]),
-                     "eta_lower": float(r["eta_lower"])}): r for r in rows}
+    return {name_of(setting_of(r)): r for r in rows}
+
+
+def setting_of(row: dict) -> dict:
+    """The varied parameters of a study row."""
+    return {"nodes": int(row["nodes"]), "seed": int(row["seed"]),
+            "plate_density": float(row["plate_density"]),
+            "yield_stress": float(row["yield_stress"]), "eta_lower": float(row["eta_lower"])}
+
+
+def stopped(done: dict, out: Path, grid) -> list:
+    """The rows of ``done`` (by name) of the settings ``grid`` whose runs stopped and left
+    a checkpoint in ``out`` to continue from."""
+    rows = [done.get(name_of(s)) for s in grid]
+    return [r for r in rows if r is not None and str(r["completed"]) != "True"
+            and (out / name_of(setting_of(r)) / "checkpoint.json").exists()]
 
 
 def _rewrite(log: Path, rows) -> None:
@@ -253,6 +289,9 @@ def main(argv=None):
     ap.add_argument("--end-time", type=float, default=1000.0)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default="out/robustness")
+    ap.add_argument("--continue-stopped", action="store_true",
+                    help="also continue the study's stopped runs from the checkpoints "
+                         "their stops wrote, with today's code")
     ap.add_argument("--report", nargs="+", metavar="CSV",
                     help="merge these study CSVs and print their tables (runs nothing)")
     args = ap.parse_args(argv)
@@ -263,7 +302,8 @@ def main(argv=None):
     log = out / "robustness.csv"
     done = read_done(log)
     todo = [s for s in settings(args) if name_of(s) not in done]
-    rows = [done[name_of(s)] for s in settings(args) if name_of(s) in done]
+    if args.continue_stopped:
+        todo += stopped(done, out, settings(args))
     if done and set(next(iter(done.values()))) != set(COLUMNS):
         _rewrite(log, list(done.values()))    # a study begun with fewer columns
     new_file = not log.exists()
@@ -272,11 +312,12 @@ def main(argv=None):
         if new_file:
             w.writeheader()
         for k, row in enumerate(_results(todo, args), 1):
-            w.writerow({c: row.get(c, "") for c in COLUMNS})
-            fh.flush()
-            rows.append(row)
+            w.writerow({c: row.get(c, "") for c in COLUMNS})   # (the last row of a run
+            fh.flush()                                          # is the one read back)
+            done[name_of(row)] = row
             print(f"[{k}/{len(todo)}] {name_of(row)}: completed {row['completed']}, "
                   f"t = {row.get('t_reached', '')}", flush=True)
+    rows = [done[name_of(s)] for s in settings(args) if name_of(s) in done]
     rows.sort(key=lambda r: tuple(float(r[k]) for k in COLUMNS[:5]))
     print()
     print(table(rows))

@@ -348,6 +348,40 @@ def test_robustness_study_rows_table_and_resume(tmp_path, capsys):
     assert stopped["completed"] is False and "eta_lower" in stopped["stop"]
 
 
+def test_robustness_continues_stopped_runs(tmp_path, capsys, monkeypatch):
+    """A run that stops at its second step is a row with its reason and a checkpoint;
+    ``--continue-stopped`` continues it from there to the end (its new row replaces the
+    old one, steps and seconds counting both parts); without the option, or once
+    completed, nothing runs again."""
+    from skfem_nem.apps.sinking_plate import SinkingPlate
+    bench = load_benchmark("robustness")
+    args = ["--nodes", "300", "--seeds", "0", "--plate-density", "1.5", "--yield-stress",
+            "0.3", "--eta-lower", "100", "--end-time", "6", "--jobs", "1", "--out",
+            str(tmp_path)]
+    real = SinkingPlate.step
+
+    def failing(self, dt, *a, **kw):
+        if self.lm.step == 1:
+            raise RuntimeError("two parts of the layer interface close\nmore")
+        return real(self, dt, *a, **kw)
+
+    monkeypatch.setattr(SinkingPlate, "step", failing)
+    [first] = bench.main(args)
+    assert first["completed"] is False and first["steps"] == 1
+    assert first["stop"] == "two parts of the layer interface close"
+    assert bench.main(args)[0]["completed"] == "False"      # read back, not continued
+    monkeypatch.setattr(SinkingPlate, "step", real)
+    capsys.readouterr()
+    [row] = bench.main(args + ["--continue-stopped"])
+    assert "[1/1]" in capsys.readouterr().out
+    assert row["completed"] is True and row["t_reached"] == pytest.approx(6.0)
+    assert row["steps"] > 1 and row["seconds"] >= float(first["seconds"])
+    assert bench.read_done(tmp_path / "robustness.csv")[bench.name_of(row)]["completed"] \
+        == "True"
+    bench.main(args + ["--continue-stopped"])
+    assert "[1/" not in capsys.readouterr().out
+
+
 def test_robustness_report_merges_studies(tmp_path, capsys):
     """``--report``: rows of several study CSVs merged (the first file holding a setting
     gives its row), summarised per node count and lower-layer viscosity; nothing run."""

@@ -19,7 +19,8 @@ compiles kernels) split as the diagnostics split them (basis, Stokes assembly an
 linear solver summed over the Picard iterations, the mesh's evolution, the whole
 step), best of ``--repeat``; the step's microseconds per node and their ratio to the
 first size's (linear cost: 1), Picard iterations, the plate depth after step 3 and the
-peak memory of the run's process.
+peak memory of the run's process. ``--plate-solvers schur schur:refactor`` measures the
+default solver against itself factorising every solve (``REUSE_FACTOR`` off).
 
 Prints markdown tables. Quick run::
 
@@ -49,6 +50,9 @@ SOLVER_ORDER = ("direct", "schur", "schur-amg", "minres", "fgmres")
 # the direct solve of the whole system is run up to this many nodes (it took
 # 96 s at 10,000 nodes)
 DIRECT_MAX_NODES = 5000
+# the plate's solver "schur" factorising the viscous block at every solve, as before
+# the factorisation was kept between the Picard iterations (stokes_solvers.REUSE_FACTOR)
+REFACTOR = "schur:refactor"
 
 
 def _rss_kb() -> float:
@@ -142,12 +146,15 @@ STEP_PARTS = ("basis", "assembly", "solver", "evolution", "step")
 def plate_run(n, solver, out):
     """One 3-step sinking-plate run: the mean seconds of steps 2-3 per part of
     :data:`STEP_PARTS`, the nodes, Picard iterations, the depth after step 3 and the
-    peak resident memory (MB) of the run's process."""
-    cmd = [sys.executable, "-c", "import resource, sys; from skfem_nem.apps.cli import main; "
-           "rc = main(sys.argv[1:]); print('PEAK_KB', resource.getrusage("
+    peak resident memory (MB) of the run's process. ``solver`` is a solver of the
+    command line, or :data:`REFACTOR` (``"schur"`` factorising every solve)."""
+    setup = ("import skfem_nem.models.stokes_solvers as s; s.REUSE_FACTOR = False; "
+             if solver == REFACTOR else "")
+    cmd = [sys.executable, "-c", setup + "import resource, sys; from skfem_nem.apps.cli "
+           "import main; rc = main(sys.argv[1:]); print('PEAK_KB', resource.getrusage("
            "resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(rc)",
-           "sinking-plate", "--nodes", str(n), "--max-steps", "3", "--solver", solver,
-           "-o", out, "--quiet"]
+           "sinking-plate", "--nodes", str(n), "--max-steps", "3", "--solver",
+           "schur" if solver == REFACTOR else solver, "-o", out, "--quiet"]
     done = subprocess.run(cmd, check=True, capture_output=True, text=True)
     peak = float(done.stderr.split("PEAK_KB")[-1].split()[0]) / 1024
     with open(Path(out) / "diagnostics.csv") as fh:

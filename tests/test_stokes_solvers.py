@@ -105,11 +105,13 @@ def test_cache_reuses_hierarchy_and_warm_starts(square):
     assert cache.builds == 2
 
 
-def test_schur_warm_starts_from_the_cached_solution(square):
-    """``"schur"`` with a cache: the pressure CG of a second, slightly different
-    problem starts from the first solution, needs fewer iterations than a cold start
-    and gives the direct solution; a start worse than zero (another problem's
-    pressure scaled up) or of another size is not taken."""
+def test_schur_warm_starts_from_the_cached_solution(square, monkeypatch):
+    """``"schur"`` with a cache, factorising every solve: the pressure CG of a second,
+    slightly different problem starts from the first solution, needs fewer iterations
+    than a cold start and gives the direct solution; a start worse than zero (another
+    problem's pressure scaled up) or of another size is not taken."""
+    import skfem_nem.models.stokes_solvers as solvers
+    monkeypatch.setattr(solvers, "REUSE_FACTOR", False)
     sp_, _ = square
     ex = SolCx(1.0, 1e4)
     cache = StokesCache()
@@ -128,6 +130,37 @@ def test_schur_warm_starts_from_the_cached_solution(square):
     other = stokes_spaces(delaunay_mesh(box_nodes(300, seed=5)), "nem")
     s4 = solve_stokes(other, ex.viscosity, ex.force, solver="schur", cache=cache)
     assert not s4.info["warm_start"]
+
+
+def test_schur_reuses_its_factorisation_while_it_pays(square):
+    """``"schur"`` with a cache keeps the viscous factorisation: a second solve with a
+    slightly different viscosity (same pattern) runs FGMRES with the old factors, in
+    fewer iterations than the first solve's CG, to the direct solution; a viscosity far
+    from the factorised one (a contrast of 1e6 after a uniform one) takes more than
+    the allowed growth, so it factorises again, still to the direct solution; another
+    pattern factorises too."""
+    sp_, _ = square
+    ex = SolCx(1.0, 1e4)
+    cache = StokesCache()
+    s1 = solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", cache=cache)
+    lu = cache.factor
+    assert not s1.info["factor_reused"] and cache.factorisations == 1 and lu is not None
+    eta2 = lambda x: ex.viscosity(x) * (1 + 0.05 * np.sin(3 * x[1]))   # noqa: E731
+    s2 = solve_stokes(sp_, eta2, ex.force, solver="schur", cache=cache)
+    assert s2.info["factor_reused"] and cache.factor is lu and cache.factor_reuses == 1
+    assert s2.iterations < s1.iterations
+    _close(s2, solve_stokes(sp_, eta2, ex.force, solver="direct"), 1e-7)
+    cache = StokesCache()
+    solve_stokes(sp_, 1.0, ex.force, solver="schur", cache=cache)
+    lu = cache.factor
+    far = SolCx(1.0, 1e6)
+    s3 = solve_stokes(sp_, far.viscosity, far.force, solver="schur", cache=cache)
+    assert not s3.info["factor_reused"] and cache.factor is not lu
+    assert (cache.factorisations, cache.factor_reuses) == (2, 0)
+    _close(s3, solve_stokes(sp_, far.viscosity, far.force, solver="direct"), 1e-7)
+    other = stokes_spaces(delaunay_mesh(box_nodes(300, seed=5)), "nem")
+    s4 = solve_stokes(other, ex.viscosity, ex.force, solver="schur", cache=cache)
+    assert not s4.info["factor_reused"] and cache.factorisations == 3
 
 
 def test_cache_rebuilds_when_iterations_grow(square):

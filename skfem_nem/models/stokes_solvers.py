@@ -85,10 +85,17 @@ FGMRES_RESTART = 150
 # steps were the fastest of 1-4 steps and of 1-2 stationary cycles at 4,000 and
 # 16,000 nodes (SolCx, contrasts 1 and 1e6)
 VISCOUS_CG_STEPS = 2
-# a cached AMG hierarchy is rebuilt when a solve needs more than this factor
-# times the iterations of the solve it was built for (plus REBUILD_SLACK)
+# a cached AMG hierarchy is rebuilt (a kept factorisation of "schur" made again) when a
+# solve needs more than this factor times the iterations of the solve it was built for
+# (plus REBUILD_SLACK)
 REBUILD_GROWTH = 1.5
 REBUILD_SLACK = 10
+# "schur" keeps the viscous factorisation in its StokesCache for the next solves of the
+# same pattern (False: factorise every solve, as before; benchmarks/scaling.py measures
+# both). Kept, the later Picard iterations of a step take 16-32 FGMRES iterations with the
+# old factors against 38-44 CG iterations after a new factorisation (sinking plate,
+# 1,600-21,000 nodes): their solves are 2-3 times faster
+REUSE_FACTOR = True
 
 
 @dataclass
@@ -188,7 +195,20 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
     """Sparse LU of the viscous block, pressure CG on the Schur complement. With a
     ``cache`` (a :class:`StokesCache`), the CG starts from the pressure of the last
     solve where the sizes agree and it is a better start than zero (the Picard
-    iterations of a time step), and keeps this solve's; ``info["warm_start"]``."""
+    iterations of a time step), and keeps this solve's; ``info["warm_start"]``.
+    The cache also keeps the factorisation: a later solve whose viscous block has the
+    same pattern (the next Picard iterations, with new viscosities) does not factorise
+    again but runs :func:`fgmres` preconditioned by the kept factors
+    (:func:`_reuse_factor`), and factorises only if that takes more than
+    ``REBUILD_GROWTH`` times the iterations of the solve that factorised;
+    ``info["factor_reused"]``."""
+    if cache is not None and REUSE_FACTOR:
+        lu = cache.kept_factor(problem.A)
+        sol = None if lu is None else _reuse_factor(problem, lu, tol, maxiter, info, cache)
+        if sol is not None:
+            return sol
+        cache.factor = None                # (freed before the next one is made)
+    info["factor_reused"] = False
     try:
         lu = spla.splu(problem.A, permc_spec="MMD_AT_PLUS_A",
                        options=dict(SymmetricMode=True))
@@ -200,7 +220,52 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
     sol = schur_pressure_cg(problem, lu, tol, maxiter, None if x0 is None else x0[n1:], info)
     if cache is not None:
         cache.record(np.concatenate([sol.u, sol.p]), sol.iterations, False)
+        if REUSE_FACTOR:
+            cache.keep_factor(lu, problem.A, sol.iterations)
     return sol
+
+
+def _reuse_factor(problem: SaddlePointProblem, lu, tol: float, maxiter: int, info: dict,
+                  cache: StokesCache) -> Optional[SaddlePointSolution]:
+    """The solve of :func:`solve_schur` with a kept factorisation ``lu`` of an earlier
+    viscous block of the same pattern: :func:`fgmres` on the whole system with the block
+    upper-triangular preconditioner (``lu`` for the viscous block, the lumped
+    1/eta-weighted pressure mass for the Schur complement), from the cached start. A
+    fixed linear preconditioner, exact where the viscosity has not changed; where it
+    has, the Krylov space makes up the difference in a few more iterations. None (and
+    the factor dropped) if it does not converge within ``REBUILD_GROWTH`` times the
+    iterations of the solve that factorised, plus ``REBUILD_SLACK``."""
+    limit = min(maxiter, int(REBUILD_GROWTH * cache.factor_iterations + REBUILD_SLACK))
+    A = problem.A.tocsr()                          # CSR: faster products
+    matvec = saddle_matvec(problem, A)
+    precondition = _triangular_preconditioner(problem, lu.solve)
+    rhs = np.concatenate([problem.f, problem.g])
+    x0 = cache.start(rhs.size)
+    warm = x0 is not None and _norm(rhs - matvec(x0)) < _norm(rhs)
+    x, its, res = fgmres(matvec, precondition, rhs, x0 if warm else None, tol, limit,
+                         restart=min(FGMRES_RESTART, limit))
+    if not res <= tol:
+        cache.factor = None
+        return None
+    info.update(factor_reused=True, warm_start=warm)
+    cache.record(x, its, False)
+    cache.factor_reuses += 1
+    n1 = problem.n_velocity
+    p = problem.mean_free(x[n1:])
+    return SaddlePointSolution(x[:n1], p, its, problem.residual(x[:n1], p))
+
+
+def _triangular_preconditioner(problem: SaddlePointProblem, solve_A: Callable) -> Callable:
+    """The block upper-triangular preconditioner ``[[A, B^T], [0, -S_hat]]^-1`` of the
+    whole system, ``solve_A`` applying (an approximation of) ``A^-1`` and ``S_hat`` the
+    lumped 1/eta-weighted pressure mass ``dp``."""
+    n1, dp, B = problem.n_velocity, problem.dp, problem.B
+
+    def precondition(r):
+        zp = -r[n1:] / dp
+        return np.concatenate([solve_A(r[:n1] - B.T @ zp), zp])
+
+    return precondition
 
 
 class AMGViscousSolve:
@@ -446,7 +511,8 @@ def rigid_modes(ubasis, free: np.ndarray) -> np.ndarray:
 @dataclass
 class StokesCache:
     """What solvers ``"fgmres"`` and ``"schur"`` keep from one solve to the next:
-    the AMG hierarchy of the viscous block (``"fgmres"``) and the last solution.
+    the AMG hierarchy of the viscous block (``"fgmres"``), its factorisation
+    (``"schur"``, :data:`REUSE_FACTOR`) and the last solution.
 
     Pass one object to a sequence of solves of similar problems (the Picard
     iterations of a time step, successive time steps). The hierarchy is
@@ -455,7 +521,10 @@ class StokesCache:
     pattern changes or a solve needs more than ``REBUILD_GROWTH`` times the
     iterations of the solve it was built for. The last solution is the
     next solve's start where the sizes agree and it is a better start than
-    zero. ``builds`` and ``reuses`` count what happened.
+    zero. ``builds`` and ``reuses`` count what happened (``factorisations`` and
+    ``factor_reuses`` for the factorisation, kept while the pattern is the same and a
+    solve with it needs at most ``REBUILD_GROWTH`` times the iterations of the solve
+    that made it).
     """
 
     hierarchy: object = None
@@ -465,31 +534,39 @@ class StokesCache:
     builds: int = 0
     reuses: int = 0
     last_iterations: Optional[int] = field(default=None, repr=False)
+    factor: object = field(default=None, repr=False)
+    factor_pattern: Optional[tuple] = field(default=None, repr=False)
+    factor_iterations: Optional[int] = None
+    factorisations: int = 0
+    factor_reuses: int = 0
 
     def amg(self, problem: SaddlePointProblem):
         """The hierarchy for ``problem.A``: the kept one (refreshed) or a new one."""
         A = problem.A
-        pattern = (A.shape, A.format, A.indptr, A.indices)
+        pattern = _pattern_of(A)
         stale = (self.base_iterations is not None and self.last_iterations is not None
                  and self.last_iterations > REBUILD_GROWTH * self.base_iterations
                  + REBUILD_SLACK)
-        if self.hierarchy is not None and not stale and self._same(pattern):
+        if self.hierarchy is not None and not stale and _same_pattern(self.pattern, pattern):
             refresh_amg(self.hierarchy, A)
             self.reuses += 1
             return self.hierarchy, False
         self.hierarchy = viscous_amg(problem)
-        self.pattern = (A.shape, A.format, A.indptr.copy(), A.indices.copy())
+        self.pattern = _pattern_of(A, copy=True)
         self.base_iterations = None
         self.builds += 1
         return self.hierarchy, True
 
-    def _same(self, pattern: tuple) -> bool:
-        """True if ``pattern`` is the sparsity pattern the hierarchy was built for."""
-        if self.pattern is None:
-            return False
-        (s0, f0, p0, i0), (s1, f1, p1, i1) = self.pattern, pattern
-        return (s0 == s1 and f0 == f1 and p0.shape == p1.shape and i0.shape == i1.shape
-                and np.array_equal(p0, p1) and np.array_equal(i0, i1))
+    def kept_factor(self, A: sp.spmatrix):
+        """The kept factorisation (``"schur"``) if it was made for a viscous block of
+        the pattern of ``A``, else None."""
+        return self.factor if _same_pattern(self.factor_pattern, _pattern_of(A)) else None
+
+    def keep_factor(self, lu, A: sp.spmatrix, iterations: int) -> None:
+        """Keep the factorisation ``lu`` of ``A`` and the iterations of its solve."""
+        self.factor, self.factor_pattern = lu, _pattern_of(A, copy=True)
+        self.factor_iterations = iterations
+        self.factorisations += 1
 
     def start(self, n: int) -> Optional[np.ndarray]:
         """The last solution as a start vector of length ``n`` (None if the
@@ -503,6 +580,22 @@ class StokesCache:
         self.last_iterations = iterations
         if rebuilt or self.base_iterations is None:
             self.base_iterations = iterations
+
+
+def _pattern_of(A: sp.spmatrix, copy: bool = False) -> tuple:
+    """The sparsity pattern of the compressed matrix ``A``: shape, format, index arrays."""
+    if copy:
+        return A.shape, A.format, A.indptr.copy(), A.indices.copy()
+    return A.shape, A.format, A.indptr, A.indices
+
+
+def _same_pattern(a: Optional[tuple], b: tuple) -> bool:
+    """True if the patterns ``a`` (None: none kept) and ``b`` are equal."""
+    if a is None:
+        return False
+    (s0, f0, p0, i0), (s1, f1, p1, i1) = a, b
+    return (s0 == s1 and f0 == f1 and p0.shape == p1.shape and i0.shape == i1.shape
+            and np.array_equal(p0, p1) and np.array_equal(i0, i1))
 
 
 def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: dict,
@@ -525,14 +618,11 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
     """
     cache = StokesCache() if cache is None else cache
     ml, rebuilt = cache.amg(problem)
-    A, B = ml.levels[0].A, problem.B               # A as CSR: faster products
-    n1, dp = problem.n_velocity, problem.dp
+    A = ml.levels[0].A                             # A as CSR: faster products
+    n1 = problem.n_velocity
     matvec = saddle_matvec(problem, A)
-
-    def precondition(r):
-        zp = -r[n1:] / dp
-        zu = amg_cg(ml, A, r[:n1] - B.T @ zp, VISCOUS_CG_STEPS)
-        return np.concatenate([zu, zp])
+    precondition = _triangular_preconditioner(
+        problem, lambda r: amg_cg(ml, A, r, VISCOUS_CG_STEPS))
 
     rhs = np.concatenate([problem.f, problem.g])
     x0 = cache.start(rhs.size)

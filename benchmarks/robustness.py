@@ -25,6 +25,9 @@ first that holds a setting gives its row) and the summary by node count and lowe
 viscosity (the table of ``docs/sinking_plate.md``) and the whole table are printed::
 
     python benchmarks/robustness.py --report continued/robustness.csv out/robustness.csv
+
+The rows of the whole grid as measured for ``docs/sinking_plate.md`` are kept in
+``benchmarks/results/robustness.csv``.
 """
 from __future__ import annotations
 

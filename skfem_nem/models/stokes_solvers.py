@@ -94,7 +94,7 @@ REBUILD_SLACK = 10
 # same pattern (False: factorise every solve, as before; benchmarks/scaling.py measures
 # both). Kept, the later Picard iterations of a step take 16-32 FGMRES iterations with the
 # old factors against 38-44 CG iterations after a new factorisation (sinking plate,
-# 1,600-21,000 nodes): their solves are 2-3 times faster
+# 1,600-21,000 nodes): the linear solver's time of a step drops by 20-28% (docs/stokes.md)
 REUSE_FACTOR = True
 
 

@@ -8,7 +8,8 @@ the time step can, from the step's nodal velocities: the spacing limit (cfl), th
 between material lines (their gaps shrink by at most that fraction). Distances shrinking
 geometrically keep the step bounded; a film that closes within any step is returned to
 the caller: where the plate's two faces meet as it necks, the plate breaks there and the
-caller cuts its outline in two (``plate_outlines``); any other closing film stops the run.
+caller cuts its outline in two, or closes a fold or a spike (``plate_outlines``); where
+the interface is on one side, the caller releases it there (``plate_films``).
 """
 from __future__ import annotations
 
@@ -124,7 +125,7 @@ def film_dt(lm, v: np.ndarray, dt: float, c, outline_segments: int):
     below ``outline_segments`` are the outline's. Returns dt and None, or, for a film
     that still closes after :data:`FILM_HALVINGS` halvings, the last dt that did not
     collapse and the :class:`ClosingFilm` (where the plate necks through, the caller
-    cuts it in two there; elsewhere it stops)."""
+    cuts it in two there; where the interface closes, the caller releases it)."""
     P, S = lm.nodes, lm.triangulation.segments
     watch = FILM_WATCH * c.cfl * c.outline_spacing * c.plate_thickness
     i, j, gap = close_segment_pairs(P, S, watch, film_apart(c.cfl))

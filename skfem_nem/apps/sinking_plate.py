@@ -448,9 +448,9 @@ class SinkingPlate:
 
     def step(self, dt: float, retries: int = 4, cuts: int = 3) -> dict:
         """One time step of length dt (halved up to ``retries`` times if the mesh cannot
-        follow the move; where the last try fails because two faces of the plate would
-        cross, the plate is cut there and the step tried again, at most ``cuts``
-        times); returns the diagnostics row."""
+        follow the move; where the last try fails because two material lines would
+        cross, the plate is cut there or the interface released, and the step tried
+        again, at most ``cuts`` times); returns the diagnostics row."""
         self._check_films()
         try:
             row = self._tries(dt, retries)

@@ -383,10 +383,12 @@ def test_expansion_arithmetic(v):
     assert abs(Fraction(approx) - exact) <= Fraction(2 * EPS) * abs(exact)
 
 
+# (inside the documented domain of exactness, as the inputs above: a random coordinate
+# of 1e-288 next to 1.0 makes the exact stage's products underflow)
 stage_orient_inputs = st.one_of(random_points(3), near_collinear(), grid_with_step(3),
-                                translated(near_collinear()))
+                                translated(near_collinear())).filter(in_domain(480))
 stage_incircle_inputs = st.one_of(random_points(4), near_cocircular(), grid_with_step(4),
-                                  translated(near_cocircular()))
+                                  translated(near_cocircular())).filter(in_domain(200))
 
 
 @FEWER

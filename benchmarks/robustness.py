@@ -124,11 +124,12 @@ def mesh_checks(d) -> dict:
 
 def _safe_run(job, end_time, out):
     """The row of ``job``: a setting to run, or the row of a stopped run to continue."""
-    setting = job if "completed" not in job else setting_of(job)
+    stopped_row = "completed" in job
+    setting = setting_of(job) if stopped_row else job
     try:
-        if job is setting:
-            return run_one(setting, end_time, out)
-        return continue_one(job, end_time, out)
+        if stopped_row:
+            return continue_one(job, end_time, out)
+        return run_one(setting, end_time, out)
     except Exception:  # a failure before the first step: still a row
         row = dict(setting, completed=False, stop=traceback.format_exc().splitlines()[-1])
         return {k: row.get(k, "") for k in COLUMNS}

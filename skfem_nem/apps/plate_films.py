@@ -19,13 +19,19 @@ import numpy as np
 from ..geometry.polylines import close_segment_pairs, segment_distances
 from .plate_time_step import FILM_FRACTION, film_apart
 
-__all__ = ["interface_rows", "release_near_outline", "release_interface_film"]
+__all__ = ["interface_rows", "on_interface", "release_near_outline", "release_interface_film"]
 
 
 def interface_rows(tri, outline_segments: int) -> np.ndarray:
     """Rows of ``tri.segments`` that are the layer interface's (given segments from
     ``outline_segments`` on; those below are the outline's)."""
     return np.flatnonzero(tri.segment_source >= outline_segments)
+
+
+def on_interface(tri, rows, outline_segments: int) -> bool:
+    """Whether any of the rows ``rows`` of ``tri.segments`` is the layer interface's."""
+    return bool((tri.segment_source[np.asarray(rows, dtype=np.int64)]
+                 >= outline_segments).any())
 
 
 def release_near_outline(lm, outlines, outline_segments: int, spacing: float) -> int:
@@ -54,9 +60,8 @@ def release_interface_film(lm, rows, outline_segments: int, spacing: float,
     segments were released (none if ``rows`` are all the outline's)."""
     tri, P = lm.triangulation, lm.nodes
     rows = np.asarray(rows, dtype=np.int64).reshape(-1)
+    if not on_interface(tri, rows, outline_segments):
+        return 0
     i, j, _ = close_segment_pairs(P, tri.segments, FILM_FRACTION * spacing, film_apart(cfl))
     near = np.r_[rows, i, j]
-    near = near[tri.segment_source[near] >= outline_segments]
-    if not (tri.segment_source[rows] >= outline_segments).any():
-        return 0
-    return lm.release_segments(near)
+    return lm.release_segments(near[tri.segment_source[near] >= outline_segments])

@@ -49,7 +49,7 @@ from ..evolution.stepping import StepTooLong
 from ..coordinates import sibson_coordinates
 from ..geometry.nodesets import box_nodes, polyline_nodes
 from .plate_figures import plate_figures
-from .plate_films import release_interface_film, release_near_outline
+from .plate_films import on_interface, release_interface_film, release_near_outline
 from .plate_outlines import PlateOutlines, polygon_area_centroid
 from .plate_time_step import (FILM_FRACTION, WALL_FRACTION, ClosingFilm,  # noqa: F401
                               hold_off_walls, node_spacing, stable_dt)
@@ -473,9 +473,8 @@ class SinkingPlate:
         rows = tri.segment_rows(err.crossing)
         if (rows < 0).any():
             return False
-        what = ("the interface released there" if (tri.segment_source[rows]
-                >= self.outline_segments).any() else "the plate cut there (a fold or a "
-                "spike: closed)")
+        what = ("the interface released there" if on_interface(tri, rows, self.outline_segments)
+                else "the plate cut there (a fold or a spike: closed)")
         why = self._close_film(int(rows[0]), int(rows[1]))
         if why is None:
             import warnings
@@ -633,8 +632,7 @@ class SinkingPlate:
         the fold (:meth:`PlateOutlines.pinch`, counted); where one is the interface,
         release the interface there (:func:`~.plate_films.release_interface_film`,
         counted in the next step's row). None, or why not."""
-        if (self.lm.triangulation.segment_source[[first, second]]
-                >= self.outline_segments).any():
+        if on_interface(self.lm.triangulation, [first, second], self.outline_segments):
             self._released += release_interface_film(
                 self.lm, [first, second], self.outline_segments, self._spacing, self.cfg.cfl)
             return None

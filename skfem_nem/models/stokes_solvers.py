@@ -232,24 +232,34 @@ def _reuse_factor(problem: SaddlePointProblem, lu, tol: float, maxiter: int, inf
     upper-triangular preconditioner (``lu`` for the viscous block, the lumped
     1/eta-weighted pressure mass for the Schur complement), from the cached start. A
     fixed linear preconditioner, exact where the viscosity has not changed; where it
-    has, the Krylov space makes up the difference in a few more iterations. None (and
-    the factor dropped) if it does not converge within ``REBUILD_GROWTH`` times the
-    iterations of the solve that factorised, plus ``REBUILD_SLACK``."""
+    has, the Krylov space makes up the difference in a few more iterations. None if it
+    does not converge within ``REBUILD_GROWTH`` times the iterations of the solve that
+    factorised, plus ``REBUILD_SLACK`` (the caller factorises again)."""
     limit = min(maxiter, int(REBUILD_GROWTH * cache.factor_iterations + REBUILD_SLACK))
     A = problem.A.tocsr()                          # CSR: faster products
     matvec = saddle_matvec(problem, A)
     precondition = _triangular_preconditioner(problem, lu.solve)
     rhs = np.concatenate([problem.f, problem.g])
-    x0 = cache.start(rhs.size)
-    warm = x0 is not None and _norm(rhs - matvec(x0)) < _norm(rhs)
-    x, its, res = fgmres(matvec, precondition, rhs, x0 if warm else None, tol, limit,
+    x0 = _warm_start(cache, matvec, rhs)
+    x, its, res = fgmres(matvec, precondition, rhs, x0, tol, limit,
                          restart=min(FGMRES_RESTART, limit))
     if not res <= tol:
-        cache.factor = None
         return None
-    info.update(factor_reused=True, warm_start=warm)
+    info.update(factor_reused=True, warm_start=x0 is not None)
     cache.record(x, its, False)
     cache.factor_reuses += 1
+    return _split(problem, x, its)
+
+
+def _warm_start(cache: StokesCache, matvec: Callable, rhs: np.ndarray) -> Optional[np.ndarray]:
+    """The cached solution as the start of a solve of the whole system, if it is a
+    better start than zero (else None)."""
+    x0 = cache.start(rhs.size)
+    return x0 if x0 is not None and _norm(rhs - matvec(x0)) < _norm(rhs) else None
+
+
+def _split(problem: SaddlePointProblem, x: np.ndarray, its: int) -> SaddlePointSolution:
+    """The solution of the whole system ``x`` as velocity and (mean-free) pressure."""
     n1 = problem.n_velocity
     p = problem.mean_free(x[n1:])
     return SaddlePointSolution(x[:n1], p, its, problem.residual(x[:n1], p))
@@ -619,24 +629,21 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
     cache = StokesCache() if cache is None else cache
     ml, rebuilt = cache.amg(problem)
     A = ml.levels[0].A                             # A as CSR: faster products
-    n1 = problem.n_velocity
     matvec = saddle_matvec(problem, A)
     precondition = _triangular_preconditioner(
         problem, lambda r: amg_cg(ml, A, r, VISCOUS_CG_STEPS))
 
     rhs = np.concatenate([problem.f, problem.g])
-    x0 = cache.start(rhs.size)
-    warm = x0 is not None and _norm(rhs - matvec(x0)) < _norm(rhs)
-    x, its, res = fgmres(matvec, precondition, rhs, x0 if warm else None, tol, maxiter)
-    info.update(amg_levels=len(ml.levels), amg_rebuilt=rebuilt, warm_start=warm)
+    x0 = _warm_start(cache, matvec, rhs)
+    x, its, res = fgmres(matvec, precondition, rhs, x0, tol, maxiter)
+    info.update(amg_levels=len(ml.levels), amg_rebuilt=rebuilt, warm_start=x0 is not None)
     if not res <= tol:
         cache.last_iterations = its  # a failed solve asks for a new hierarchy next time
         raise RuntimeError(f"FGMRES did not converge: {its} iterations (maxiter), relative "
                            f"residual {res:.3e} > tol {tol:.1e} (raise maxiter, loosen tol, "
                            f"or use solver='schur', which factorises the viscous block)")
     cache.record(x, its, rebuilt)
-    p = problem.mean_free(x[n1:])
-    return SaddlePointSolution(x[:n1], p, its, problem.residual(x[:n1], p))
+    return _split(problem, x, its)
 
 
 def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional[np.ndarray],

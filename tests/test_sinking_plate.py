@@ -86,7 +86,8 @@ def test_outputs(coarse_run):
     assert m.points.shape[0] == sim.lm.nodes.shape[0]
     cols = read_csv_columns(out / "diagnostics.csv")
     for k in ("plate_depth", "plate_area", "fluid_area", "max_plastic_strain", "flips",
-              "injected", "min_angle", "solver_iterations", "picard_iterations"):
+              "injected", "min_angle", "solver_iterations", "picard_iterations",
+              "factorisations"):
         assert k in cols, k
 
 

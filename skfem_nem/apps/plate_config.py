@@ -17,6 +17,7 @@ from ..models.stokes_solvers import SOLVERS
 
 __all__ = ["HELP", "PlateConfig", "load_config", "stored_config"]
 
+
 @dataclass
 class PlateConfig:
     """Parameters of the sinking-plate run (nondimensional: L = 1, eta0 = 1,

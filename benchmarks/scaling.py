@@ -19,8 +19,10 @@ compiles kernels) split as the diagnostics split them (basis, Stokes assembly an
 linear solver summed over the Picard iterations, the mesh's evolution, the whole
 step), best of ``--repeat``; the step's microseconds per node and their ratio to the
 first size's (linear cost: 1), Picard iterations, the plate depth after step 3 and the
-peak memory of the run's process. ``--plate-solvers schur schur:refactor`` measures the
-default solver against itself factorising every solve (``REUSE_FACTOR`` off).
+peak memory of the run's process. ``--plate-solvers schur schur:refactor schur:strict``
+measures the default solver against itself factorising every solve (``REUSE_FACTOR``
+off) and against itself solving the Picard iterations' Stokes systems to the final
+solves' ``LINEAR_TOL`` (``PICARD_LINEAR_FACTOR`` 0).
 
 Prints markdown tables. Quick run::
 
@@ -45,14 +47,21 @@ from ex07_solcx import nodes  # noqa: E402
 from skfem_nem import delaunay_mesh  # noqa: E402
 from skfem_nem.models.analytic import SolCx  # noqa: E402
 from skfem_nem.models.stokes import assemble_stokes, solve_stokes, stokes_spaces  # noqa: E402
+from skfem_nem.models.stokes_solvers import SOLVERS  # noqa: E402
 
 SOLVER_ORDER = ("direct", "schur", "schur-amg", "minres", "fgmres")
 # the direct solve of the whole system is run up to this many nodes (it took
 # 96 s at 10,000 nodes)
 DIRECT_MAX_NODES = 5000
-# the plate's solver "schur" factorising the viscous block at every solve, as before
-# the factorisation was kept between the Picard iterations (stokes_solvers.REUSE_FACTOR)
-REFACTOR = "schur:refactor"
+# variants of the plate's solver "schur", by the module setting each changes: factorising
+# the viscous block at every solve, as before the factorisation was kept between the
+# Picard iterations (stokes_solvers.REUSE_FACTOR); solving every Picard iteration to the
+# final solves' LINEAR_TOL, as before those stopped near the Picard tolerance
+# (rheology.PICARD_LINEAR_FACTOR)
+VARIANTS = {"schur:refactor": "import skfem_nem.models.stokes_solvers as s; "
+                              "s.REUSE_FACTOR = False; ",
+            "schur:strict": "import skfem_nem.models.rheology as r; "
+                            "r.PICARD_LINEAR_FACTOR = 0.0; "}
 
 
 def _rss_kb() -> float:
@@ -147,14 +156,13 @@ def plate_run(n, solver, out):
     """One 3-step sinking-plate run: the mean seconds of steps 2-3 per part of
     :data:`STEP_PARTS`, the nodes, Picard iterations, the depth after step 3 and the
     peak resident memory (MB) of the run's process. ``solver`` is a solver of the
-    command line, or :data:`REFACTOR` (``"schur"`` factorising every solve)."""
-    setup = ("import skfem_nem.models.stokes_solvers as s; s.REUSE_FACTOR = False; "
-             if solver == REFACTOR else "")
+    command line, or one of :data:`VARIANTS` (of ``"schur"``)."""
+    setup = VARIANTS.get(solver, "")
     cmd = [sys.executable, "-c", setup + "import resource, sys; from skfem_nem.apps.cli "
            "import main; rc = main(sys.argv[1:]); print('PEAK_KB', resource.getrusage("
            "resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(rc)",
            "sinking-plate", "--nodes", str(n), "--max-steps", "3", "--solver",
-           "schur" if solver == REFACTOR else solver, "-o", out, "--quiet"]
+           solver.split(":")[0], "-o", out, "--quiet"]
     done = subprocess.run(cmd, check=True, capture_output=True, text=True)
     peak = float(done.stderr.split("PEAK_KB")[-1].split()[0]) / 1024
     with open(Path(out) / "diagnostics.csv") as fh:
@@ -207,6 +215,10 @@ def main(argv=None):
     ap.add_argument("--max-seconds", type=float, default=600.0)
     ap.add_argument("--maxiter", type=int, default=3000)
     a = ap.parse_args(argv)
+    for name in a.plate_solvers:
+        if name not in SOLVERS and name not in VARIANTS:
+            ap.error(f"--plate-solvers: unknown solver {name!r} (solvers: "
+                     f"{', '.join(SOLVERS)}; variants: {', '.join(VARIANTS)})")
     # numba kernels compiled once, before the forks
     solve_stokes(stokes_spaces(delaunay_mesh(nodes(100)), "nem"), 1.0, SolCx(1.0, 1.0).force)
     solvers = sorted(a.solvers, key=lambda s: SOLVER_ORDER.index(s) if s in SOLVER_ORDER

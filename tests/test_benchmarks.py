@@ -432,12 +432,24 @@ def test_scaling_plate_table_splits_the_step(capsys):
     iterations and the peak memory of the run."""
     bench = load_benchmark("scaling")
     bench.main(["--sizes", "--plate-nodes", "300", "--plate-solvers", "schur",
-                "--repeat", "1"])
+                "schur:strict", "--repeat", "1"])
     row = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("| 300 |")]
-    assert len(row) == 1
+    assert len(row) == 2
+    # the variant solving every Picard iteration to LINEAR_TOL: the same plate
+    strict = [c.strip() for c in row[1].strip("|").split("|")]
     cells = [c.strip() for c in row[0].strip("|").split("|")]
+    assert strict[2] == "schur:strict" and strict[1] == cells[1]
+    assert float(strict[11]) == pytest.approx(float(cells[11]), abs=2e-6)
     assert len(cells) == 13 and cells[2] == "schur" and int(cells[1]) > 300
     basis, assembly, solver, evolution, step = (float(c) for c in cells[3:8])
     assert 0 < basis + assembly + solver + evolution <= step + 0.02   # 2-digit rounding
     assert float(cells[8]) == pytest.approx(step / int(cells[1]) * 1e6, rel=0.1, abs=10)
     assert cells[9] == "1.00" and int(cells[10]) >= 3 and float(cells[12]) > 50
+
+
+def test_scaling_names_an_unknown_plate_solver(capsys):
+    bench = load_benchmark("scaling")
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--sizes", "--plate-nodes", "300", "--plate-solvers", "schur:fast"])
+    assert exc.value.code == 2
+    assert "unknown solver 'schur:fast'" in capsys.readouterr().err

@@ -294,3 +294,47 @@ def test_a_picard_limit_cycle_settles_by_relaxation(box, monkeypatch):
     np.testing.assert_allclose(r.eta_eff, 2.0, rtol=1e-5)
     assert r.history[-1] <= rh.PICARD_RELAXATION * 1e-6
     assert min(r.history[1:rh.PICARD_RELAX_AFTER]) > 0.5      # cycling until then
+
+
+def test_picard_solves_stop_near_the_picard_tolerance(monkeypatch):
+    """The Stokes solves of Picard iterations stop at PICARD_LINEAR_FACTOR times the Picard
+    tolerance, a step without iterations at LINEAR_TOL, a given linear_tol wins; the
+    plastic step's velocity and stress agree with solves to LINEAR_TOL far below the
+    Picard tolerance; a bad linear_tol raises before any solve."""
+    import skfem_nem.models.rheology as rh
+    S = stokes_spaces(delaunay_mesh(box_nodes(300, seed=1)), "nem")
+    X = S.quadrature_points
+    ne, nq = X.shape[1:]
+    inside = (np.abs(X[0] - 0.5) < 0.2) & (np.abs(X[1] - 0.5) < 0.1)
+    mat = Material(np.where(inside, 1e3, 1.0), np.where(inside, 10.0, np.inf),
+                   np.where(inside, 0.05, np.inf))
+    f = np.stack([0 * X[0], -1.0 * inside])
+    tau = np.zeros((2, 2, ne, nq))
+    tols = []
+    solve = rh.solve_stokes_bc
+
+    def recording(*args, **kw):
+        tols.append(kw["tol"])
+        return solve(*args, **kw)
+
+    monkeypatch.setattr(rh, "solve_stokes_bc", recording)
+    loose = vep_step(S, mat, tau, 1.0, f=f, tol=1e-3)
+    assert loose.iterations > 2 and loose.yielded.any()
+    assert tols == [rh.PICARD_LINEAR_FACTOR * 1e-3] * loose.iterations
+    tols.clear()
+    strict = vep_step(S, mat, tau, 1.0, f=f, tol=1e-3, linear_tol=rh.LINEAR_TOL)
+    assert set(tols) == {rh.LINEAR_TOL}
+    # the two differ far less than the Picard iterations leave undone (the last velocity
+    # change, about the tolerance): the velocity by 1% of it, the stress by 10%
+    assert loose.iterations == strict.iterations
+    u0 = np.abs(strict.solution.u).max()
+    assert np.abs(loose.solution.u - strict.solution.u).max() < 1e-2 * 1e-3 * u0
+    assert np.abs(loose.tau - strict.tau).max() < 0.1 * 1e-3 * np.abs(strict.tau).max()
+    tols.clear()
+    vep_step(S, Material(1.0), tau, 1.0, f=f, rotation="none")    # one solve, final
+    assert tols == [rh.LINEAR_TOL]
+    tols.clear()
+    for bad in (0.0, 1.0, float("nan"), "1e-6", True):
+        with pytest.raises(ValueError, match="linear_tol"):
+            vep_step(S, mat, tau, 1.0, f=f, linear_tol=bad)
+    assert tols == []

@@ -82,6 +82,13 @@ PICARD_RELAXATION = 0.5
 # default lower bound of the effective viscosity, relative to the smallest
 # visco-elastic viscosity (keeps the Stokes system solvable where yielding)
 MIN_VISCOSITY_FACTOR = 1e-8
+# relative residual of a Stokes solve that is final: the one solve of a step without
+# plastic iterations (the solvers' own default)
+LINEAR_TOL = 1e-10
+# the Stokes solves of Picard iterations stop at this factor times the Picard tolerance
+# (on the relative velocity change), not below LINEAR_TOL: their error stays three orders
+# below the change that ends the iterations (docs/stokes.md measures what it saves)
+PICARD_LINEAR_FACTOR = 1e-3
 
 
 # ---------------------------------------------------------------------------
@@ -481,7 +488,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
              rotation: str = "jaumann", tol: float = 1e-6, maxiter: int = 100,
              min_viscosity: Optional[float] = None, u_guess: Optional[np.ndarray] = None,
              constraints=None, eta_guess: Optional[np.ndarray] = None,
-             solver: str = "schur", cache: Optional[StokesCache] = None) -> VEPStep:
+             solver: str = "schur", cache: Optional[StokesCache] = None,
+             linear_tol: Optional[float] = None) -> VEPStep:
     """One visco-elasto-plastic time step (see the module docstring).
 
     Parameters
@@ -506,9 +514,11 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         ``"jaumann"`` or ``"exact"`` (see :func:`rotate_stress`), or
         ``"none"``. The spin is taken from the current Picard iterate (from
         ``u_guess`` for the first solve, zero if not given).
-    tol, maxiter
-        Picard iterations stop when the relative change of the velocity
-        (max norm) falls below ``tol``.
+    tol, maxiter, linear_tol
+        Picard iterations stop when the relative change of the velocity (max norm)
+        falls below ``tol``; each Stokes solve at the relative residual ``linear_tol``,
+        default ``PICARD_LINEAR_FACTOR * tol`` (at least ``LINEAR_TOL``), or
+        ``LINEAR_TOL`` for a step without iterations (``docs/stokes.md``).
     min_viscosity
         Lower bound of the effective plastic viscosity (Pa s); default
         ``1e-8`` times the smallest visco-elastic viscosity.
@@ -519,10 +529,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         (e.g. the previous step's ``eta_eff``, carried by the evolving mesh);
         clipped to ``[min_viscosity, eta_ve]``. Default ``eta_ve``.
     constraints
-        Extra linear constraints on the velocity (a matrix C for ``C u = 0`` or a
-        pair ``(C, c)`` for ``C u = c``), passed to
-        :func:`skfem_nem.models.stokes.solve_stokes` (e.g. the net flux through a
-        material outline).
+        Extra linear constraints on the velocity, ``C`` for ``C u = 0`` or ``(C, c)`` for
+        ``C u = c`` (e.g. the net flux through a material outline), see :func:`solve_stokes_bc`.
     solver, cache
         Stokes solver of the Picard iterations and, for ``"fgmres"``, a
         :class:`~skfem_nem.models.stokes.StokesCache` kept across steps
@@ -533,7 +541,7 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     ValueError
         For a bad ``dt``, stress of the wrong shape or non-finite values
         (naming the element), or a non-finite new stress (naming the element),
-        an unknown ``solver`` or a ``cache`` it does not use.
+        an unknown ``solver``, a ``cache`` it does not use, a ``linear_tol`` not in (0, 1).
     RuntimeError
         If the Picard iterations do not converge in ``maxiter`` iterations
         (naming the count and the last residual).
@@ -548,8 +556,19 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     eta_eff = st.start_viscosity(eta_guess)
     walls = (prescribed, free_slip, no_slip, pressure_mean)
     pic = _picard(spaces, st, u, G, eta_eff, walls, constraints, tol, maxiter,
-                  dict(solver=solver, cache=cache))
+                  dict(solver=solver, cache=cache, tol=_linear_tol(linear_tol, tol, st)))
     return _vep_result(st, pic)
+
+
+def _linear_tol(linear_tol, tol: float, st: _StepSetup) -> float:
+    """The relative residual of the step's Stokes solves (see :func:`vep_step`);
+    ``ValueError`` unless a given one is a number in (0, 1)."""
+    if linear_tol is None:
+        return max(LINEAR_TOL, PICARD_LINEAR_FACTOR * tol) if st.iterate else LINEAR_TOL
+    if not (isinstance(linear_tol, (int, float)) and not isinstance(linear_tol, bool)
+            and 0 < linear_tol < 1):
+        raise ValueError(f"linear_tol must be a number in (0, 1), got {linear_tol!r}")
+    return float(linear_tol)
 
 
 @dataclass

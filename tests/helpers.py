@@ -6,6 +6,29 @@ from skfem.helpers import dot, grad
 from skfem_nem import Triangulation, sibson_coordinates
 
 # ---------------------------------------------------------------------------
+# problems
+# ---------------------------------------------------------------------------
+
+
+def plastic_inclusion():
+    """A visco-elasto-plastic step's input on 300 random nodes of the unit square: a
+    stiff (viscosity 1e3), elastic (shear modulus 10), yielding (0.05) heavy inclusion
+    0.4 x 0.2 in a fluid of viscosity 1. Returns the spaces, the material, the force
+    and the zero initial stress."""
+    from skfem_nem import delaunay_mesh
+    from skfem_nem.geometry.nodesets import box_nodes
+    from skfem_nem.models.rheology import Material
+    from skfem_nem.models.stokes import stokes_spaces
+    S = stokes_spaces(delaunay_mesh(box_nodes(300, seed=1)), "nem")
+    X = S.quadrature_points
+    ne, nq = X.shape[1:]
+    inside = (np.abs(X[0] - 0.5) < 0.2) & (np.abs(X[1] - 0.5) < 0.1)
+    mat = Material(np.where(inside, 1e3, 1.0), np.where(inside, 10.0, np.inf),
+                   np.where(inside, 0.05, np.inf))
+    return S, mat, np.stack([0 * X[0], -1.0 * inside]), np.zeros((2, 2, ne, nq))
+
+
+# ---------------------------------------------------------------------------
 # node sets
 # ---------------------------------------------------------------------------
 

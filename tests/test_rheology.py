@@ -11,6 +11,8 @@ from skfem_nem.models.rheology import (Material, combine_materials, deviator, fr
                                        to_ip_field, velocity_gradient, vep_step, vep_update)
 from skfem_nem.models.stokes import solve_stokes, stokes_spaces
 
+from helpers import plastic_inclusion
+
 KYR = 1e3 * 3.15576e7
 ETA, MU, EDOT = 1e22, 1e10, 1e-14
 
@@ -302,14 +304,7 @@ def test_picard_solves_stop_near_the_picard_tolerance(monkeypatch):
     plastic step's velocity and stress agree with solves to LINEAR_TOL far below the
     Picard tolerance; a bad linear_tol raises before any solve."""
     import skfem_nem.models.rheology as rh
-    S = stokes_spaces(delaunay_mesh(box_nodes(300, seed=1)), "nem")
-    X = S.quadrature_points
-    ne, nq = X.shape[1:]
-    inside = (np.abs(X[0] - 0.5) < 0.2) & (np.abs(X[1] - 0.5) < 0.1)
-    mat = Material(np.where(inside, 1e3, 1.0), np.where(inside, 10.0, np.inf),
-                   np.where(inside, 0.05, np.inf))
-    f = np.stack([0 * X[0], -1.0 * inside])
-    tau = np.zeros((2, 2, ne, nq))
+    S, mat, f, tau = plastic_inclusion()
     tols = []
     solve = rh.solve_stokes_bc
 

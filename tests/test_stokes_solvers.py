@@ -9,6 +9,8 @@ from skfem_nem.models.analytic import SolCx
 from skfem_nem.models.stokes import StokesCache, outline_flux, solve_stokes, stokes_spaces
 from skfem_nem.models.stokes_solvers import SOLVERS
 
+from helpers import plastic_inclusion
+
 
 # the pressure of the direct solve itself is only this accurate at a 1e6 jump
 # (the factorised Schur-complement solve differs from it by 9e-7 there)
@@ -199,15 +201,8 @@ def test_vep_step_passes_solver_and_cache():
     """A plastic step with ``solver="fgmres"``: the same result as the default
     solver, and the AMG hierarchy built once and reused by the step's Picard
     iterations (a cache of the caller's is kept across steps)."""
-    from skfem_nem.models.rheology import Material, vep_step
-    sp_ = stokes_spaces(delaunay_mesh(box_nodes(300, seed=1)), "nem")
-    X = sp_.quadrature_points
-    ne, nq = X.shape[1:]
-    inside = (np.abs(X[0] - 0.5) < 0.2) & (np.abs(X[1] - 0.5) < 0.1)
-    mat = Material(np.where(inside, 1e3, 1.0), np.where(inside, 10.0, np.inf),
-                   np.where(inside, 0.05, np.inf))
-    f = np.stack([0 * X[0], -1.0 * inside])
-    tau = np.zeros((2, 2, ne, nq))
+    from skfem_nem.models.rheology import vep_step
+    sp_, mat, f, tau = plastic_inclusion()
     ref = vep_step(sp_, mat, tau, 1.0, f=f, tol=1e-6)
     cache = StokesCache()
     r = vep_step(sp_, mat, tau, 1.0, f=f, tol=1e-6, solver="fgmres", cache=cache)

@@ -49,7 +49,7 @@ import scipy.sparse as sp
 import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
-from .stokes_amg import (amg_cg, norm as _norm, refresh_amg,
+from .stokes_amg import (amg_cg, norm, refresh_amg,
                          rigid_modes, viscous_amg)
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "CACHED_SOLVERS",
@@ -250,7 +250,7 @@ def _warm_start(cache: StokesCache, matvec: Callable, rhs: np.ndarray) -> Option
     """The cached solution as the start of a solve of the whole system, if it is a
     better start than zero (else None)."""
     x0 = cache.start(rhs.size)
-    return x0 if x0 is not None and _norm(rhs - matvec(x0)) < _norm(rhs) else None
+    return x0 if x0 is not None and norm(rhs - matvec(x0)) < norm(rhs) else None
 
 
 def _split(problem: SaddlePointProblem, x: np.ndarray, its: int) -> SaddlePointSolution:
@@ -321,7 +321,7 @@ def schur_pressure_cg(problem: SaddlePointProblem, lu, tol: float, maxiter: int,
     Sop = spla.LinearOperator((npr, npr), matvec=schur, dtype=float)
     Pp = spla.LinearOperator((npr, npr), matvec=lambda q: q / problem.dp, dtype=float)
     g = B @ lu.solve(fu) - problem.g
-    warm = p0 is not None and _norm(g - schur(p0)) < _norm(g)
+    warm = p0 is not None and norm(g - schur(p0)) < norm(g)
     if info is not None:
         info["warm_start"] = warm
     p, flag = spla.cg(Sop, g, x0=p0 if warm else None, M=Pp, rtol=tol, maxiter=maxiter,
@@ -559,14 +559,14 @@ def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional
     stopping test (checked at every restart).
     """
     n = b.size
-    bnorm = _norm(b) or 1.0
+    bnorm = norm(b) or 1.0
     x = np.zeros(n) if x0 is None else np.array(x0, dtype=float)
     r = b - matvec(x) if x0 is not None else b.copy()
     its = 0
     V = np.empty((restart + 1, n))
     Z = np.empty((restart, n))
     while True:
-        beta = _norm(r)
+        beta = norm(r)
         if beta <= tol * bnorm or its >= maxiter:
             return x, its, beta / bnorm
         H = np.zeros((restart + 1, restart))
@@ -582,7 +582,7 @@ def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional
                 h = np.einsum("ij,j->i", V[:j + 1], w)
                 w -= np.einsum("i,ij->j", h, V[:j + 1])
                 H[:j + 1, j] += h
-            H[j + 1, j] = _norm(w)
+            H[j + 1, j] = norm(w)
             if H[j + 1, j] > 0:
                 V[j + 1] = w / H[j + 1, j]
             for i in range(j):

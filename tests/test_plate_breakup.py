@@ -9,8 +9,8 @@ from helpers import square_nodes
 from test_evolution_segments import (assert_same_state, check_chain, check_constrained,
                                      outlined_square, saved_state)
 from skfem_nem import LagrangianMesh
-from skfem_nem.apps.plate_outlines import (PINCH_FRACTION, WELD_FRACTION, PlateOutlines,
-                                           polygon_area_centroid)
+from skfem_nem.apps.plate_outlines import (FOLD_AREA_TOLERANCE, PINCH_FRACTION, WELD_FRACTION,
+                                           PlateOutlines, polygon_area_centroid)
 from skfem_nem.apps.plate_time_step import ClosingFilm
 from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate
 from skfem_nem.geometry.nodesets import polyline_nodes
@@ -154,17 +154,25 @@ def test_a_plate_is_cut_in_two_at_its_neck(neck):
     np.testing.assert_allclose(lm.ip_integral("one"), area, rtol=1e-13)
 
 
-def test_no_cut_where_the_plate_folds_around_much_fluid_or_two_pieces_meet(tmp_path):
-    """Faces meeting from outside (the arms of a U) half way up, around fluid of 0.85% of
-    the plate's area, or segments of two pieces: the reason comes back, nothing changes."""
+@pytest.mark.parametrize("case", ["much fluid", "plate above its area"])
+def test_no_cut_where_the_plate_folds_around_much_fluid_or_two_pieces_meet(case, tmp_path):
+    """Faces meeting from outside (the arms of a U) half way up, around fluid of 1.3% of
+    the plate's area; or lower down, around 0.6%, where the plate is already 0.8% above
+    its reference area; or segments of two pieces: the reason comes back, nothing
+    changes."""
     lm, loop = dumbbell(0.0, gap=0.02)
-    outlines = PlateOutlines([loop], [abs(polygon_area_centroid(lm.nodes[loop])[0])])
+    A0 = abs(polygon_area_centroid(lm.nodes[loop])[0])
+    y, areas0 = (0.55, [A0]) if case == "much fluid" else (0.4875, [A0 / 1.008])
+    outlines = PlateOutlines([loop], areas0)
     before = saved_state(lm, tmp_path / "before.npz")
-    rows = pair_rows(lm, [loop[[i, (i + 1) % len(loop)]] for i in _arms(lm, loop, 0.55)])
+    rows = pair_rows(lm, [loop[[i, (i + 1) % len(loop)]] for i in _arms(lm, loop, y)])
     why = outlines.pinch(lm, *rows, SPACING)
-    assert "folds onto itself" in why and "more than WELD_FRACTION" in why
+    assert "folds onto itself" in why and "more than FOLD_AREA_TOLERANCE" in why
     assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
-    assert len(outlines.loops) == 1
+    assert len(outlines.loops) == 1 and outlines.areas0 == areas0
+    if case == "plate above its area":      # the same fold closes at the reference area
+        assert PlateOutlines([loop], [A0]).pinch(lm, *rows, SPACING) is None
+        return
     lm, loop = dumbbell(0.02)
     outlines = PlateOutlines([loop], [1.0])
     assert outlines.pinch(lm, *facing(lm, loop, 0.5, 0.5), SPACING) is None
@@ -191,19 +199,21 @@ def _arms(lm, loop, y):
 
 def test_a_small_fold_is_closed_and_its_fluid_joins_the_plate():
     """The arms of a U meeting from outside just above the bottom of its slot: the plate
-    keeps the outer loop (one piece, the same reference area), the pocket's segments are
-    released (its nodes on no segment, inside the plate), every segment an edge, the mesh
+    keeps the outer loop (one piece, the same reference area), the pocket's segments and
+    the two that met are released (the nodes below the upper ends of those two on no
+    segment, inside the plate: the two can never cross), every segment an edge, the mesh
     constrained Delaunay, the ip integrals kept."""
     lm, loop = dumbbell(0.0, gap=0.02)
     P = lm.nodes
     A0 = abs(polygon_area_centroid(P[loop])[0])
     outlines = PlateOutlines([loop], [A0])
     before = lm.ip_integral("one")
-    rows = pair_rows(lm, [loop[[i, (i + 1) % len(loop)]] for i in _arms(lm, loop, 0.4875)])
-    # the slot's nodes below the two that meet (at y = 0.475 or 0.5)
-    meet = [loop[i + (P[loop[i], 1] > P[loop[(i + 1) % len(loop)], 1])]
-            for i in _arms(lm, loop, 0.4875)]
-    pocket = [n for n in loop if abs(P[n, 0] - 0.5) < 0.011 and P[n, 1] < P[meet[0], 1] - 1e-9]
+    arms = _arms(lm, loop, 0.4875)
+    met = [loop[[i, (i + 1) % len(loop)]] for i in arms]
+    rows = pair_rows(lm, met)
+    # the slot's nodes below the upper ends of the two segments that meet (at y = 0.5)
+    top = max(P[met[0], 1])
+    pocket = [n for n in loop if abs(P[n, 0] - 0.5) < 0.011 and P[n, 1] < top - 1e-9]
     assert outlines.pinch(lm, *rows, SPACING) is None
     check_constrained(lm)
     assert len(outlines.loops) == 1 and outlines.areas0 == [A0]
@@ -213,7 +223,7 @@ def test_a_small_fold_is_closed_and_its_fluid_joins_the_plate():
     assert not set(pocket) & set(lm.triangulation.segments.ravel())
     assert outlines.inside(lm.nodes, lm.nodes[pocket]).all()
     area = abs(polygon_area_centroid(lm.nodes[o])[0])
-    assert 0 < area / A0 - 1 <= WELD_FRACTION          # the pocket joined the plate
+    assert 0 < area / A0 - 1 <= FOLD_AREA_TOLERANCE      # the pocket joined the plate
     np.testing.assert_allclose(lm.ip_integral("one"), before, rtol=1e-13)
 
 

@@ -16,10 +16,13 @@ outline's spacing to the other end of its new segment is removed with it.
 Where the plate folds onto itself instead (two faces meet from outside, across the
 fluid the fold encloses), the same cut would leave the enclosed fluid as a loop of its
 own. The fold is closed instead (:meth:`PlateOutlines.pinch`, a weld): of the two arcs
-of the loop between the nodes that met, the one around the pocket is released (its
-fluid joins the plate) and the other, closed by a segment between those two nodes, is
-the plate's loop. The pocket is at most :data:`WELD_FRACTION` of the piece's area (the area
-constraint then squeezes it out over the next steps); a larger fold stops the run.
+of the loop between the outer ends of the segments that met, the one around the pocket
+is released (its fluid, and the film between those segments, joins the plate) and the
+other, closed by a segment between those ends, is the plate's loop. Both segments that
+met are released, so they cannot cross afterwards. With the pocket, the plate's area
+(all pieces) stays within :data:`FOLD_AREA_TOLERANCE` above its reference area (the
+area constraint then squeezes the pocket out over the next steps); a larger fold stops
+the run.
 
 Where the two faces that meet are a few nodes apart along the loop (a spike: a sliver
 of plate, or a crack of fluid, thinner than the mesh resolves, closing within one step),
@@ -38,16 +41,23 @@ import numpy as np
 from ..geometry.constrained import pair_keys
 from ..geometry.polylines import segments_cross
 
-__all__ = ["PlateOutlines", "polygon_area_centroid", "PINCH_FRACTION", "WELD_FRACTION"]
+__all__ = ["PlateOutlines", "polygon_area_centroid", "PINCH_FRACTION", "WELD_FRACTION",
+           "FOLD_AREA_TOLERANCE"]
 
 #: after a cut, a node closer than this fraction of the outline's spacing to the node at
 #: the other end of its new segment is removed (the two met as the neck closed; kept,
 #: they would bound a triangle as thin as the closed film)
 PINCH_FRACTION = 0.25
-#: a fold is closed (its pocket of fluid joins the plate) only if the pocket's area is at
-#: most this fraction of the piece's reference area: half the 1% to which the plate's
-#: area is held (the area constraint then squeezes the pocket out)
+#: a spike (a sliver of plate or of fluid, a few nodes along the loop) is closed only if
+#: its area is at most this fraction of the piece's reference area, and a piece cut off
+#: at a neck is followed only if it is larger (a smaller one is closed as a spike): half
+#: the 1% to which the plate's area is held
 WELD_FRACTION = 0.005
+#: a fold is closed (its pocket of fluid joins the plate) only if the plate's area, all
+#: pieces together and the pocket joined, stays within this fraction above its reference
+#: area: the 1% to which the plate's area is held (the area constraint then squeezes the
+#: pocket out over the next steps)
+FOLD_AREA_TOLERANCE = 0.01
 
 
 def polygon_area_centroid(P):
@@ -149,26 +159,28 @@ class PlateOutlines:
         turn = np.sign(polygon_area_centroid(P[o])[0])
         areas = [polygon_area_centroid(P[piece])[0] * turn for piece in plan[:2]]
         if min(areas) <= 0:
-            return self._weld(lm, k, plan, turn)
+            return self._weld(lm, k, p, q, turn)
         if min(areas) <= WELD_FRACTION * self.areas0[k]:
             return self._trim(lm, k, p, q)       # a sliver, not a piece worth following
         return self._apply(lm, k, plan, spacing)
 
-    def _weld(self, lm, k, plan, turn: float) -> Optional[str]:
-        """Close a fold of piece ``k`` where the nodes ``a`` and ``b`` of ``plan`` met:
-        of the two arcs of the loop between them, the one turning against the plate
-        bounds the enclosed fluid; its segments are released and the other arc, closed
-        by a new segment a-b, becomes the loop."""
-        keep, rest = plan[0], plan[1]
-        arcs = (list(keep), [keep[-1], *rest, keep[0]])       # both from one to the other
+    def _weld(self, lm, k, p, q, turn: float) -> Optional[str]:
+        """Close a fold of piece ``k`` where its segments at positions p and q met: of
+        the two arcs of the loop from the outer end of one to the outer end of the other
+        (each holds both segments, which can then never cross), the one turning against
+        the plate bounds the enclosed fluid; its segments are released and the other
+        arc, closed by a new segment between those ends, becomes the loop."""
         P = lm.nodes
-        turning = [polygon_area_centroid(P[a])[0] * turn for a in arcs]
-        inner, outer = arcs if turning[0] <= turning[1] else arcs[::-1]
-        ratio = abs(polygon_area_centroid(P[inner])[0]) / self.areas0[k]
-        if ratio > WELD_FRACTION:
+        arcs = _arcs(self.loops[k], p, q)
+        inner, outer = min(arcs, key=lambda arc: polygon_area_centroid(P[arc[0]])[0] * turn)
+        pocket = abs(polygon_area_centroid(P[inner])[0])
+        area0 = sum(self.areas0)
+        after = (self.area_centroid(P)[0] + pocket) / area0 - 1
+        if after > FOLD_AREA_TOLERANCE:
             return (f"the plate folds onto itself (its faces meet from outside) around "
-                    f"fluid of {ratio:.2%} of its area (more than WELD_FRACTION), which "
-                    f"the model does not follow")
+                    f"fluid of {pocket / area0:.2%} of its area; with it the plate would be "
+                    f"{after:.2%} above its reference area (more than FOLD_AREA_TOLERANCE), "
+                    f"which the model does not follow")
         why = self._close(lm, k, inner, outer, remove=())
         return None if why is None else f"the fold cannot be closed ({why})"
 
@@ -178,14 +190,9 @@ class PlateOutlines:
         the mesh resolves). Of the two arcs between them, the one around the smaller
         area is released, the nodes inside it removed (kept if they cannot go), and a
         segment joins its ends."""
-        o, P = self.loops[k], lm.nodes
-        n = len(o)
-        arcs = []
-        for s, t in ((p, q), (q, p)):
-            inner = [o[(s + m) % n] for m in range((t - s) % n + 2)]   # o[s] ... o[t + 1]
-            outer = [o[(t + 1 + m) % n] for m in range(n - len(inner) + 2)]
-            if len(outer) >= 3:
-                arcs.append((abs(polygon_area_centroid(P[inner])[0]), inner, outer))
+        P = lm.nodes
+        arcs = [(abs(polygon_area_centroid(P[inner])[0]), inner, outer)
+                for inner, outer in _arcs(self.loops[k], p, q) if len(outer) >= 3]
         if not arcs:
             return "a piece would keep fewer than three nodes"
         area, inner, outer = min(arcs, key=lambda arc: arc[0])
@@ -261,6 +268,20 @@ class PlateOutlines:
         if "outlines" in meta:
             return cls(meta["outlines"], meta["areas0"])
         return cls([meta["outline"]], [area0])
+
+
+def _arcs(o, p, q):
+    """The two ways to close loop o where its segments at positions p and q meet, as
+    (inner, outer): ``inner`` runs from the start of one segment to the end of the
+    other (o[s] ... o[t + 1], holding both), ``outer`` is the rest of the loop, from the
+    end of ``inner`` back to its start."""
+    n = len(o)
+    arcs = []
+    for s, t in ((p, q), (q, p)):
+        inner = [o[(s + m) % n] for m in range((t - s) % n + 2)]
+        outer = [o[(t + 1 + m) % n] for m in range(n - len(inner) + 2)]
+        arcs.append((inner, outer))
+    return arcs
 
 
 def _cut(P, o, p, q):

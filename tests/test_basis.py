@@ -537,3 +537,26 @@ def test_scikit_fem_assembly_untouched_by_import_and_by_the_hook():
             assert (a.indptr == b.indptr).all() and (a.indices == b.indices).all()
             a, b = a.data, b.data
         assert np.array_equal(a, b)
+
+
+def test_a_basis_is_freed_as_soon_as_it_is_dropped(mesh):
+    """The groups refer to their basis weakly: with the cyclic collector off, dropping
+    an assembled basis frees it (and its stencil arrays) at once; a group kept beyond
+    its basis says so when asked for it."""
+    import gc
+    import weakref
+    basis = NaturalNeighbourBasis(mesh)
+    laplace.assemble(basis)
+    group = basis.groups[0]
+    assert group.parent is basis
+    gone = weakref.ref(basis)
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        del basis
+        assert gone() is None
+    finally:
+        if enabled:
+            gc.enable()
+    with pytest.raises(ReferenceError, match="outlived its basis"):
+        group.default_parameters()

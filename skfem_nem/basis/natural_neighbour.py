@@ -25,6 +25,7 @@ the stencil size squared, not with the largest stencil.
 """
 from __future__ import annotations
 
+import weakref
 from typing import Optional, Tuple
 
 import numpy as np
@@ -52,11 +53,14 @@ class _GroupBasis(AbstractBasis, assembly.StencilGroup):
     """The triangles of one stencil size: an ordinary basis with fixed Nbfun.
 
     Built by :class:`NaturalNeighbourBasis`; users never see it, scikit-fem's
-    form kernels do.
+    form kernels do. It refers to its basis weakly: the basis holds its groups, and
+    a reference back would make the two a cycle, whose arrays (the values and
+    gradients of every stencil, hundreds of megabytes at 10^5 nodes) Python frees
+    only when its cyclic collector next runs, steps later.
     """
 
     def __init__(self, parent, elems, stencils, V, G):
-        self.parent = parent
+        self._parent = weakref.ref(parent)
         self.mesh = parent.mesh
         self.elem = parent.elem
         self.mapping = parent.mapping
@@ -105,6 +109,15 @@ class _GroupBasis(AbstractBasis, assembly.StencilGroup):
                     grad[comp, g, sel] = G[g, js]
             return (DiscreteField(val.reshape(dim, -1, nq), grad.reshape(dim, dim, -1, nq)),)
         return (DiscreteField(V[idx].reshape(-1, nq), G[:, idx].reshape(G.shape[0], -1, nq)),)
+
+    @property
+    def parent(self) -> "NaturalNeighbourBasis":
+        """The basis whose triangles of one stencil size these are."""
+        parent = self._parent()
+        if parent is None:
+            raise ReferenceError("this group of a NaturalNeighbourBasis outlived its "
+                                 "basis: keep the basis while its groups are used")
+        return parent
 
     @property
     def element_dofs(self):

@@ -53,10 +53,9 @@ class _GroupBasis(AbstractBasis, assembly.StencilGroup):
     """The triangles of one stencil size: an ordinary basis with fixed Nbfun.
 
     Built by :class:`NaturalNeighbourBasis`; users never see it, scikit-fem's
-    form kernels do. It refers to its basis weakly: the basis holds its groups, and
-    a reference back would make the two a cycle, whose arrays (the values and
-    gradients of every stencil, hundreds of megabytes at 10^5 nodes) Python frees
-    only when its cyclic collector next runs, steps later.
+    form kernels do. It refers to its basis weakly: a reference back would make a
+    cycle, whose arrays (every stencil's values and gradients, hundreds of megabytes
+    at 10^5 nodes) Python frees only at its next cyclic collection, steps later.
     """
 
     def __init__(self, parent, elems, stencils, V, G):
@@ -115,8 +114,7 @@ class _GroupBasis(AbstractBasis, assembly.StencilGroup):
         """The basis whose triangles of one stencil size these are."""
         parent = self._parent()
         if parent is None:
-            raise ReferenceError("this group of a NaturalNeighbourBasis outlived its "
-                                 "basis: keep the basis while its groups are used")
+            raise ReferenceError("a group of a NaturalNeighbourBasis outlived its basis")
         return parent
 
     @property

@@ -47,7 +47,7 @@ import numpy as np
 from ..evolution.lagrangian import LagrangianMesh
 from ..evolution.stepping import StepTooLong
 from ..coordinates import sibson_coordinates
-from ..geometry.nodesets import box_nodes, polyline_nodes
+from ..geometry.nodesets import box_nodes, hilbert_order, polyline_nodes
 from .plate_config import HELP, PlateConfig, load_config, stored_config  # noqa: F401
 from .plate_figures import plate_figures
 from .plate_films import on_interface, release_interface_film, release_near_outline
@@ -101,6 +101,9 @@ def initial_nodes(c: PlateConfig):
         lines.append(np.c_[xs, np.full(xs.size, c.interface_z)])
     nodes = box_nodes(c.nodes, c.width, c.height, density=density, seed=c.seed, lines=lines,
                       boundary_spacing=max(c.width, c.height) / 60)
+    # numbered along a Hilbert curve: a stencil's nodes get nearby indices, so the
+    # assembly and the solves touch nearby memory
+    nodes = nodes[hilbert_order(nodes)]
     from scipy.spatial import cKDTree
     tree = cKDTree(nodes)
     idx = []

@@ -560,3 +560,30 @@ def test_a_basis_is_freed_as_soon_as_it_is_dropped(mesh):
             gc.enable()
     with pytest.raises(ReferenceError, match="outlived its basis"):
         group.default_parameters()
+
+
+def test_group_fields_are_built_for_scikit_fem_and_dropped_after_its_assembly(mesh, vbasis):
+    """A group's per-function fields (scikit-fem's ``basis``) hold each stencil
+    function's value and gradient in its own component, zeros elsewhere; a mixed
+    assembly that needs them (natural-neighbour velocity, P1 pressure) leaves none
+    built behind, and gives the same matrix again."""
+    g = vbasis.groups[-1]
+    V, G = g.stencil_values
+    fields = g.basis
+    assert len(fields) == g.Nbfun == 2 * V.shape[0]
+    for j in (0, V.shape[0] - 1):
+        for c in (0, 1):
+            f = fields[2 * j + c][0]
+            np.testing.assert_array_equal(f.value[c], V[j])
+            np.testing.assert_array_equal(f.grad[c], G[:, j])
+            assert not f.value[1 - c].any() and not f.grad[1 - c].any()
+    g.release_fields()
+    p1 = vbasis.with_element(ElementTriP1())
+    div = BilinearForm(lambda u, q, w: q * (u.grad[0][0] + u.grad[1][1]))
+    D = div.assemble(vbasis, p1)
+    assert all(h._basis is None for h in vbasis.groups)
+    np.testing.assert_array_equal(div.assemble(vbasis, p1).toarray(), D.toarray())
+    u = np.zeros(vbasis.N)
+    u[vbasis.nodal_dofs[0]] = mesh.p[0]          # u = (x, 0): divergence 1
+    one = LinearForm(lambda q, w: q).assemble(p1)
+    np.testing.assert_allclose(D @ u, one, atol=1e-12)

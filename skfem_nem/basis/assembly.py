@@ -1,30 +1,27 @@
 """Teach scikit-fem's forms to assemble over natural-neighbour bases.
 
-A :class:`~skfem_nem.NaturalNeighbourBasis` is a set of groups of triangles
-with equal stencil size; each group is an ordinary scikit-fem basis. The
-wrappers installed here make ``BilinearForm`` and ``LinearForm`` (and
-therefore ``asm``) loop over those groups and concatenate
-their COO contributions, so user code is unchanged. Forms on ordinary bases
-take scikit-fem's own code path untouched. The wrappers are installed when
-the first natural-neighbour basis (a :class:`StencilBasis`) is built, not on
-import, and :func:`restore_scikit_fem_assembly` takes them out again.
+A :class:`~skfem_nem.NaturalNeighbourBasis` is a set of groups of triangles with equal
+stencil size; each group is an ordinary scikit-fem basis. The wrappers installed here make
+``BilinearForm`` and ``LinearForm`` (and therefore ``asm``) loop over those groups and
+concatenate their COO contributions, so user code is unchanged. Forms on ordinary bases take
+scikit-fem's own code path untouched. The wrappers are installed when the first
+natural-neighbour basis (a :class:`StencilBasis`) is built, not on import, and
+:func:`restore_scikit_fem_assembly` takes them out again.
 
-Keyword arguments are split with the groups: dof vectors are interpolated by
-each group, arrays and ``DiscreteField`` objects defined over all elements
-(shape ``(..., nelems, nq)``) are restricted to the group's elements.
+Keyword arguments are split with the groups: dof vectors are interpolated by each group,
+arrays and ``DiscreteField`` objects defined over all elements (shape ``(..., nelems, nq)``)
+are restricted to the group's elements.
 
-Bilinear and linear forms on natural-neighbour bases whose trial and test
-functions share their stencils (the usual case: one basis, or a scalar and a
-vector basis on the same mesh) take a faster road that needs no groups at
-all: the form is linear in the components of (value, gradient) of u and of
-v, so ``form(u, v) = sum_ab C_ab(x) u_a v_b``; the coefficients ``C`` are read
-off by calling the form on unit fields (all of them stacked into one call per
-chunk of elements) and a numba kernel contracts them, element by element,
-with the values and gradients of the element's stencil functions. The form
-is called a fixed number of times whatever the stencil sizes, and the work is
-the sum over elements of the stencil size squared. Functionals need no
-wrapper: they read only the quadrature data, which a natural-neighbour basis
-has over all its elements.
+Bilinear and linear forms on natural-neighbour bases whose trial and test functions share
+their stencils (the usual case: one basis, or a scalar and a vector basis on the same mesh)
+take a faster road that needs no groups at all: the form is linear in the components of
+(value, gradient) of u and of v, so ``form(u, v) = sum_ab C_ab(x) u_a v_b``; the
+coefficients ``C`` are read off by calling the form on unit fields (all of them stacked into
+one call per chunk of elements) and a numba kernel contracts them, element by element, with
+the values and gradients of the element's stencil functions. The form is called a fixed
+number of times whatever the stencil sizes, and the work is the sum over elements of the
+stencil size squared. Functionals need no wrapper: they read only the quadrature data, which
+a natural-neighbour basis has over all its elements.
 """
 from __future__ import annotations
 
@@ -55,8 +52,9 @@ class StencilBasis:
 
 
 class StencilGroup:
-    """Marks the per-stencil-size group bases of a natural-neighbour basis; they hold
-    ``stencil_values = (V, G)`` and ``stacked(idx)`` for the stacked assembly."""
+    """Marks the per-stencil-size group bases of a natural-neighbour basis: ``stencil_values
+    = (V, G)`` and ``stacked(idx)`` for the stacked assembly; ``release_fields()`` drops
+    the per-function fields (``basis``) that scikit-fem's own assembly made them build."""
 
 
 def _is_nn(basis) -> bool:
@@ -126,8 +124,8 @@ def _pairs(ubasis, vbasis):
         return
     for g in nn.groups:
         idx = g.tind
-        u = g if ubasis is nn else _partner(ubasis, nn, idx, ("group", len(g.basis)))
-        v = g if vbasis is nn else _partner(vbasis, nn, idx, ("group", len(g.basis)))
+        u = g if ubasis is nn else _partner(ubasis, nn, idx, ("group", g.Nbfun))
+        v = g if vbasis is nn else _partner(vbasis, nn, idx, ("group", g.Nbfun))
         yield idx, u, v
 
 
@@ -773,6 +771,8 @@ def install():
                 ind, d = _stacked_bilinear(self, u, v, kw)
             else:
                 ind, d, _, _ = bil(self, u, v, **kw)
+                for b in filter(_stackable, (u, v)):   # one group's fields at a time
+                    b.release_fields()
             rows.append(ind)
             data.append(d)
         return np.concatenate(rows, axis=1), np.concatenate(data), shape, None

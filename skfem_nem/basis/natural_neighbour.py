@@ -25,7 +25,6 @@ the stencil size squared, not with the largest stencil.
 """
 from __future__ import annotations
 
-import weakref
 from typing import Optional, Tuple
 
 import numpy as np
@@ -43,101 +42,11 @@ from .companions import companion_basis, is_natural_neighbour, refuse_keywords
 from .plotting import DEFAULT_NREFS, refined_values, visuals_call
 from .projection import (field_values, l2_project, normalize_elements, normalize_facets,
                          positions_in, projection_dofs, stencil_dofs)
+from .groups import GroupBasis, restrict_field
 from .stencils import fill_group, stencil_union
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
 __all__ = ["NaturalNeighbourBasis", "NaturalNeighbourFacetBasis"]
-
-
-class _GroupBasis(AbstractBasis, assembly.StencilGroup):
-    """The triangles of one stencil size: an ordinary basis with fixed Nbfun.
-
-    Built by :class:`NaturalNeighbourBasis`; users never see it, scikit-fem's
-    form kernels do. It refers to its basis weakly: a reference back would make a
-    cycle, whose arrays (every stencil's values and gradients, hundreds of megabytes
-    at 10^5 nodes) Python frees only at its next cyclic collection, steps later.
-    """
-
-    def __init__(self, parent, elems, stencils, V, G):
-        self._parent = weakref.ref(parent)
-        self.mesh = parent.mesh
-        self.elem = parent.elem
-        self.mapping = parent.mapping
-        self.dofs = parent.dofs
-        self.X, self.W = parent.X, parent.W
-        self.tind = elems
-        self.nelems = elems.shape[0]
-        self.dx = parent.dx[elems]
-        S = stencils.shape[0]
-        vec = isinstance(self.elem, ElementVector)
-        if vec:
-            dim = self.elem.dim
-            nd = self.dofs.nodal_dofs
-            self._element_dofs = np.empty((dim * S, self.nelems), dtype=np.int64)
-            basis = []
-            for j in range(S):
-                for c in range(dim):
-                    self._element_dofs[dim * j + c] = nd[c, stencils[j]]
-                    val = np.zeros((dim,) + V.shape[1:])
-                    val[c] = V[j]
-                    grad = np.zeros((dim, dim) + V.shape[1:])
-                    grad[c] = G[:, j]
-                    basis.append((DiscreteField(val, grad),))
-        else:
-            self._element_dofs = self.dofs.nodal_dofs[0][stencils]
-            basis = [(DiscreteField(V[j], G[:, j]),) for j in range(S)]
-        self.basis = basis
-        self.Nbfun = len(basis)
-        self.stencil_values = (V, G)  # (V, G) arrays for the stacked assembly
-
-    def stacked(self, idx):
-        """Local functions ``idx`` (P,) stacked along the element axis: a
-        one-tuple of DiscreteField over P * nelems elements (pair-major)."""
-        V, G = self.stencil_values
-        nq = V.shape[2]
-        if isinstance(self.elem, ElementVector):
-            dim = self.elem.dim
-            j, c = idx // dim, idx % dim
-            val = np.zeros((dim, idx.size) + V.shape[1:])
-            grad = np.zeros((dim, dim, idx.size) + V.shape[1:])
-            for comp in range(dim):
-                sel = c == comp
-                val[comp, sel] = V[j[sel]]
-                js = j[sel]
-                for g in range(dim):
-                    grad[comp, g, sel] = G[g, js]
-            return (DiscreteField(val.reshape(dim, -1, nq), grad.reshape(dim, dim, -1, nq)),)
-        return (DiscreteField(V[idx].reshape(-1, nq), G[:, idx].reshape(G.shape[0], -1, nq)),)
-
-    @property
-    def parent(self) -> "NaturalNeighbourBasis":
-        """The basis whose triangles of one stencil size these are."""
-        parent = self._parent()
-        if parent is None:
-            raise ReferenceError("a group of a NaturalNeighbourBasis outlived its basis")
-        return parent
-
-    @property
-    def element_dofs(self):
-        return self._element_dofs
-
-    def default_parameters(self):
-        x = self.parent.global_coordinates()
-        h = self.parent.mesh_parameters()
-        return {"x": _take(x, self.tind), "h": _take(h, self.tind)}
-
-    def global_coordinates(self):
-        return _take(self.parent.global_coordinates(), self.tind)
-
-
-def _take(f, idx):
-    """Restrict a DiscreteField (or tuple of them) over elements to ``idx``."""
-    if isinstance(f, tuple):
-        return tuple(_take(g, idx) for g in f)
-    if isinstance(f, DiscreteField):
-        return DiscreteField(*[None if a is None else np.asarray(a)[..., idx, :]
-                               for a in f.astuple])
-    return f
 
 
 class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
@@ -276,7 +185,7 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         return Phi, out
 
     def _group(self, elems, stencils, V, G):
-        return _GroupBasis(self, elems, stencils, V, G)
+        return GroupBasis(self, elems, stencils, V, G)
 
     # -- what assembly and users read ----------------------------------------
     @property
@@ -777,11 +686,11 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
         return self._geom.mesh_parameters()
 
     def _group(self, elems, stencils, V, G):
-        g = _GroupBasis(self, elems, stencils, V, G)
+        g = GroupBasis(self, elems, stencils, V, G)
         g.default_parameters = lambda: {
-            "x": _take(self.global_coordinates(), elems),
-            "h": _take(self.mesh_parameters(), elems),
-            "n": _take(self.normals, elems)}
+            "x": restrict_field(self.global_coordinates(), elems),
+            "h": restrict_field(self.mesh_parameters(), elems),
+            "n": restrict_field(self.normals, elems)}
         return g
 
 

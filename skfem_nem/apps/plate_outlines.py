@@ -171,7 +171,9 @@ class PlateOutlines:
         the plate bounds the enclosed fluid; its segments are released and the other
         arc, closed by a new segment between those ends, becomes the loop."""
         P = lm.nodes
-        arcs = _arcs(self.loops[k], p, q)
+        arcs = [arc for arc in _arcs(self.loops[k], p, q) if len(arc[1]) >= 3]
+        if not arcs:
+            return "a piece would keep fewer than three nodes"
         inner, outer = min(arcs, key=lambda arc: polygon_area_centroid(P[arc[0]])[0] * turn)
         pocket = abs(polygon_area_centroid(P[inner])[0])
         area0 = sum(self.areas0)

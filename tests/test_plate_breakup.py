@@ -183,6 +183,67 @@ def test_no_cut_where_the_plate_folds_around_much_fluid_or_two_pieces_meet(case,
     assert_same_state(saved_state(lm, tmp_path / "after2.npz"), before)
 
 
+def two_blocks(gap, seed=0):
+    """Two blocks 0.3 high side by side, ``gap`` apart, each outlined by its own loop of
+    segments turning the same way; random nodes around. The mesh and the two loops."""
+    x0, x1 = 0.5 - gap / 2, 0.5 + gap / 2
+    left = polyline_nodes([[0.2, 0.35], [x0, 0.35], [x0, 0.65], [0.2, 0.65]], SPACING, True)
+    right = polyline_nodes([[x1, 0.35], [0.8, 0.35], [0.8, 0.65], [x1, 0.65]], SPACING, True)
+    p = square_nodes(300, 16, seed, jitter=0.3, margin=0.01)
+    d, _ = cKDTree(np.r_[left, right]).query(p)
+    p = p[(d > 0.03) | (np.arange(p.shape[0]) < 64)]
+    a = p.shape[0] + np.arange(len(left))
+    b = a[-1] + 1 + np.arange(len(right))
+    segs = np.r_[np.c_[a, np.roll(a, -1)], np.c_[b, np.roll(b, -1)]]
+    lm = LagrangianMesh(np.r_[p, left, right], segments=segs, ip_fields={"one": np.ones(3)})
+    return lm, a, b
+
+
+def _facing_sides(lm, a, b):
+    """Rows of the two segments facing each other across the gap, nearest y = 0.5."""
+    rows = []
+    for loop, x in ((a, lm.nodes[a, 0].max()), (b, lm.nodes[b, 0].min())):
+        P, Q = lm.nodes[loop], lm.nodes[np.roll(loop, -1)]
+        side = np.flatnonzero((np.abs(P[:, 0] - x) < 1e-12) & (np.abs(Q[:, 0] - x) < 1e-12))
+        i = side[np.argmin(np.abs(0.5 * (P[side, 1] + Q[side, 1]) - 0.5))]
+        rows.append(pair_rows(lm, [[loop[i], loop[(i + 1) % len(loop)]]])[0])
+    return rows
+
+
+def test_two_pieces_that_meet_are_joined_into_one():
+    """Two pieces whose facing sides meet across a film: one loop of both pieces' nodes,
+    turning the same way, its reference area theirs together; the film joins the plate,
+    every segment an edge, the mesh constrained Delaunay, the ip integrals kept."""
+    lm, a, b = two_blocks(gap=0.004)
+    P = lm.nodes
+    areas = [polygon_area_centroid(P[o])[0] for o in (a, b)]
+    outlines = PlateOutlines([a, b], [areas[0], 2 * areas[1]])
+    before = lm.ip_integral("one")
+    assert outlines.pinch(lm, *_facing_sides(lm, a, b), SPACING) is None
+    check_constrained(lm)
+    assert len(outlines.loops) == 1 and outlines.areas0 == [areas[0] + 2 * areas[1]]
+    o = outlines.loops[0]
+    check_chain(lm, o, closed=True)
+    assert len(o) == len(a) + len(b) == lm.triangulation.segments.shape[0]
+    assert outlines.crossings(lm.nodes) == 0
+    joined = polygon_area_centroid(lm.nodes[o])[0]
+    assert 0 < joined - sum(areas) <= 0.004 * SPACING * (1 + 1e-9)     # the film
+    assert outlines.inside(lm.nodes, np.array([[0.5, 0.5], [0.3, 0.5], [0.7, 0.5]])).all()
+    np.testing.assert_allclose(lm.ip_integral("one"), before, rtol=1e-13)
+
+
+def test_pieces_that_meet_far_from_a_film_are_not_joined(tmp_path):
+    """The facing sides 0.04 apart, more than the outline's spacing: the reason comes
+    back and nothing changes."""
+    lm, a, b = two_blocks(gap=0.04)
+    outlines = PlateOutlines([a, b], [1.0, 1.0])
+    before = saved_state(lm, tmp_path / "before.npz")
+    why = outlines.pinch(lm, *_facing_sides(lm, a, b), SPACING)
+    assert "two pieces of the plate meet" in why and "spacing" in why
+    assert_same_state(saved_state(lm, tmp_path / "after.npz"), before)
+    assert len(outlines.loops) == 2 and outlines.areas0 == [1.0, 1.0]
+
+
 def _arms(lm, loop, y):
     """Positions of the two segments facing each other across the U's gap, nearest
     height ``y``."""

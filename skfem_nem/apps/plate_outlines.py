@@ -24,6 +24,13 @@ met are released, so they cannot cross afterwards. With the pocket, the plate's 
 area constraint then squeezes the pocket out over the next steps); a larger fold stops
 the run.
 
+Where two pieces meet (a film of fluid between two pieces closes), they are joined
+(:meth:`PlateOutlines.pinch` again): the two segments that met are released and their
+ends joined crosswise, so the two loops become one and the film joins the plate; the
+piece's reference area is the two pieces' together. The segments' facing ends must be
+closer than the outline's spacing, and the plate's area with the film within
+:data:`FOLD_AREA_TOLERANCE` above its reference area.
+
 Where the two faces that meet are a few nodes apart along the loop (a spike: a sliver
 of plate, or a crack of fluid, thinner than the mesh resolves, closing within one step),
 a cut would leave a piece of fewer than three nodes or one of at most
@@ -143,12 +150,13 @@ class PlateOutlines:
     def pinch(self, lm, first: int, second: int, spacing: float) -> Optional[str]:
         """Cut the piece whose faces hold the segments ``first`` and ``second`` (rows of
         ``lm.triangulation.segments``, a film of plate closing between them) in two,
-        or close the fold where they meet from outside, as the module docs say;
+        close the fold where they meet from outside, or join two pieces that meet, as
+        the module docs say;
         ``spacing``: the outline's node spacing. Returns None, or why not (the mesh and
         the loops then unchanged)."""
         found = self._locate(lm.triangulation.segments[[first, second]])
         if found is None:
-            return "two pieces of the plate meet, which the model does not follow"
+            return self._join(lm, lm.triangulation.segments[[first, second]], spacing)
         k, p, q = found
         o, P = self.loops[k], lm.nodes
         plan = _cut(P, o, p, q)
@@ -221,6 +229,47 @@ class PlateOutlines:
             return str(err)
         self.loops = [new[np.asarray(outer if m == k else o)]
                       for m, o in enumerate(self.loops)]
+        return None
+
+    def _join(self, lm, pair, spacing: float) -> Optional[str]:
+        """Join the two pieces whose faces hold the segments ``pair`` (a film of fluid
+        between them closing): both segments are released and their ends joined
+        crosswise (each end to the facing end of the other), so the two loops become
+        one, turning the same way; the film joins the plate, whose reference area is
+        the two pieces' together."""
+        where = [self._position(key) for key in pair_keys(pair)]
+        if None in where or where[0][0] == where[1][0]:
+            return "a segment of the film is not on the plate's outline"
+        (k1, p), (k2, q) = where
+        o1, o2, P = self.loops[k1], self.loops[k2], lm.nodes
+        a0, a1, b0, b1 = o1[p], o1[(p + 1) % len(o1)], o2[q], o2[(q + 1) % len(o2)]
+        rungs = np.hypot(*(P[[a0, b0]] - P[[b1, a1]]).T)
+        if rungs.max() > spacing:
+            return (f"two pieces of the plate meet ({rungs.max():.3g} apart at the ends of "
+                    f"the segments that met, more than the outline's spacing), which the "
+                    f"model does not follow")
+        film = abs(polygon_area_centroid(P[[a0, a1, b0, b1]])[0])
+        if (self.area_centroid(P)[0] + film) / sum(self.areas0) - 1 > FOLD_AREA_TOLERANCE:
+            return "two pieces of the plate meet around more fluid than FOLD_AREA_TOLERANCE"
+        tri = lm.triangulation
+        rows = tri.segment_rows(np.array([[a0, a1], [b0, b1]]))
+        try:
+            new = lm.reconnect_segments(rows, [[a0, b1], [b0, a1]], tri.segment_source[rows])
+        except ValueError as err:
+            return f"two pieces of the plate meet and cannot be joined ({err})"
+        joined = np.r_[np.roll(o1, -(p + 1)), np.roll(o2, -(q + 1))]   # a1 .. a0 b1 .. b0
+        first, gone = min(k1, k2), max(k1, k2)
+        self.loops[first], self.areas0[first] = joined, self.areas0[k1] + self.areas0[k2]
+        del self.loops[gone], self.areas0[gone]
+        self.loops = [new[o] for o in self.loops]
+        return None
+
+    def _position(self, key):
+        """(piece, position) of the outline segment with pair key ``key``, or None."""
+        for k, o in enumerate(self.loops):
+            pos = np.flatnonzero(pair_keys(np.c_[o, np.roll(o, -1)]) == key)
+            if pos.size:
+                return k, int(pos[0])
         return None
 
     def _locate(self, pair):

@@ -154,10 +154,13 @@ class PlateOutlines:
         the module docs say;
         ``spacing``: the outline's node spacing. Returns None, or why not (the mesh and
         the loops then unchanged)."""
-        found = self._locate(lm.triangulation.segments[[first, second]])
-        if found is None:
-            return self._join(lm, lm.triangulation.segments[[first, second]], spacing)
-        k, p, q = found
+        where = [self._position(key)
+                 for key in pair_keys(lm.triangulation.segments[[first, second]])]
+        if None in where:
+            return "a segment of the film is not on the plate's outline"
+        (k, p), (k2, q) = where
+        if k != k2:
+            return self._join(lm, (k, p), (k2, q), spacing)
         o, P = self.loops[k], lm.nodes
         plan = _cut(P, o, p, q)
         if plan is None:
@@ -184,13 +187,12 @@ class PlateOutlines:
             return "a piece would keep fewer than three nodes"
         inner, outer = min(arcs, key=lambda arc: polygon_area_centroid(P[arc[0]])[0] * turn)
         pocket = abs(polygon_area_centroid(P[inner])[0])
-        area0 = sum(self.areas0)
-        after = (self.area_centroid(P)[0] + pocket) / area0 - 1
+        after = self._excess_with(P, pocket)
         if after > FOLD_AREA_TOLERANCE:
             return (f"the plate folds onto itself (its faces meet from outside) around "
-                    f"fluid of {pocket / area0:.2%} of its area; with it the plate would be "
-                    f"{after:.2%} above its reference area (more than FOLD_AREA_TOLERANCE), "
-                    f"which the model does not follow")
+                    f"fluid of {pocket / sum(self.areas0):.2%} of its area; with it the "
+                    f"plate would be {after:.2%} above its reference area (more than "
+                    f"FOLD_AREA_TOLERANCE), which the model does not follow")
         why = self._close(lm, k, inner, outer, remove=())
         return None if why is None else f"the fold cannot be closed ({why})"
 
@@ -231,16 +233,18 @@ class PlateOutlines:
                       for m, o in enumerate(self.loops)]
         return None
 
-    def _join(self, lm, pair, spacing: float) -> Optional[str]:
-        """Join the two pieces whose faces hold the segments ``pair`` (a film of fluid
-        between them closing): both segments are released and their ends joined
-        crosswise (each end to the facing end of the other), so the two loops become
-        one, turning the same way; the film joins the plate, whose reference area is
-        the two pieces' together."""
-        where = [self._position(key) for key in pair_keys(pair)]
-        if None in where or where[0][0] == where[1][0]:
-            return "a segment of the film is not on the plate's outline"
-        (k1, p), (k2, q) = where
+    def _excess_with(self, P, area: float) -> float:
+        """How far above its reference area the plate (all pieces) would be with
+        ``area`` more, as a fraction of the reference area."""
+        return (self.area_centroid(P)[0] + area) / sum(self.areas0) - 1
+
+    def _join(self, lm, first, second, spacing: float) -> Optional[str]:
+        """Join pieces ``first[0]`` and ``second[0]`` where their segments at positions
+        ``first[1]`` and ``second[1]`` met (a film of fluid between them closing): both
+        segments are released and their ends joined crosswise (each end to the facing
+        end of the other), so the two loops become one, turning the same way; the film
+        joins the plate, whose reference area is the two pieces' together."""
+        (k1, p), (k2, q) = first, second
         o1, o2, P = self.loops[k1], self.loops[k2], lm.nodes
         a0, a1, b0, b1 = o1[p], o1[(p + 1) % len(o1)], o2[q], o2[(q + 1) % len(o2)]
         rungs = np.hypot(*(P[[a0, b0]] - P[[b1, a1]]).T)
@@ -249,7 +253,7 @@ class PlateOutlines:
                     f"the segments that met, more than the outline's spacing), which the "
                     f"model does not follow")
         film = abs(polygon_area_centroid(P[[a0, a1, b0, b1]])[0])
-        if (self.area_centroid(P)[0] + film) / sum(self.areas0) - 1 > FOLD_AREA_TOLERANCE:
+        if self._excess_with(P, film) > FOLD_AREA_TOLERANCE:
             return "two pieces of the plate meet around more fluid than FOLD_AREA_TOLERANCE"
         tri = lm.triangulation
         rows = tri.segment_rows(np.array([[a0, a1], [b0, b1]]))
@@ -270,16 +274,6 @@ class PlateOutlines:
             pos = np.flatnonzero(pair_keys(np.c_[o, np.roll(o, -1)]) == key)
             if pos.size:
                 return k, int(pos[0])
-        return None
-
-    def _locate(self, pair):
-        """(piece, position of the first segment, of the second) or None."""
-        keys = pair_keys(pair)
-        for k, o in enumerate(self.loops):
-            ring = pair_keys(np.c_[o, np.roll(o, -1)])
-            pos = [np.flatnonzero(ring == key) for key in keys]
-            if pos[0].size and pos[1].size:
-                return k, int(pos[0][0]), int(pos[1][0])
         return None
 
     def _apply(self, lm, k, plan, spacing) -> Optional[str]:

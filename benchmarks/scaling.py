@@ -21,8 +21,9 @@ step), best of ``--repeat``; the step's microseconds per node and their ratio to
 first size's (linear cost: 1), Picard iterations, the plate depth after step 3 and the
 peak memory of the run's process. ``--plate-solvers schur schur:refactor schur:strict``
 measures the default solver against itself factorising every solve (``REUSE_FACTOR``
-off) and against itself solving the Picard iterations' Stokes systems to the final
-solves' ``LINEAR_TOL`` (``PICARD_LINEAR_FACTOR`` 0).
+off), against itself solving the Picard iterations' Stokes systems to the final
+solves' ``LINEAR_TOL`` (``PICARD_LINEAR_FACTOR`` 0); ``schur:double`` against its
+factors in double precision (``FACTOR_DTYPE``).
 
 Prints markdown tables. Quick run::
 
@@ -57,11 +58,14 @@ DIRECT_MAX_NODES = 5000
 # the viscous block at every solve, as before the factorisation was kept between the
 # Picard iterations (stokes_solvers.REUSE_FACTOR); solving every Picard iteration to the
 # final solves' LINEAR_TOL, as before those stopped near the Picard tolerance
-# (rheology.PICARD_LINEAR_FACTOR)
+# (rheology.PICARD_LINEAR_FACTOR); factorising the viscous block in double precision, as
+# before the single-precision factors (stokes_solvers.FACTOR_DTYPE)
 VARIANTS = {"schur:refactor": "import skfem_nem.models.stokes_solvers as s; "
                               "s.REUSE_FACTOR = False; ",
             "schur:strict": "import skfem_nem.models.rheology as r; "
-                            "r.PICARD_LINEAR_FACTOR = 0.0; "}
+                            "r.PICARD_LINEAR_FACTOR = 0.0; ",
+            "schur:double": "import numpy; import skfem_nem.models.stokes_solvers as s; "
+                            "s.FACTOR_DTYPE = numpy.float64; "}
 
 
 def _rss_kb() -> float:

@@ -7,7 +7,10 @@ from skfem_nem import delaunay_mesh
 from skfem_nem.geometry.nodesets import box_nodes, polyline_nodes
 from skfem_nem.models.analytic import SolCx
 from skfem_nem.models.stokes import StokesCache, outline_flux, solve_stokes, stokes_spaces
-from skfem_nem.models.stokes_solvers import SOLVERS
+import scipy.sparse as sps
+
+import skfem_nem.models.stokes_solvers as solvers
+from skfem_nem.models.stokes_solvers import SOLVERS, ViscousFactor, fgmres
 
 from helpers import plastic_inclusion
 
@@ -163,6 +166,85 @@ def test_schur_reuses_its_factorisation_while_it_pays(square):
     other = stokes_spaces(delaunay_mesh(box_nodes(300, seed=5)), "nem")
     s4 = solve_stokes(other, ex.viscosity, ex.force, solver="schur", cache=cache)
     assert not s4.info["factor_reused"] and cache.factorisations == 3
+
+
+@pytest.mark.parametrize("contrast", [1.0, 1e6])
+def test_schur_single_precision_factors_reach_the_direct_solution(square, contrast):
+    """The default factors are single precision; the solve still meets tol on the
+    true residual and agrees with the direct solve at a 1e6 jump."""
+    sp_, _ = square
+    ex = SolCx(1.0, contrast)
+    ref = solve_stokes(sp_, ex.viscosity, ex.force, solver="direct")
+    s = solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", tol=1e-10, maxiter=3000)
+    assert s.info["factor_precision"] == "float32" and s.residual < 1e-10
+    _close(s, ref, 1e-8)
+
+
+def test_schur_goes_on_in_double_precision(square, monkeypatch):
+    """A solve not converged after ``PRECISION_ITERATIONS`` (here 3) with
+    single-precision factors goes on from where it stands with double-precision ones
+    and the Schur-complement CG, to the direct solution; the iterations of both
+    count, and the double-precision factors are kept. Out of iterations it raises
+    naming them."""
+    sp_, _ = square
+    ex = SolCx(1.0, 1e4)
+    ref = solve_stokes(sp_, ex.viscosity, ex.force, solver="direct")
+    made = []
+    monkeypatch.setattr(solvers, "PRECISION_ITERATIONS", 3)
+    monkeypatch.setattr(solvers, "ViscousFactor", lambda A, dtype: made.append(dtype)
+                        or ViscousFactor(A, dtype))
+    cache = StokesCache()
+    s = solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", cache=cache)
+    assert made == [np.float32, np.float64] and s.info["factor_precision"] == "float64"
+    assert s.iterations > 3 and cache.factor.dtype == np.float64
+    _close(s, ref, 1e-7)
+    with pytest.raises(RuntimeError, match="pressure CG did not converge: 5 iterations"):
+        solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", maxiter=5)
+
+
+def test_factor_fgmres_stops_where_rounding_stalls_it(square, monkeypatch):
+    """With a tolerance below what the rounding of the residual allows, FGMRES with
+    the factors stops after a restart cycle that did not halve the residual instead
+    of running on to its limit (here 2,000 iterations), and the Schur-complement CG
+    takes over."""
+    sp_, _ = square
+    ex = SolCx(1.0, 1e6)
+    runs = []
+
+    def recorded(*args, **kw):
+        out = fgmres(*args, **kw)
+        runs.append(out[1:])
+        return out
+
+    monkeypatch.setattr(solvers, "fgmres", recorded)
+    monkeypatch.setattr(solvers, "PRECISION_ITERATIONS", 2000)
+    s = solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", tol=1e-17, maxiter=3000)
+    [(its, res)] = runs
+    assert res > 1e-17 and its < 4 * solvers.FGMRES_RESTART
+    assert s.info["factor_precision"] == "float64" and s.iterations > its
+    _close(s, solve_stokes(sp_, ex.viscosity, ex.force, solver="direct"), 1e-8)
+
+
+def test_viscous_factor_precision_and_errors():
+    """Scaled factors solve to their precision; a zero diagonal and a singular
+    block are named."""
+    rng = np.random.default_rng(0)
+    n = 60
+    L = sps.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1])
+    A = (sps.diags(10.0 ** rng.uniform(-3, 3, n)) @ L @ sps.diags(np.ones(n))).tocsc()
+    A = (0.5 * (A + A.T) + sps.identity(n) * 1e-3).tocsc()
+    b = rng.standard_normal(n)
+    for dtype, rtol in ((np.float64, 1e-12), (np.float32, 1e-3)):
+        x = ViscousFactor(A, dtype).solve(b)
+        assert x.dtype == np.float64
+        assert np.linalg.norm(A @ x - b) < rtol * np.linalg.norm(b)
+    A0 = A.tolil()
+    A0[4, 4] = 0.0
+    with pytest.raises(RuntimeError, match="1 diagonal entries <= 0"):
+        ViscousFactor(A0.tocsc())
+    S = sps.csc_matrix(np.array([[1.0, 1.0], [1.0, 1.0]]))
+    with pytest.raises(RuntimeError, match="singular"):
+        ViscousFactor(S)
 
 
 def test_cache_rebuilds_when_iterations_grow(square):

@@ -17,11 +17,14 @@ The problem, with ``m`` the integrals of the pressure basis functions::
 Solvers
 -------
 ``"schur"`` factorises the viscous block (sparse LU in a symmetric
-ordering) and solves the pressure Schur complement by preconditioned
-conjugate gradients (preconditioner: the lumped 1/eta-weighted pressure
-mass). ``"schur-amg"`` is the same outer iteration with the viscous block
-solved by AMG-preconditioned CG instead of a factorisation (memory linear in
-the problem size). ``"direct"`` factorises the whole saddle-point system
+ordering, in single precision after a diagonal scaling) and runs flexible
+GMRES on the whole system preconditioned by the block upper-triangular
+``[[A, B^T], [0, -S_hat]]^-1`` with those factors for ``A`` and the lumped
+1/eta-weighted pressure mass for ``S_hat``: with exact factors, the
+iterations of conjugate gradients on the pressure Schur complement.
+``"schur-amg"`` is conjugate gradients on the Schur complement with the
+viscous block solved by AMG-preconditioned CG instead of a factorisation
+(memory linear in the problem size). ``"direct"`` factorises the whole saddle-point system
 (slower: natural-neighbour stencils are wide). ``"minres"`` uses MINRES with
 a block-diagonal preconditioner: one smoothed-aggregation AMG V-cycle
 (pyamg, rigid-body modes as near null space) for the viscous block and the
@@ -91,6 +94,23 @@ REBUILD_SLACK = 10
 # old factors against 38-44 CG iterations after a new factorisation (sinking plate,
 # 1,600-21,000 nodes): the linear solver's time of a step drops by 20-28% (docs/stokes.md)
 REUSE_FACTOR = True
+# precision in which "schur" first factorises the (diagonally scaled) viscous block: the
+# factors precondition FGMRES on the whole system, so they need not be exact. At
+# 178,497 velocity unknowns (sinking plate, 100,000 drawn nodes) single precision
+# factorises in 4.6 s against 7.4 s, solves in 94 ms against 136 ms and keeps half the
+# memory, for 23 FGMRES iterations against 22 with double-precision factors (SolCx at a
+# contrast of 1e6, 16,430 nodes: 124 against 107 Schur-complement CG iterations, in the
+# same time). A solve that has not converged after PRECISION_ITERATIONS, or stalls,
+# goes on from where it stands with double-precision factors and conjugate gradients on
+# the pressure Schur complement, the solve of "schur" before (docs/stokes.md)
+FACTOR_DTYPE = np.float32
+# FGMRES iterations with the single-precision factors (one restart cycle)
+PRECISION_ITERATIONS = FGMRES_RESTART
+# a restart cycle of FGMRES preconditioned by factors that does not reduce the true
+# residual below this fraction of the last one's has met the rounding of the residual
+# itself (Taylor-Hood, a block 1e4 times stiffer: 1.1e-10 to 1.3e-10 for 500
+# iterations): the solve stops there
+FACTOR_STALL = 0.5
 
 
 @dataclass
@@ -123,6 +143,11 @@ class SaddlePointProblem:
     def n_velocity(self) -> int:
         """Number of free velocity unknowns."""
         return self.free.size
+
+    @property
+    def rhs(self) -> np.ndarray:
+        """Right side of the whole system, ``[f, g]``."""
+        return np.concatenate([self.f, self.g])
 
     @property
     def n_pressure(self) -> int:
@@ -175,7 +200,7 @@ def solve_direct(problem: SaddlePointProblem, tol: float, maxiter: int,
         rhs = np.concatenate([problem.f, problem.g, [0.0]])
     else:
         K = sp.bmat([[A, B.T], [B, -S]], format="csc")
-        rhs = np.concatenate([problem.f, problem.g])
+        rhs = problem.rhs
     x = spla.spsolve(K, rhs)
     if not np.isfinite(x).all():
         raise RuntimeError("the Stokes system is singular: check the wall conditions "
@@ -187,15 +212,21 @@ def solve_direct(problem: SaddlePointProblem, tol: float, maxiter: int,
 
 def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
                 info: dict, cache: Optional[StokesCache] = None) -> SaddlePointSolution:
-    """Sparse LU of the viscous block, pressure CG on the Schur complement. With a
-    ``cache`` (a :class:`StokesCache`), the CG starts from the pressure of the last
-    solve where the sizes agree and it is a better start than zero (the Picard
-    iterations of a time step), and keeps this solve's; ``info["warm_start"]``.
-    The cache also keeps the factorisation: a later solve whose viscous block has the
-    same pattern (the next Picard iterations, with new viscosities) does not factorise
-    again but runs :func:`fgmres` preconditioned by the kept factors
-    (:func:`_reuse_factor`), and factorises only if that takes more than
-    ``REBUILD_GROWTH`` times the iterations of the solve that factorised;
+    """Sparse LU of the viscous block in single precision (:class:`ViscousFactor`,
+    :data:`FACTOR_DTYPE`), :func:`fgmres` on the whole system preconditioned by it
+    (:func:`_factor_fgmres`): with exact factors, the iterations of conjugate
+    gradients on the pressure Schur complement (hence the name). If that has not met
+    ``tol`` after :data:`PRECISION_ITERATIONS` or stalls (:data:`FACTOR_STALL`), the
+    viscous block is factorised in double precision and :func:`schur_pressure_cg`
+    goes on from the pressure reached; ``info["factor_precision"]``.
+
+    With a ``cache`` (a :class:`StokesCache`), the solve starts from the last solution
+    where the sizes agree and it is a better start than zero (the Picard iterations
+    of a time step), ``info["warm_start"]``. The cache also keeps the factorisation:
+    a later solve whose viscous block has the same pattern (the next Picard
+    iterations, with new viscosities) does not factorise again but is preconditioned
+    by the kept factors (:func:`_reuse_factor`), and factorises only if that takes
+    more than ``REBUILD_GROWTH`` times the iterations of the solve that factorised;
     ``info["factor_reused"]``."""
     if cache is not None and REUSE_FACTOR:
         lu = cache.kept_factor(problem.A)
@@ -204,43 +235,101 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
             return sol
         cache.factor = None                # (freed before the next one is made)
     info["factor_reused"] = False
-    try:
-        lu = spla.splu(problem.A, permc_spec="MMD_AT_PLUS_A",
-                       options=dict(SymmetricMode=True))
-    except RuntimeError as err:
-        raise RuntimeError(f"the viscous block is singular ({err}): check the wall "
-                           f"conditions (a rigid-body motion left free?)") from None
-    n1 = problem.n_velocity
-    x0 = None if cache is None else cache.start(n1 + problem.n_pressure)
-    sol = schur_pressure_cg(problem, lu, tol, maxiter, None if x0 is None else x0[n1:], info)
+    matvec = saddle_matvec(problem, problem.A.tocsr())
+    x0 = None if cache is None else _warm_start(cache, matvec, problem.rhs)
+    info["warm_start"] = x0 is not None
+    lu = ViscousFactor(problem.A, FACTOR_DTYPE)
+    x, its, res = _factor_fgmres(problem, lu, matvec, x0, tol,
+                                 min(maxiter, PRECISION_ITERATIONS))
+    if res <= tol:
+        sol = _split(problem, x, its)
+    elif its >= maxiter:
+        raise RuntimeError(f"FGMRES with the factorised viscous block did not converge: "
+                           f"{its} iterations, relative residual {res:.3e} > tol {tol:.1e} "
+                           f"(raise maxiter)")
+    else:                              # on in double precision from where it stands
+        del lu
+        lu = ViscousFactor(problem.A, np.float64)
+        n1 = problem.n_velocity
+        sol = schur_pressure_cg(problem, lu, tol, max(1, maxiter - its), x[n1:],
+                                counted=its)
+        x = np.concatenate([sol.u, sol.p])
+    info["factor_precision"] = lu.dtype.name
     if cache is not None:
-        cache.record(np.concatenate([sol.u, sol.p]), sol.iterations, False)
+        cache.record(x, sol.iterations, False)
         if REUSE_FACTOR:
             cache.keep_factor(lu, problem.A, sol.iterations)
     return sol
 
 
-def _reuse_factor(problem: SaddlePointProblem, lu, tol: float, maxiter: int, info: dict,
-                  cache: StokesCache) -> Optional[SaddlePointSolution]:
-    """The solve of :func:`solve_schur` with a kept factorisation ``lu`` of an earlier
-    viscous block of the same pattern: :func:`fgmres` on the whole system with the block
-    upper-triangular preconditioner (``lu`` for the viscous block, the lumped
-    1/eta-weighted pressure mass for the Schur complement), from the cached start. A
-    fixed linear preconditioner, exact where the viscosity has not changed; where it
-    has, the Krylov space makes up the difference in a few more iterations. None if it
-    does not converge within ``REBUILD_GROWTH`` times the iterations of the solve that
-    factorised, plus ``REBUILD_SLACK`` (the caller factorises again)."""
-    limit = min(maxiter, int(REBUILD_GROWTH * cache.factor_iterations + REBUILD_SLACK))
-    A = problem.A.tocsr()                          # CSR: faster products
-    matvec = saddle_matvec(problem, A)
+class ViscousFactor:
+    """Sparse LU of the viscous block ``A`` scaled by its diagonal, ``D^-1/2 A D^-1/2``,
+    in the precision ``dtype`` (symmetric minimum-degree ordering); :meth:`solve`
+    applies the resulting approximation of ``A^-1`` to double-precision vectors. The
+    scaling takes the viscosity contrast out of the factors' rounding: an unscaled
+    single-precision factorisation needed as many iterations at a contrast of 1e6 but
+    took twice as long to make (SolCx, 16,430 nodes)."""
+
+    def __init__(self, A: sp.spmatrix, dtype=np.float64):
+        A = sp.csc_matrix(A)
+        d = A.diagonal()
+        if not (d > 0).all():
+            raise RuntimeError(f"the viscous block has {int((d <= 0).sum())} diagonal "
+                               f"entries <= 0: check the viscosity")
+        self.scale = 1.0 / np.sqrt(d)
+        scaled = A.copy()
+        cols = np.repeat(np.arange(A.shape[1]), np.diff(A.indptr))
+        scaled.data = (scaled.data * self.scale[A.indices] * self.scale[cols]).astype(dtype)
+        self.dtype = np.dtype(dtype)
+        try:
+            self.lu = spla.splu(scaled, permc_spec="MMD_AT_PLUS_A",
+                                options=dict(SymmetricMode=True))
+        except RuntimeError as err:
+            raise RuntimeError(f"the viscous block is singular ({err}): check the wall "
+                               f"conditions (a rigid-body motion left free?)") from None
+
+    def solve(self, r: np.ndarray) -> np.ndarray:
+        """``A^-1 r`` (to the rounding of the factors' precision)."""
+        s = self.scale
+        return s * self.lu.solve((s * r).astype(self.dtype)).astype(float)
+
+
+def _factor_fgmres(problem: SaddlePointProblem, lu: ViscousFactor, matvec: Callable,
+                   x0: Optional[np.ndarray], tol: float, maxiter: int):
+    """:func:`fgmres` on the whole system from ``x0`` with the block upper-triangular
+    preconditioner, ``lu`` for the viscous block: solution, iterations, residual.
+
+    The residual is relative to the right side of the pressure Schur complement,
+    ``B A^-1 f - g`` (the continuity residual of the preconditioned right side), not
+    to ``[f, g]``: where a large load is nearly balanced (a prestress, a
+    hydrostatic pressure) ``|f|`` says nothing of the velocity's size, and the
+    residual it allowed left errors of 6e-4 in the velocity that the
+    single-precision factors did not remove. The Schur complement's right side is
+    the reference of the conjugate gradients of :func:`schur_pressure_cg` too."""
     precondition = _triangular_preconditioner(problem, lu.solve)
-    rhs = np.concatenate([problem.f, problem.g])
-    x0 = _warm_start(cache, matvec, rhs)
-    x, its, res = fgmres(matvec, precondition, rhs, x0, tol, limit,
-                         restart=min(FGMRES_RESTART, limit))
+    rhs, n1 = problem.rhs, problem.n_velocity
+    scale = norm((rhs - matvec(precondition(rhs)))[n1:]) or norm(rhs)
+    return fgmres(matvec, precondition, rhs, x0, tol, maxiter,
+                  restart=max(1, min(FGMRES_RESTART, maxiter)), stall=FACTOR_STALL,
+                  scale=scale)
+
+
+def _reuse_factor(problem: SaddlePointProblem, lu: ViscousFactor, tol: float, maxiter: int,
+                  info: dict, cache: StokesCache) -> Optional[SaddlePointSolution]:
+    """The solve of :func:`solve_schur` with a kept factorisation ``lu`` of an earlier
+    viscous block of the same pattern, from the cached start: exact where the
+    viscosity has not changed; where it has, the Krylov space makes up the difference
+    in a few more iterations. None if it does not converge within ``REBUILD_GROWTH``
+    times the iterations of the solve that factorised, plus ``REBUILD_SLACK`` (the
+    caller factorises again)."""
+    limit = min(maxiter, int(REBUILD_GROWTH * cache.factor_iterations + REBUILD_SLACK))
+    matvec = saddle_matvec(problem, problem.A.tocsr())      # CSR: faster products
+    x0 = _warm_start(cache, matvec, problem.rhs)
+    x, its, res = _factor_fgmres(problem, lu, matvec, x0, tol, limit)
     if not res <= tol:
         return None
-    info.update(factor_reused=True, warm_start=x0 is not None)
+    info.update(factor_reused=True, warm_start=x0 is not None,
+                factor_precision=lu.dtype.name)
     cache.record(x, its, False)
     cache.factor_reuses += 1
     return _split(problem, x, its)
@@ -306,14 +395,15 @@ def solve_schur_amg(problem: SaddlePointProblem, tol: float, maxiter: int,
 
 
 def schur_pressure_cg(problem: SaddlePointProblem, lu, tol: float, maxiter: int,
-                      p0: Optional[np.ndarray] = None,
-                      info: Optional[dict] = None) -> SaddlePointSolution:
+                      p0: Optional[np.ndarray] = None, info: Optional[dict] = None,
+                      counted: int = 0) -> SaddlePointSolution:
     """Pressure CG on ``B A^-1 B^T + S + c m m^T`` with ``lu.solve`` applying
     ``A^-1``; preconditioner: ``1 / dp``. ``p0``: a start, taken if its residual is
-    below the right side's (recorded in ``info["warm_start"]``)."""
+    below the right side's (recorded in ``info["warm_start"]``). ``counted``: iterations
+    done before (a solve this one goes on from), added to the count."""
     B, S, m, c = problem.B, problem.S, problem.m, problem.mean_weight
     npr, fu = problem.n_pressure, problem.f
-    count = [0]
+    count = [counted]
 
     def schur(q):
         return B @ lu.solve(B.T @ q) + S @ q + c * m * (m @ q)
@@ -343,9 +433,8 @@ def solve_minres(problem: SaddlePointProblem, tol: float, maxiter: int,
     ml = viscous_amg(problem)
     n1 = problem.n_velocity
     matvec, K, M = minres_operators(problem, ml.aspreconditioner(cycle="V"))
-    x, res_m, restarts, its = restarted_minres(matvec, K, M,
-                                               np.concatenate([problem.f, problem.g]),
-                                               tol, maxiter)
+    x, res_m, restarts, its = restarted_minres(matvec, K, M, problem.rhs, tol,
+                                               maxiter)
     res = problem.residual(x[:n1], x[n1:])
     info["preconditioned_residual"] = res_m
     info["restarts"] = restarts
@@ -530,7 +619,7 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
     precondition = _triangular_preconditioner(
         problem, lambda r: amg_cg(ml, A, r, VISCOUS_CG_STEPS))
 
-    rhs = np.concatenate([problem.f, problem.g])
+    rhs = problem.rhs
     x0 = _warm_start(cache, matvec, rhs)
     x, its, res = fgmres(matvec, precondition, rhs, x0, tol, maxiter)
     info.update(amg_levels=len(ml.levels), amg_rebuilt=rebuilt, warm_start=x0 is not None)
@@ -544,7 +633,8 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
 
 
 def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional[np.ndarray],
-           tol: float, maxiter: int, restart: int = FGMRES_RESTART):
+           tol: float, maxiter: int, restart: int = FGMRES_RESTART,
+           stall: Optional[float] = None, scale: Optional[float] = None):
     """Restarted flexible GMRES (Saad 1993), right-preconditioned.
 
     Flexible because the preconditioned vectors are kept and the update is
@@ -556,19 +646,24 @@ def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional
     numba's threads or other jobs hold made the solves of the sinking plate
     5-7 times slower. Returns the solution, the number of
     iterations and the true relative residual ``|b - K x| / |b|``, the
-    stopping test (checked at every restart).
+    stopping test (checked at every restart). ``stall``: also stop when a
+    restart cycle leaves the true residual above this fraction of the last.
+    ``scale``: the norm the residual is relative to, in place of ``|b|``.
     """
     n = b.size
-    bnorm = norm(b) or 1.0
+    bnorm = (norm(b) if scale is None else scale) or 1.0
     x = np.zeros(n) if x0 is None else np.array(x0, dtype=float)
     r = b - matvec(x) if x0 is not None else b.copy()
     its = 0
     V = np.empty((restart + 1, n))
     Z = np.empty((restart, n))
+    last = np.inf
     while True:
         beta = norm(r)
-        if beta <= tol * bnorm or its >= maxiter:
+        if beta <= tol * bnorm or its >= maxiter or (stall is not None
+                                                      and beta > stall * last):
             return x, its, beta / bnorm
+        last = beta
         H = np.zeros((restart + 1, restart))
         rot = np.zeros((restart, 2))                 # Givens cosines and sines
         g = np.zeros(restart + 1)

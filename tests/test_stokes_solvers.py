@@ -226,18 +226,20 @@ def test_factor_fgmres_stops_where_rounding_stalls_it(square, monkeypatch):
 
 
 def test_viscous_factor_precision_and_errors():
-    """Scaled factors solve to their precision; a zero diagonal and a singular
-    block are named."""
+    """Scaled factors solve to their precision, from a CSC or a CSR block; a zero
+    diagonal and a singular block are named."""
     rng = np.random.default_rng(0)
     n = 60
     L = sps.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1])
     A = (sps.diags(10.0 ** rng.uniform(-3, 3, n)) @ L @ sps.diags(np.ones(n))).tocsc()
-    A = (0.5 * (A + A.T) + sps.identity(n) * 1e-3).tocsc()
+    # not symmetric: a CSR block is factorised as its transpose, which must not show
+    A = (0.5 * (A + A.T) + sps.identity(n) * 1e-3 + 0.1 * sps.eye(n, k=1)).tocsc()
     b = rng.standard_normal(n)
     for dtype, rtol in ((np.float64, 1e-12), (np.float32, 1e-3)):
-        x = ViscousFactor(A, dtype).solve(b)
-        assert x.dtype == np.float64
-        assert np.linalg.norm(A @ x - b) < rtol * np.linalg.norm(b)
+        for M in (A, A.tocsr()):
+            x = ViscousFactor(M, dtype).solve(b)
+            assert x.dtype == np.float64
+            assert np.linalg.norm(A @ x - b) < rtol * np.linalg.norm(b)
     A0 = A.tolil()
     A0[4, 4] = 0.0
     with pytest.raises(RuntimeError, match="1 diagonal entries <= 0"):

@@ -523,7 +523,7 @@ def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndar
     # the mean pressure is fixed by a rank-one term c m m^T of the size of 1/eta
     c = float(mass) / area ** 2 if pressure_mean else 0.0
     problem = SaddlePointProblem(
-        A=Afull[free][:, free].tocsc(), B=Bfull[:, free].tocsr(), S=Sb,
+        A=Afull[free][:, free].tocsr(), B=Bfull[:, free].tocsr(), S=Sb,
         f=sys_.f[free] - Afull[free][:, D] @ uD[D], g=g0 - Bfull[:, D] @ uD[D], m=mvec,
         dp=dp, mean_weight=c, pressure_mean=pressure_mean, ubasis=spaces.ubasis, free=free,
         total=None if share is None else share.total)

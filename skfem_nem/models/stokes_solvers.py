@@ -119,7 +119,7 @@ class SaddlePointProblem:
     velocities moved to the right side), extra constraint rows appended to
     ``B`` as pressure-like multipliers."""
 
-    A: sp.csc_matrix        # (n1, n1) viscous block, free dofs
+    A: sp.csr_matrix        # (n1, n1) viscous block, free dofs
     B: sp.csr_matrix        # (npr, n1) divergence (and constraint) rows
     S: sp.csr_matrix        # (npr, npr) pressure stabilisation
     f: np.ndarray           # (n1,) momentum right side
@@ -271,15 +271,18 @@ class ViscousFactor:
     took twice as long to make (SolCx, 16,430 nodes)."""
 
     def __init__(self, A: sp.spmatrix, dtype=np.float64):
-        A = sp.csc_matrix(A)
-        d = A.diagonal()
+        # a CSR block is factorised as its transpose, whose CSC arrays are its own
+        # (no conversion of the block; solves then use the transposed factors)
+        self.trans = "T" if A.format == "csr" else "N"
+        M = A.T if self.trans == "T" else sp.csc_matrix(A)
+        d = M.diagonal()
         if not (d > 0).all():
             raise RuntimeError(f"the viscous block has {int((d <= 0).sum())} diagonal "
                                f"entries <= 0: check the viscosity")
-        self.scale = 1.0 / np.sqrt(d)
-        scaled = A.copy()
-        cols = np.repeat(np.arange(A.shape[1]), np.diff(A.indptr))
-        scaled.data = (scaled.data * self.scale[A.indices] * self.scale[cols]).astype(dtype)
+        self.scale = s = 1.0 / np.sqrt(d)
+        cols = np.repeat(s, np.diff(M.indptr))
+        scaled = sp.csc_matrix(((M.data * s[M.indices] * cols).astype(dtype), M.indices,
+                                M.indptr), shape=M.shape)
         self.dtype = np.dtype(dtype)
         try:
             self.lu = spla.splu(scaled, permc_spec="MMD_AT_PLUS_A",
@@ -291,7 +294,7 @@ class ViscousFactor:
     def solve(self, r: np.ndarray) -> np.ndarray:
         """``A^-1 r`` (to the rounding of the factors' precision)."""
         s = self.scale
-        return s * self.lu.solve((s * r).astype(self.dtype)).astype(float)
+        return s * self.lu.solve((s * r).astype(self.dtype), trans=self.trans).astype(float)
 
 
 def _factor_fgmres(problem: SaddlePointProblem, lu: ViscousFactor, matvec: Callable,

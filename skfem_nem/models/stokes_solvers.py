@@ -235,7 +235,7 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
             return sol
         cache.factor = None                # (freed before the next one is made)
     info["factor_reused"] = False
-    matvec = saddle_matvec(problem, problem.A.tocsr())
+    matvec = saddle_matvec(problem)
     x0 = None if cache is None else _warm_start(cache, matvec, problem.rhs)
     info["warm_start"] = x0 is not None
     lu = ViscousFactor(problem.A, FACTOR_DTYPE)
@@ -248,7 +248,7 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
                            f"{its} iterations, relative residual {res:.3e} > tol {tol:.1e} "
                            f"(raise maxiter)")
     else:                              # on in double precision from where it stands
-        del lu
+        del lu                         # (freed before the next one is made)
         lu = ViscousFactor(problem.A, np.float64)
         n1 = problem.n_velocity
         sol = schur_pressure_cg(problem, lu, tol, max(1, maxiter - its), x[n1:],
@@ -310,7 +310,7 @@ def _factor_fgmres(problem: SaddlePointProblem, lu: ViscousFactor, matvec: Calla
     against it left errors of 6e-4 in the velocity (an elastic box turned by its
     walls). The solves with kept factors start from such a solution and are
     measured against ``[f, g]`` (``schur`` False), as before the single-precision
-    factors: against the Schur complement's right side they took twice the
+    factors: against the Schur complement's right side they took up to twice the
     iterations (6,000-node plate)."""
     precondition = _triangular_preconditioner(problem, lu.solve)
     rhs, n1 = problem.rhs, problem.n_velocity
@@ -329,7 +329,7 @@ def _reuse_factor(problem: SaddlePointProblem, lu: ViscousFactor, tol: float, ma
     times the iterations of the solve that factorised, plus ``REBUILD_SLACK`` (the
     caller factorises again)."""
     limit = min(maxiter, int(REBUILD_GROWTH * cache.factor_iterations + REBUILD_SLACK))
-    matvec = saddle_matvec(problem, problem.A.tocsr())      # CSR: faster products
+    matvec = saddle_matvec(problem)
     x0 = _warm_start(cache, matvec, problem.rhs)
     x, its, res = _factor_fgmres(problem, lu, matvec, x0, tol, limit, schur=False)
     if not res <= tol:

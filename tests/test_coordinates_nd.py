@@ -73,6 +73,21 @@ def test_3d_properties_on_random_node_sets(seed, n):
     check_properties(p, q, (Phi, dPhi), tol=1e-11, grad_tol=1e-8, neg_tol=1e-13)
 
 
+@pytest.mark.xfail(strict=True, reason="known defect: a 3D gradient identity holds to "
+                   "2.6e-5 only (query 3 of this draw; gradients below 4, insphere margins "
+                   "above 1e-4); 1 draw of the property test above in over 1,500 fails so")
+def test_3d_gradient_identity_on_a_drawn_set_it_misses():
+    """The draw of the property test that failed once (seed 670924, 8 nodes), kept
+    so the defect stays in view; strict: it fails here once the gradients are fixed."""
+    rng = np.random.default_rng(670924)
+    p = rng.random((8, 3))
+    tri = Delaunay(p)
+    s = rng.integers(0, tri.simplices.shape[0], 6)
+    q = np.einsum("mk,mkd->md", rng.dirichlet(np.ones(4), 6), p[tri.simplices[s]])
+    Phi, dPhi = sibson_coordinates(tri, q, gradient=True)
+    check_properties(p, q, (Phi, dPhi), tol=1e-11, grad_tol=1e-8, neg_tol=1e-13)
+
+
 def test_3d_chunks_give_the_same_matrices():
     rng = np.random.default_rng(5)
     p = rng.random((200, 3))

@@ -33,6 +33,7 @@ from skfem.assembly.form.form import FormExtraParams
 from skfem.element import DiscreteField, ElementVector
 
 from ..jit import serial_twin
+from .summation import sum_coo
 
 _INSTALLED = False
 #: element-pairs evaluated per form call in the stacked assembly
@@ -328,121 +329,6 @@ def _contract_bilinear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, p
                         K[col + (Dv * j + cv) * nc] += t * B[q, l_, j]
 
 
-@njit(cache=True)
-def _incidence(ptr, sten, n):
-    """Node -> (element, local index) lists of the stencils: node v is
-    function ``inc_l[k]`` of element ``inc_e[k]`` for k in
-    ``inc_ptr[v]:inc_ptr[v + 1]``."""
-    ne = ptr.shape[0] - 1
-    inc_ptr = np.zeros(n + 1, np.int64)
-    for k in range(ptr[ne]):
-        inc_ptr[sten[k] + 1] += 1
-    for v in range(n):
-        inc_ptr[v + 1] += inc_ptr[v]
-    fill = inc_ptr[:-1].copy()
-    inc_e = np.empty(ptr[ne], np.int64)
-    inc_l = np.empty(ptr[ne], np.int64)
-    for e in range(ne):
-        for s in range(ptr[e], ptr[e + 1]):
-            v = sten[s]
-            inc_e[fill[v]] = e
-            inc_l[fill[v]] = s - ptr[e]
-            fill[v] += 1
-    return inc_ptr, inc_e, inc_l
-
-
-_GAPS = (701, 301, 132, 57, 23, 10, 4, 1)  # Ciura's gaps, for the Shell sort below
-
-
-@njit(cache=True)
-def _sort_run(a, lo, hi):
-    """Sort a[lo:hi] in place (Shell sort: rows of tens to hundreds of nodes; numba's
-    quicksort would add a second or two to the first run's compilation)."""
-    for g in _GAPS:
-        for i in range(lo + g, hi):
-            x = a[i]
-            j = i
-            while j - g >= lo and a[j - g] > x:
-                a[j] = a[j - g]
-                j -= g
-            a[j] = x
-
-
-@njit(cache=True, parallel=True)
-def _node_pattern(ptr, sten, inc_ptr, inc_e, n, nblocks):
-    """Sparsity pattern between nodes: node v couples with the (sorted)
-    nodes ``cols[cptr[v]:cptr[v + 1]]``, the union of the stencils of the
-    elements whose stencil holds v."""
-    cnt = np.zeros(n, np.int64)
-    for blk in prange(nblocks):
-        mark = np.full(n, -1, np.int64)
-        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
-            c = 0
-            for k in range(inc_ptr[v], inc_ptr[v + 1]):
-                e = inc_e[k]
-                for s in range(ptr[e], ptr[e + 1]):
-                    if mark[sten[s]] != v:
-                        mark[sten[s]] = v
-                        c += 1
-            cnt[v] = c
-    cptr = np.zeros(n + 1, np.int64)
-    for v in range(n):
-        cptr[v + 1] = cptr[v] + cnt[v]
-    cols = np.empty(cptr[n], np.int64)
-    for blk in prange(nblocks):
-        mark = np.full(n, -1, np.int64)
-        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
-            c = cptr[v]
-            for k in range(inc_ptr[v], inc_ptr[v + 1]):
-                e = inc_e[k]
-                for s in range(ptr[e], ptr[e + 1]):
-                    if mark[sten[s]] != v:
-                        mark[sten[s]] = v
-                        cols[c] = sten[s]
-                        c += 1
-            _sort_run(cols, cptr[v], cptr[v + 1])
-    return cptr, cols
-
-
-@njit(cache=True, parallel=True)
-def _sum_rows(ptr, sten, off, K, inc_ptr, inc_e, inc_l, cptr, cols, Du, Dv, ndu, ndv,
-              nblocks, rows_out, cols_out, data_out):
-    """Sum the local matrices ``K`` into the global matrix, row by row:
-    node v's rows (components cv) hold the entries with the nodes
-    ``cols[cptr[v]:cptr[v + 1]]`` (components cu) at
-    ``Dv Du cptr[v] + (cv n_v + k) Du + cu``; no two entries share a place,
-    and with dofs numbered ``D node + c`` the entries come out row-major
-    sorted (canonical CSR order)."""
-    n = cptr.shape[0] - 1
-    for blk in prange(nblocks):
-        pos = np.full(n, -1, np.int64)
-        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
-            nv = cptr[v + 1] - cptr[v]
-            base = Dv * Du * cptr[v]
-            for k in range(nv):
-                pos[cols[cptr[v] + k]] = k
-            for cv in range(Dv):
-                for k in range(nv):
-                    for cu in range(Du):
-                        o = base + (cv * nv + k) * Du + cu
-                        rows_out[o] = ndv[cv, v]
-                        cols_out[o] = ndu[cu, cols[cptr[v] + k]]
-                        data_out[o] = 0.0
-            for t in range(inc_ptr[v], inc_ptr[v + 1]):
-                e = inc_e[t]
-                j = inc_l[t]
-                s0 = ptr[e]
-                S = ptr[e + 1] - s0
-                nc = Du * S
-                for cv in range(Dv):
-                    src = off[e] + (Dv * j + cv) * nc
-                    dst = base + cv * nv * Du
-                    for i in range(S):
-                        k = pos[sten[s0 + i]]
-                        for cu in range(Du):
-                            data_out[dst + k * Du + cu] += K[src + Du * i + cu]
-
-
 @njit(cache=True, parallel=True)
 def _contract_linear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, pb, Dv, ndv,
                      off, rows, data):
@@ -478,8 +364,6 @@ def _contract_linear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, pb,
 # compete with everything else on the machine).
 _contract_bilinear_serial = serial_twin(_contract_bilinear)
 _contract_linear_serial = serial_twin(_contract_linear)
-_node_pattern_serial = serial_twin(_node_pattern)
-_sum_rows_serial = serial_twin(_sum_rows)
 #: below this many stencil entries squared (times quadrature points) the
 #: kernels run on one thread
 PARALLEL_MIN = 1 << 21
@@ -635,9 +519,10 @@ def _coefficients(form, basis, kwargs, Du, Dv, which_u, which_v):
         yield e0, e1, np.ascontiguousarray(C[active]), active
 
 
-def _whole_bilinear(form, u, v, kwargs):
-    """COO data of a bilinear form on two natural-neighbour bases that share
-    their functions, without groups; None if the form cannot be probed."""
+def _element_matrices(form, u, v, kwargs):
+    """``(Du, Dv, off, K)``: the element matrices of a bilinear form on two
+    natural-neighbour bases that share their functions (element e's, (Dv S) x (Du S)
+    row-major, at ``K[off[e]:off[e + 1]]``); None if the form cannot be probed."""
     if form.dtype != np.float64:
         return None
     Du, dim = _components(u)
@@ -658,42 +543,39 @@ def _whole_bilinear(form, u, v, kwargs):
                    C, pa[active], pb[active], Du, Dv, off, K)
     except _NotProbeable:
         return None  # take the group road
-    return _global(u, v, Du, Dv, off, K)
+    return Du, Dv, off, K
 
 
-def _pattern(basis):
-    """The node incidence and node-node pattern of a basis' stencils (cached)."""
-    pat = basis.__dict__.get("_node_pattern")
-    if pat is None:
-        n = basis.mesh.p.shape[1]
-        ptr, sten = basis.stencil_ptr, basis.stencil_nodes
-        inc = _incidence(ptr, sten, n)
-        kernel = _node_pattern if _parallel(basis) else _node_pattern_serial
-        pat = inc + kernel(ptr, sten, inc[0], inc[1], n, _blocks(n))
-        basis.__dict__["_node_pattern"] = pat
-    return pat
+def element_matrices(form: BilinearForm, basis, **kwargs):
+    """The element matrices of the bilinear ``form`` with trial and test functions
+    those of the natural-neighbour ``basis`` (a ``D``-vector or scalar basis), before
+    they are summed: ``(off, K)``, element e's (D S_e) x (D S_e) matrix row-major at
+    ``K[off[e]:off[e + 1]]`` (row ``D j + c``: component c of stencil function j, in
+    the order of ``basis.stencil_nodes``). Sum them with
+    :func:`skfem_nem.basis.summation.sum_csr`; a caller may first correct them element
+    by element (the static condensation of element-interior functions). Raises
+    ``ValueError`` naming the form if it cannot be probed (a form reading more than
+    values and gradients)."""
+    out = _element_matrices(form, basis, basis, dict(kwargs))
+    if out is None:
+        raise ValueError(f"the form {getattr(form.form, '__name__', form)!r} cannot be "
+                         f"probed on unit fields (it reads more than values and gradients, "
+                         f"or is not real)")
+    return out[2], out[3]
 
 
-def _blocks(n):
-    import numba
-    return max(1, min(n // 256, 4 * numba.get_num_threads()))
+def parallel_kernels(basis) -> bool:
+    """Whether the kernels of a basis this size run on all threads (``PARALLEL_MIN``)."""
+    return _parallel(basis)
 
 
-def _global(u, v, Du, Dv, off, K):
-    """COO arrays of the summed local matrices (each entry once)."""
-    inc_ptr, inc_e, inc_l, cptr, cols = _pattern(u)
-    n = cptr.shape[0] - 1
-    nnz = Du * Dv * int(cptr[-1])
-    idt = _index_dtype(max(u.N, v.N))
-    rows_out = np.empty(nnz, dtype=idt)
-    cols_out = np.empty(nnz, dtype=idt)
-    data_out = np.empty(nnz)
-    ndu = np.ascontiguousarray(u.dofs.nodal_dofs[:Du], dtype=np.int64)
-    ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
-    kernel = _sum_rows if _parallel(u) else _sum_rows_serial
-    kernel(u.stencil_ptr, u.stencil_nodes, off, K, inc_ptr, inc_e, inc_l, cptr, cols,
-           Du, Dv, ndu, ndv, _blocks(n), rows_out, cols_out, data_out)
-    return np.array([rows_out, cols_out]), data_out
+def _whole_bilinear(form, u, v, kwargs):
+    """COO data of a bilinear form on two natural-neighbour bases that share
+    their functions, without groups; None if the form cannot be probed."""
+    out = _element_matrices(form, u, v, kwargs)
+    if out is None:
+        return None
+    return sum_coo(u, v, *out, parallel=_parallel(u))
 
 
 def _whole_linear(form, v, kwargs):

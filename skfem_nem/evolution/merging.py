@@ -336,9 +336,12 @@ class NodeRemoval:
         fields ``vals``, vertex values) that tile the same region: conservative."""
         Y = self.nodes[self.triangles[tris]]
         for k, F in self.ip_fields.items():
-            flat = F.reshape(F.shape[0], 3, -1).copy()
+            # in place, as the row moves of _take_out (a copy of every field per removed
+            # node made the merges quadratic: 1 s a step at 88,000 nodes); the step's
+            # snapshot (_state) holds the fields to restore
+            F = self.ip_fields[k] = np.ascontiguousarray(F)
+            flat = F.reshape(F.shape[0], 3, -1)
             flat[tris] = conservative_fill(X, np.ascontiguousarray(vals[k]), Y)
-            self.ip_fields[k] = flat.reshape(F.shape)
 
     def _compact(self):
         """Drop the nodes in no triangle from the triangulation and every per-node array;

@@ -106,6 +106,7 @@ import scipy.sparse.linalg as spla
 from skfem import BilinearForm, LinearForm
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
+from .condensation import condensed_viscous
 from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
 from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, outline_flux,
                            wall_dofs, walls_fix_pressure)
@@ -264,27 +265,7 @@ class StokesSystem:
     f: np.ndarray           # (nu,) load
     eta: np.ndarray         # (ne, nq) viscosity at quadrature points
     g: Optional[np.ndarray] = None  # (np,) right side of the continuity equation
-    bubble: Optional[tuple] = None  # (Ainv_bb, A_bn, B_b, f_b) of the condensed bubbles
-
-
-def block_inverse(A: sp.csr_matrix, element_dofs: np.ndarray) -> sp.csr_matrix:
-    """Inverse of a matrix that is block diagonal with one block per element
-    (the dofs ``element_dofs[:, e]`` of element e), e.g. the bubble block
-    condensed by :func:`assemble_stokes`.
-
-    Raises ``ValueError`` naming the first element whose block is singular.
-    """
-    k, ne = element_dofs.shape
-    rows = np.repeat(element_dofs.T, k, axis=1).ravel()          # (ne*k*k)
-    cols = np.tile(element_dofs.T, (1, k)).ravel()
-    blocks = np.asarray(A[rows, cols]).reshape(ne, k, k)
-    det = np.linalg.det(blocks)
-    bad = ~(np.abs(det) > 0)
-    if bad.any():
-        raise ValueError(f"degenerate triangle {int(np.flatnonzero(bad)[0])}: its bubble "
-                         f"block is singular ({int(bad.sum())} triangle(s))")
-    inv = np.linalg.inv(blocks)
-    return sp.csr_matrix((inv.ravel(), (rows, cols)), shape=A.shape)
+    bubble: Optional[tuple] = None  # (A_bb^-1, A_bb^-1 A_bn, B_b, f_b) of the bubbles
 
 
 def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
@@ -314,7 +295,6 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
             b = b + stress_load.assemble(basis, tau=t)
         return b
 
-    A = viscous.assemble(spaces.ubasis, eta=e).tocsr()
     bform = divergence if spaces.method == "taylor-hood" else weak_divergence
     cache = spaces.__dict__.setdefault("_cache", {})
     if "B" not in cache:  # independent of the coefficients: once per spaces
@@ -334,23 +314,19 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     m = cache["m"]
     g = np.zeros(pb.N)
     S = _stabilisation(spaces, inv) if spaces.stabilised else sp.csr_matrix((pb.N, pb.N))
-    bubble = None
-    if spaces.bbasis is not None:
-        # static condensation of the bubbles (they live in one triangle each)
-        bb = spaces.bbasis
-        Abb = viscous.assemble(bb, eta=e).tocsr()
-        Abn = viscous.assemble(ub, bb, eta=e).tocsr()       # (nb, nu)
-        Bb = cache["Bb"]                                     # (np, nb)
-        fb = loads(bb)
-        Ainv = block_inverse(Abb, bb.element_dofs)
-        AiAbn = (Ainv @ Abn).tocsr()
-        A = (A - Abn.T @ AiAbn).tocsr()
-        B = (B - Bb @ AiAbn).tocsr()
-        S = (Bb @ Ainv @ Bb.T).tocsr()
-        b = b - Abn.T @ (Ainv @ fb)
-        g = -(Bb @ (Ainv @ fb))
-        bubble = (Ainv, Abn, Bb, fb)
-    return StokesSystem(0.5 * (A + A.T), B, 0.5 * (S + S.T), Mp, m, b, e, g, bubble)
+    if spaces.bbasis is None:
+        A = viscous.assemble(ub, eta=e).tocsr()
+        return StokesSystem(0.5 * (A + A.T), B, 0.5 * (S + S.T), Mp, m, b, e, g, None)
+    # static condensation of the bubbles, triangle by triangle (models.condensation)
+    bb, Bb = spaces.bbasis, cache["Bb"]                      # Bb (np, nb)
+    cv = condensed_viscous(ub, bb, e, viscous)
+    fb = loads(bb)
+    B = (B - Bb @ cv.AiAbn).tocsr()
+    S = (Bb @ cv.Ainv @ Bb.T).tocsr()
+    b = b - cv.AiAbn.T @ fb
+    g = -(Bb @ (cv.Ainv @ fb))
+    return StokesSystem(cv.A, B, 0.5 * (S + S.T), Mp, m, b, e, g,
+                        (cv.Ainv, cv.AiAbn, Bb, fb))
 
 
 def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
@@ -545,8 +521,8 @@ def _stokes_solution(spaces: StokesSpaces, sys_: StokesSystem, red: _Reduced,
     info["multipliers"] = p[red.n_pressure:]
     p = p[:red.n_pressure]
     if sys_.bubble is not None:
-        Ainv, Abn, Bb, fb = sys_.bubble
-        info["bubble"] = whole(Ainv @ (fb - Abn @ u - Bb.T @ p))
+        Ainv, AiAbn, Bb, fb = sys_.bubble
+        info["bubble"] = whole(Ainv @ (fb - Bb.T @ p) - AiAbn @ u)
     return StokesSolution(spaces, u, p, solver, x.iterations, x.residual, info)
 
 

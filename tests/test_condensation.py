@@ -1,16 +1,12 @@
-"""Element matrices summed over the stencils, and the bubbles condensed element by element."""
+"""The Stokes bubbles condensed triangle by triangle into the viscous block."""
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from skfem import BilinearForm
-from skfem.helpers import ddot, sym_grad
 
-from helpers import laplace, square_nodes
+from helpers import square_nodes
 from skfem_nem import delaunay_mesh
-from skfem_nem.basis.assembly import element_matrices
-from skfem_nem.basis.summation import sum_csr
 from skfem_nem.models.condensation import condensed_viscous
 from skfem_nem.models.stokes import viscous
 from skfem_nem.models.stokes_bases import stokes_spaces
@@ -44,7 +40,7 @@ def _relative(X, Y):
 def test_condensed_block_is_the_global_products_and_exactly_symmetric(seed, npoints):
     spaces = _spaces(120, seed, npoints=npoints)
     eta = np.exp(np.random.default_rng(seed).normal(0.0, 2.0, spaces.ubasis.dx.shape))
-    cv = condensed_viscous(spaces.ubasis, spaces.bbasis, eta, viscous)
+    cv = condensed_viscous(spaces.ubasis, spaces.bbasis, eta)
     A, Ainv, AiAbn = _reference(spaces, eta)
     assert _relative(cv.A, A) < 1e-13
     assert _relative(cv.Ainv, Ainv) < 1e-13
@@ -58,11 +54,11 @@ def test_condensation_on_part_of_the_triangles_adds_up():
     eta = np.exp(np.random.default_rng(3).normal(0.0, 1.0, spaces.ubasis.dx.shape))
     ne = spaces.mesh.nelements
     parts = [np.arange(0, ne, 2), np.arange(1, ne, 2)]
-    whole = condensed_viscous(spaces.ubasis, spaces.bbasis, eta, viscous)
+    whole = condensed_viscous(spaces.ubasis, spaces.bbasis, eta)
     A = AiAbn = 0
     for idx in parts:
         sub = spaces.restricted(idx)
-        cv = condensed_viscous(sub.ubasis, sub.bbasis, eta[idx], viscous)
+        cv = condensed_viscous(sub.ubasis, sub.bbasis, eta[idx])
         A, AiAbn = A + cv.A, AiAbn + cv.AiAbn
     assert _relative(A, whole.A) < 1e-13
     assert _relative(AiAbn, whole.AiAbn) < 1e-14
@@ -74,37 +70,4 @@ def test_a_singular_bubble_block_is_named():
     eta[7] = 0.0
     with pytest.raises(ValueError, match="degenerate triangle 7: its bubble block is "
                                          r"singular \(1 triangle"):
-        condensed_viscous(spaces.ubasis, spaces.bbasis, eta, viscous)
-
-
-@pytest.mark.parametrize("vector", [False, True])
-def test_summed_element_matrices_are_the_assembled_form(vector):
-    from skfem.element import ElementVector
-    from skfem_nem import ElementNaturalNeighbour, NaturalNeighbourBasis
-    mesh = delaunay_mesh(square_nodes(150, seed=4, jitter=0.3))
-    elem = ElementNaturalNeighbour()
-    basis = NaturalNeighbourBasis(mesh, ElementVector(elem) if vector else elem)
-
-    @BilinearForm
-    def elastic(u, v, w):
-        return ddot(sym_grad(u), sym_grad(v))
-
-    form = elastic if vector else laplace
-    off, K = element_matrices(form, basis)
-    A = sum_csr(basis, 2 if vector else 1, off, K)
-    ref = form.assemble(basis).tocsr()
-    assert A.has_canonical_format and A.shape == ref.shape
-    assert _relative(A, ref) < 1e-13
-
-
-def test_element_matrices_name_a_form_they_cannot_probe():
-    from skfem_nem import ElementNaturalNeighbour, NaturalNeighbourBasis
-    mesh = delaunay_mesh(square_nodes(60, seed=2))
-    basis = NaturalNeighbourBasis(mesh, ElementNaturalNeighbour())
-
-    @BilinearForm
-    def curvature(u, v, w):
-        return u.hess[0, 0] * v
-
-    with pytest.raises(ValueError, match="'curvature' cannot be probed"):
-        element_matrices(curvature, basis)
+        condensed_viscous(spaces.ubasis, spaces.bbasis, eta)

@@ -546,24 +546,6 @@ def _element_matrices(form, u, v, kwargs):
     return Du, Dv, off, K
 
 
-def element_matrices(form: BilinearForm, basis, **kwargs):
-    """The element matrices of the bilinear ``form`` with trial and test functions
-    those of the natural-neighbour ``basis`` (a ``D``-vector or scalar basis), before
-    they are summed: ``(off, K)``, element e's (D S_e) x (D S_e) matrix row-major at
-    ``K[off[e]:off[e + 1]]`` (row ``D j + c``: component c of stencil function j, in
-    the order of ``basis.stencil_nodes``). Sum them with
-    :func:`skfem_nem.basis.summation.sum_csr`; a caller may first correct them element
-    by element (the static condensation of element-interior functions). Raises
-    ``ValueError`` naming the form if it cannot be probed (a form reading more than
-    values and gradients)."""
-    out = _element_matrices(form, basis, basis, dict(kwargs))
-    if out is None:
-        raise ValueError(f"the form {getattr(form.form, '__name__', form)!r} cannot be "
-                         f"probed on unit fields (it reads more than values and gradients, "
-                         f"or is not real)")
-    return out[2], out[3]
-
-
 def parallel_kernels(basis) -> bool:
     """Whether the kernels of a basis this size run on all threads (``PARALLEL_MIN``)."""
     return _parallel(basis)

@@ -1,25 +1,25 @@
-"""Summing element matrices over natural-neighbour stencils into one global matrix.
+"""Summing over natural-neighbour stencils into one global matrix, row by row.
 
 Element e of a natural-neighbour basis couples all the functions of its stencil, so its
-matrix is a dense (Dv S_e) x (Du S_e) block. Two users make such blocks: the whole-mesh
-road of the assembly (:mod:`skfem_nem.basis.assembly`), and the static condensation of
-the Stokes bubbles (:mod:`skfem_nem.models.condensation`), which corrects each block before
-it is summed. Both sum here, row by row over the nodes, into the pattern of the stencils
-(the union of the stencils of the elements around a node), which is kept with the basis.
-With the dofs numbered ``D node + c`` (scikit-fem's vector numbering) the entries come out
-in canonical CSR order, so :func:`sum_csr` builds the matrix with no sort or conversion, and
-each entry sums its elements in ascending order: exactly symmetric element matrices give
-an exactly symmetric sum.
+matrix is a dense (Dv S_e) x (Du S_e) block, and the global matrix has the pattern of the
+stencils: node v couples with the union of the stencils of the elements around it. That
+pattern (:func:`node_pattern`) is kept with the basis; :func:`sum_coo` adds the element
+matrices of the whole-mesh assembly (:mod:`skfem_nem.basis.assembly`) into it row by row,
+each entry once and, with the dofs numbered ``D node + c`` (scikit-fem's vector
+numbering), in canonical CSR order. The condensed viscous block of the Stokes solver
+(:mod:`skfem_nem.models.condensation`) fills the same pattern row by row with a kernel of
+its own, which computes each element's row where it adds it. In both, an entry sums its
+elements in ascending order, so element matrices exactly symmetric give a sum exactly
+symmetric.
 """
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 from numba import njit, prange
 
 from ..jit import serial_twin
 
-__all__ = ["node_pattern", "sum_coo", "sum_csr"]
+__all__ = ["blocks", "node_pattern", "sum_coo"]
 
 
 @njit(cache=True)
@@ -152,12 +152,13 @@ def node_pattern(basis, parallel: bool = False) -> tuple:
         ptr, sten = basis.stencil_ptr, basis.stencil_nodes
         inc = _incidence(ptr, sten, n)
         kernel = _node_pattern if parallel else _node_pattern_serial
-        pat = inc + kernel(ptr, sten, inc[0], inc[1], n, _blocks(n))
+        pat = inc + kernel(ptr, sten, inc[0], inc[1], n, blocks(n))
         basis.__dict__["_node_pattern"] = pat
     return pat
 
 
-def _blocks(n):
+def blocks(n: int) -> int:
+    """How many row blocks the parallel row kernels split n nodes into."""
     import numba
     return max(1, min(n // 256, 4 * numba.get_num_threads()))
 
@@ -177,7 +178,7 @@ def _summed(u, v, Du, Dv, off, K, parallel, idt):
     ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
     kernel = _sum_rows if parallel else _sum_rows_serial
     kernel(u.stencil_ptr, u.stencil_nodes, off, K, inc_ptr, inc_e, inc_l, cptr, cols,
-           Du, Dv, ndu, ndv, _blocks(n), ind[0], ind[1], data)
+           Du, Dv, ndu, ndv, blocks(n), ind[0], ind[1], data)
     return ind, data, cptr
 
 
@@ -188,25 +189,3 @@ def sum_coo(u, v, Du, Dv, off, K, parallel: bool = False):
     their stencils) summed: each entry once."""
     ind, data, _ = _summed(u, v, Du, Dv, off, K, parallel, _index_dtype(max(u.N, v.N)))
     return ind, data
-
-
-def sum_csr(basis, D, off, K, parallel: bool = False) -> sp.csr_matrix:
-    """The element matrices ``K`` (as in :func:`sum_coo`) of the ``D``-vector basis
-    ``basis`` against itself summed into a CSR matrix (N, N), built in place where
-    the dofs are numbered ``D node + c`` (else through COO)."""
-    n = basis.mesh.p.shape[1]
-    nodal = basis.dofs.nodal_dofs[:D]
-    interleaved = basis.N == D * n and np.array_equal(
-        nodal, D * np.arange(n)[None] + np.arange(D)[:, None])
-    if not interleaved:
-        ind, data = sum_coo(basis, basis, D, D, off, K, parallel)
-        return sp.csr_matrix((data, (ind[0], ind[1])), shape=(basis.N, basis.N))
-    nnz = D * D * int(node_pattern(basis, parallel)[3][-1])
-    ind, data, cptr = _summed(basis, basis, D, D, off, K, parallel,
-                              _index_dtype(max(nnz, basis.N)))
-    nv = np.diff(cptr)
-    indptr = np.empty(D * n + 1, dtype=ind.dtype)
-    indptr[:-1] = (D * D * cptr[:-1, None] + D * nv[:, None] * np.arange(D)[None]).ravel()
-    indptr[-1] = data.size
-    return sp.csr_matrix((data, ind[1], indptr), shape=(basis.N, basis.N))
-

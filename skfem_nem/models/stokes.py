@@ -319,7 +319,7 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         return StokesSystem(0.5 * (A + A.T), B, 0.5 * (S + S.T), Mp, m, b, e, g, None)
     # static condensation of the bubbles, triangle by triangle (models.condensation)
     bb, Bb = spaces.bbasis, cache["Bb"]                      # Bb (np, nb)
-    cv = condensed_viscous(ub, bb, e, viscous)
+    cv = condensed_viscous(ub, bb, e)
     fb = loads(bb)
     B = (B - Bb @ cv.AiAbn).tocsr()
     S = (Bb @ cv.Ainv @ Bb.T).tocsr()

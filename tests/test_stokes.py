@@ -4,6 +4,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from skfem_nem import delaunay_mesh
 from skfem_nem.models.analytic import SolCx
@@ -245,3 +247,20 @@ def test_restricted_spaces_check_their_elements():
             spaces.restricted(bad)
     with pytest.raises(ValueError, match="already restricted"):
         spaces.restricted([0, 1]).restricted([0])
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10**6), st.booleans())
+def test_free_columns_is_scipys_fancy_indexing(seed, rows):
+    import scipy.sparse as sp
+    from skfem_nem.models.stokes_walls import free_columns
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 60))
+    A = sp.random(n + int(rng.integers(0, 5)), n, density=0.2, random_state=seed,
+                  format="csr") if not rows else sp.random(n, n, density=0.2,
+                                                            random_state=seed, format="csr")
+    free = np.flatnonzero(rng.random(n) < 0.7)
+    ref = (A[free][:, free] if rows else A[:, free]).toarray()
+    got = free_columns(A, free, rows=rows)
+    assert got.shape == ref.shape and np.array_equal(got.toarray(), ref)
+    assert got.has_sorted_indices

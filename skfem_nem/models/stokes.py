@@ -108,8 +108,8 @@ from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from .condensation import condensed_viscous
 from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
-from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, outline_flux,
-                           wall_dofs, walls_fix_pressure)
+from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_columns,
+                           outline_flux, wall_dofs, walls_fix_pressure)
 from .stokes_solvers import (SOLVERS, SaddlePointProblem, SaddlePointSolution, StokesCache,
                              check_solver)
 
@@ -498,9 +498,11 @@ def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndar
     area = mvec.sum()
     # the mean pressure is fixed by a rank-one term c m m^T of the size of 1/eta
     c = float(mass) / area ** 2 if pressure_mean else 0.0
+    fixed = np.zeros(nu)
+    fixed[D] = uD[D]
     problem = SaddlePointProblem(
-        A=Afull[free][:, free].tocsr(), B=Bfull[:, free].tocsr(), S=Sb,
-        f=sys_.f[free] - Afull[free][:, D] @ uD[D], g=g0 - Bfull[:, D] @ uD[D], m=mvec,
+        A=free_columns(Afull, free, rows=True), B=free_columns(Bfull, free), S=Sb,
+        f=(sys_.f - Afull @ fixed)[free], g=g0 - Bfull @ fixed, m=mvec,
         dp=dp, mean_weight=c, pressure_mean=pressure_mean, ubasis=spaces.ubasis, free=free,
         total=None if share is None else share.total)
     return _Reduced(problem, Afull, Bfull, D, uD, spaces.n_pressure, share)

@@ -14,12 +14,13 @@ from typing import TYPE_CHECKING, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 if TYPE_CHECKING:  # (only for annotations)
     from . import stokes_bases
 
 __all__ = ["wall_dofs", "boundary_flux", "outline_flux", "fixed_velocity",
-           "walls_fix_pressure", "constraint_rows"]
+           "walls_fix_pressure", "constraint_rows", "free_columns"]
 
 
 def wall_dofs(spaces: stokes_bases.StokesSpaces,
@@ -178,3 +179,40 @@ def constraint_rows(constraints, nu: int) -> Tuple[sp.csr_matrix, np.ndarray]:
         raise ValueError(f"the constraints' right side must be {C.shape[0]} finite "
                          f"value(s), got {c.tolist()}")
     return C, c
+
+
+@njit(cache=True)
+def _select(indptr, indices, data, rows, new_col):
+    """CSR arrays of the rows ``rows`` and the columns with ``new_col >= 0`` (renumbered
+    to it) of a CSR matrix: one pass to count, one to copy (column order kept)."""
+    nr = rows.shape[0]
+    out_ptr = np.zeros(nr + 1, np.int64)
+    for r in range(nr):
+        c = 0
+        for k in range(indptr[rows[r]], indptr[rows[r] + 1]):
+            if new_col[indices[k]] >= 0:
+                c += 1
+        out_ptr[r + 1] = out_ptr[r] + c
+    out_idx = np.empty(out_ptr[nr], indices.dtype)
+    out_data = np.empty(out_ptr[nr], data.dtype)
+    for r in range(nr):
+        o = out_ptr[r]
+        for k in range(indptr[rows[r]], indptr[rows[r] + 1]):
+            j = new_col[indices[k]]
+            if j >= 0:
+                out_idx[o] = j
+                out_data[o] = data[k]
+                o += 1
+    return out_ptr, out_idx, out_data
+
+
+def free_columns(A: sp.csr_matrix, free: np.ndarray, rows: bool = False) -> sp.csr_matrix:
+    """``A[:, free]`` (``A[free][:, free]`` if ``rows``) for sorted dof indices ``free``,
+    in one pass over A (scipy's fancy indexing makes two, each with a sort: 0.8 s a
+    Picard iteration at 88,000 nodes)."""
+    A = sp.csr_matrix(A)
+    new_col = np.full(A.shape[1], -1, dtype=np.int64)
+    new_col[free] = np.arange(free.size)
+    pick = free if rows else np.arange(A.shape[0])
+    ptr, idx, data = _select(A.indptr, A.indices, A.data, pick.astype(np.int64), new_col)
+    return sp.csr_matrix((data, idx, ptr), shape=(pick.size, free.size))

@@ -276,10 +276,13 @@ class Triangulation:
     @property
     def edges(self) -> np.ndarray:
         """(ne, 2) unique edges, each sorted (i < j), lexicographically ordered."""
-        T = self.triangles
-        # the segments' edge keys (sorted as the pairs): a 1-D unique, faster than by rows
-        return segments_of(np.unique(pair_keys(np.concatenate(
-            [T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]))))
+        T, N = self.triangles, self.neighbours
+        # each edge once: from the triangle with the larger index (a hull edge has the
+        # neighbour -1), so a sort of the keys, not a unique of all three per triangle
+        # (which took 0.2 s at 180,000 triangles)
+        pairs = np.stack([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]], axis=1)
+        own = N < np.arange(T.shape[0])[:, None]
+        return segments_of(np.sort(pair_keys(pairs[own])))
 
     @property
     def segments(self) -> np.ndarray:

@@ -489,7 +489,9 @@ def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndar
     """The saddle-point problem on the free velocity dofs (fixed values moved
     to the right side)."""
     nu = spaces.n_velocity
-    free = np.setdiff1d(np.arange(nu), D)
+    fixed_dof = np.zeros(nu, dtype=bool)
+    fixed_dof[D] = True
+    free = np.flatnonzero(~fixed_dof)
     Afull = sys_.A.tocsr()
     Bfull, g0, mvec, Sb, dp = _with_constraints(sys_, Afull, constraints, nu, share)
     mass = sys_.Mp.diagonal().sum()

@@ -372,3 +372,27 @@ def test_stars_and_edges_stay_exact_through_vertex_removals(seed, n, k):
             np.testing.assert_array_equal(tri.star(v), ref)
     e = np.sort(np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]]), axis=1)
     np.testing.assert_array_equal(tri.edges, np.unique(e, axis=0))
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2 ** 16), n=st.integers(10, 80), k=st.integers(1, 20))
+def test_split_triangles_is_the_splits_one_by_one(seed, n, k):
+    """A batch of splits grows the arrays once and gives the triangulation (nodes,
+    triangles, neighbours) of the same splits made one after the other."""
+    rng = np.random.default_rng(seed)
+    one = Triangulation(rng.random((n, 2)))
+    batch = Triangulation(one.nodes.copy())
+    ts = rng.permutation(one.ntriangles)[:k]
+    w = rng.dirichlet([1.0, 1.0, 1.0], size=ts.size)
+    xs = np.einsum("kj,kjd->kd", w, one.nodes[one.triangles[ts]])
+    for t, x in zip(ts, xs):
+        one.split_triangle(int(t), x)
+    new = batch.split_triangles(ts, xs)
+    np.testing.assert_array_equal(new, np.arange(n, n + ts.size))
+    for a, b in ((one.nodes, batch.nodes), (one.triangles, batch.triangles),
+                 (one.neighbours, batch.neighbours)):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="distinct triangles"):
+        batch.split_triangles([0, 0], np.zeros((2, 2)))
+    np.testing.assert_array_equal(batch.nodes, one.nodes)      # nothing changed
+    np.testing.assert_array_equal(batch.triangles, one.triangles)

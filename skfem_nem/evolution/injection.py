@@ -83,8 +83,7 @@ class NodeInjection:
         if self.node_fields:
             Phi = sibson_coordinates(self.triangulation, x_new)
             fields = {k: Phi @ v.reshape(v.shape[0], -1) for k, v in self.node_fields.items()}
-        for t, x in zip(targets, x_new):
-            self._split(int(t), x)
+        self._split(targets, x_new)
         n_new = x_new.shape[0]
         for k, v in self.node_fields.items():
             self.node_fields[k] = np.concatenate([v, fields[k].reshape((n_new,) + v.shape[1:])])
@@ -96,20 +95,24 @@ class NodeInjection:
         self._invalidate()
         return n_new
 
-    def _split(self, t, x):
-        """Split triangle t into three at the interior point x (appended as a node);
-        the ip fields of the children are the parent's linear field at their points."""
+    def _split(self, targets, x_new):
+        """Split the triangles ``targets`` into three each at the interior points
+        ``x_new`` (appended as nodes); the ip fields of the children are the parent's
+        linear field at their points. Every array grows once for the batch (a copy of
+        the fields per new node made injection cost nodes times injections)."""
         tri = self.triangulation
-        nt = tri.ntriangles
-        parent = tri.triangles[t].copy()
-        tri.split_triangle(t, x)
-        self._touched.append(np.array([t, nt, nt + 1], dtype=np.int64))
+        nt, k = tri.ntriangles, targets.shape[0]
+        parents = tri.nodes[tri.triangles[targets]]
+        tri.split_triangles(targets, x_new)
+        new_rows = nt + np.arange(2 * k).reshape(k, 2)
+        children = np.c_[targets, new_rows]                  # (k, 3): t, nt + 2m, + 1
+        self._touched.append(children.ravel())
+        Y = tri.nodes[tri.triangles[children]]               # (k, 3 children, 3, 2)
         for name, F in self.ip_fields.items():
             flat = F.reshape(F.shape[0], 3, -1)
-            new = child_values(tri.nodes[parent], flat[t],
-                               tri.nodes[tri.triangles[[t, nt, nt + 1]]])
-            flat = np.concatenate([flat, new[1:]])
-            flat[t] = new[0]
+            flat = np.concatenate([flat, np.empty((2 * k,) + flat.shape[1:])])
+            for m in range(k):
+                flat[children[m]] = child_values(parents[m], flat[targets[m]], Y[m])
             self.ip_fields[name] = flat.reshape((flat.shape[0],) + F.shape[1:])
 
     def split_segments(self, factor: float = 2.0) -> int:

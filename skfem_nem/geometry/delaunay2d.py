@@ -17,7 +17,7 @@ from numba import njit
 
 from .predicates import incircle_sign, orient2d, orient2d_sign
 
-__all__ = ["adjacency", "cavity_boundary", "circumcircle_table", "conflict_cycle",
+__all__ = ["adjacency", "split_in_three", "cavity_boundary", "circumcircle_table", "conflict_cycle",
            "count_non_delaunay", "edge_violates", "exact_hull", "first_fold",
            "flip_edge", "grow_cavity", "in_cavity", "in_circumcircle", "insert_vertex",
            "is_segment", "lawson", "locate_many", "locate_walk", "orientations",
@@ -646,3 +646,26 @@ def locate_many(P, T, N, Q, start, out):
     for i in range(Q.shape[0]):
         t, k = locate_walk(P, T, N, Q[i, 0], Q[i, 1], start[i])
         out[i] = t if k < 0 else -1
+
+
+@njit(cache=True)
+def split_in_three(T, N, ts, n, nt):
+    """Split the distinct triangles ``ts`` in three, one after the other, in arrays
+    already grown by two rows per split: triangle t = (a, b, c) of ``ts[m]`` becomes
+    ``(i, b, c)`` and rows ``nt + 2m``, ``nt + 2m + 1`` become ``(i, c, a)`` and
+    ``(i, a, b)``, with i = n + m; the neighbours follow."""
+    for m in range(ts.shape[0]):
+        t, i, t1, t2 = ts[m], n + m, nt + 2 * m, nt + 2 * m + 1
+        a, b, c = T[t, 0], T[t, 1], T[t, 2]
+        nb, nc = N[t, 1], N[t, 2]
+        T[t1, 0], T[t1, 1], T[t1, 2] = i, c, a
+        T[t2, 0], T[t2, 1], T[t2, 2] = i, a, b
+        T[t, 0] = i
+        N[t1, 0], N[t1, 1], N[t1, 2] = nb, t2, t
+        N[t2, 0], N[t2, 1], N[t2, 2] = nc, t, t1
+        N[t, 1], N[t, 2] = t1, t2
+        for nbr, child in ((nb, t1), (nc, t2)):
+            if nbr >= 0:
+                for k in range(3):
+                    if N[nbr, k] == t:
+                        N[nbr, k] = child

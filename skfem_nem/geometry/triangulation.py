@@ -27,7 +27,7 @@ from .constrained import (check_segments, edge_keys, insert_segments, pair_keys,
                           split_key, triangle_edge_keys)
 from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exact_hull, first_fold,
                          grow_cavity, insert_vertex, lawson, locate_many, orientations,
-                         segment_key)
+                         segment_key, split_in_three)
 from .predicates import incircle_sign, orient2d
 from .stars import delaunay_ears, delete_rows, fan_of, link_star, star_of
 
@@ -681,24 +681,26 @@ class Triangulation:
         t becomes ``(i, b, c)``, and rows ``nt`` and ``nt + 1`` are appended as
         ``(i, c, a)`` and ``(i, a, b)`` for t = (a, b, c). Returns the new node i.
         Not Delaunay-repaired: call :meth:`make_delaunay` after a batch."""
-        P = np.vstack([self.nodes, np.asarray(x, dtype=np.float64)[None]])
-        i = P.shape[0] - 1
-        T, N = self.triangles, self.neighbours
-        a, b, c = T[t]
-        na, nb, nc = N[t]
-        nt = T.shape[0]
-        t1, t2 = nt, nt + 1
-        T = np.vstack([T, [[i, c, a], [i, a, b]]])
-        N = np.vstack([N, [[nb, t2, t], [nc, t, t1]]])
-        T[t] = (i, b, c)
-        N[t] = (na, t1, t2)
-        for nbr, new in ((nb, t1), (nc, t2)):
-            if nbr >= 0:
-                N[nbr][N[nbr] == t] = new
+        return int(self.split_triangles([t], np.asarray(x, dtype=np.float64)[None])[0])
+
+    def split_triangles(self, ts, xs) -> np.ndarray:
+        """:meth:`split_triangle` of the distinct triangles ``ts`` at the points ``xs``
+        (k, 2) one after the other, the arrays grown once (triangle ``ts[m]`` gets node
+        ``n + m`` and rows ``nt + 2m``, ``nt + 2m + 1``). Returns the new nodes."""
+        ts = np.asarray(ts, dtype=np.int64).reshape(-1)
+        xs = np.asarray(xs, dtype=np.float64).reshape(-1, 2)
+        n, nt, k = self.npoints, self.ntriangles, ts.shape[0]
+        if np.unique(ts).size != k or xs.shape[0] != k:
+            raise ValueError(f"split_triangles needs distinct triangles and one point each, got "
+                             f"{k} ({np.unique(ts).size} distinct) and {xs.shape[0]} point(s)")
+        T = np.vstack([self.triangles, np.empty((2 * k, 3), dtype=self.triangles.dtype)])
+        N = np.vstack([self.neighbours, np.empty((2 * k, 3), dtype=self.neighbours.dtype)])
+        split_in_three(T, N, ts, n, nt)
+        P = np.vstack([self.nodes, xs])
         P.flags.writeable = False
         self.nodes, self.triangles, self.neighbours = P, T, N
         self._changed()
-        return i
+        return np.arange(n, n + k)
 
     def split_edge(self, t: int, k: int, x) -> int:
         """Append the node x (strictly inside the edge b-c opposite vertex k of triangle

@@ -7,8 +7,8 @@ from hypothesis import strategies as st
 
 from helpers import square_nodes
 from skfem_nem import delaunay_mesh
-from skfem_nem.models.condensation import condensed_viscous
-from skfem_nem.models.stokes import viscous
+from skfem_nem.models.condensation import condensed_divergence, condensed_viscous
+from skfem_nem.models.stokes import viscous, weak_divergence
 from skfem_nem.models.stokes_bases import stokes_spaces
 
 
@@ -47,6 +47,10 @@ def test_condensed_block_is_the_global_products_and_exactly_symmetric(seed, npoi
     assert _relative(cv.AiAbn, AiAbn) < 1e-13
     assert (cv.A != cv.A.T).nnz == 0                    # bitwise, not to rounding
     assert cv.A.has_canonical_format
+    B = condensed_divergence(spaces.ubasis, spaces.pbasis, spaces.bbasis, cv)
+    Bb = weak_divergence.assemble(spaces.bbasis, spaces.pbasis).tocsr()
+    Bref = weak_divergence.assemble(spaces.ubasis, spaces.pbasis).tocsr() - Bb @ AiAbn
+    assert _relative(B, Bref) < 1e-13 and B.has_canonical_format
 
 
 def test_condensation_on_part_of_the_triangles_adds_up():
@@ -55,13 +59,16 @@ def test_condensation_on_part_of_the_triangles_adds_up():
     ne = spaces.mesh.nelements
     parts = [np.arange(0, ne, 2), np.arange(1, ne, 2)]
     whole = condensed_viscous(spaces.ubasis, spaces.bbasis, eta)
-    A = AiAbn = 0
+    A = AiAbn = B = 0
     for idx in parts:
         sub = spaces.restricted(idx)
         cv = condensed_viscous(sub.ubasis, sub.bbasis, eta[idx])
         A, AiAbn = A + cv.A, AiAbn + cv.AiAbn
+        B = B + condensed_divergence(sub.ubasis, sub.pbasis, sub.bbasis, cv)
     assert _relative(A, whole.A) < 1e-13
     assert _relative(AiAbn, whole.AiAbn) < 1e-14
+    wholeB = condensed_divergence(spaces.ubasis, spaces.pbasis, spaces.bbasis, whole)
+    assert _relative(B, wholeB) < 1e-13
 
 
 def test_a_singular_bubble_block_is_named():

@@ -19,7 +19,7 @@ from numba import njit, prange
 
 from ..jit import serial_twin
 
-__all__ = ["blocks", "node_pattern", "sum_coo"]
+__all__ = ["blocks", "incidence", "node_pattern", "stencil_union", "sum_coo"]
 
 
 @njit(cache=True)
@@ -155,6 +155,20 @@ def node_pattern(basis, parallel: bool = False) -> tuple:
         pat = inc + kernel(ptr, sten, inc[0], inc[1], n, blocks(n))
         basis.__dict__["_node_pattern"] = pat
     return pat
+
+
+def incidence(ptr, sten, n: int) -> tuple:
+    """``(inc_ptr, inc_e, inc_l)``: node v is entry ``inc_l[k]`` of element ``inc_e[k]``
+    of the element lists ``sten[ptr[e]:ptr[e + 1]]`` for k in ``inc_ptr[v]:inc_ptr[v + 1]``
+    (elements ascending)."""
+    return _incidence(np.asarray(ptr, dtype=np.int64), np.asarray(sten, dtype=np.int64), n)
+
+
+def stencil_union(ptr, sten, inc_ptr, inc_e, n: int, parallel: bool = False) -> tuple:
+    """``(cptr, cols)``: node v's sorted union ``cols[cptr[v]:cptr[v + 1]]`` of the stencils
+    ``sten[ptr[e]:ptr[e + 1]]`` of the elements ``inc_e[inc_ptr[v]:inc_ptr[v + 1]]``."""
+    kernel = _node_pattern if parallel else _node_pattern_serial
+    return kernel(ptr, sten, inc_ptr, inc_e, n, blocks(n))
 
 
 def blocks(n: int) -> int:

@@ -17,7 +17,10 @@ adding the row of its condensed element matrix that belongs to the row's node, c
 where it is added. No element matrix is stored (they would take 1 GB at 88,000 nodes),
 and the block comes out exactly symmetric. The kernels evaluate the viscous form
 ``2 eta eps(u) : eps(v)`` themselves (the tests compare them with scikit-fem's assembly of
-the form); the divergence and the loads of the bubbles stay scikit-fem assemblies on the
+the form). The divergence block ``(u, grad q)`` is filled the same way, row by row over
+the pressure nodes, with its correction ``- B_b A_bb^-1 A_bn`` (:func:`_divergence_rows`;
+through scikit-fem's per-group road the mixed natural-neighbour x P1 assembly took 0.8 s
+at 88,000 nodes). The bubbles' own divergence and loads stay scikit-fem assemblies on the
 bubble basis (three nonzeros per bubble).
 """
 from __future__ import annotations
@@ -27,10 +30,10 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from ..basis.assembly import parallel_kernels, stencil_position
-from ..basis.summation import blocks, node_pattern
+from ..basis.summation import blocks, incidence, node_pattern, stencil_union
 from ..jit import serial_twin
 
-__all__ = ["CondensedViscous", "condensed_viscous"]
+__all__ = ["CondensedViscous", "condensed_viscous", "condensed_divergence"]
 
 
 @njit(cache=True, inline="always")
@@ -160,8 +163,46 @@ def _corr(a00, a11, a01, x0J, x1J, x0I, x1I):
     return a00 * (x0J * x0I) + a11 * (x1J * x1I) + a01 * ((x0J * x1I) + (x1J * x0I))
 
 
+@njit(cache=True, parallel=True)
+def _divergence_rows(ptr, sten, indptr, indices, vals, nq, dx, gl, psi, off2, AiAbn, inc_ptr,
+                     inc_e, inc_l, cptr, cols, nodal, nblocks, indices_out, data_out):
+    """The condensed divergence block ``(u, grad q) - B_b A_bb^-1 A_bn`` row by row: row r
+    (P1 function r, gradient ``gl[k, :, e]`` on triangle e where r is its vertex k) holds
+    its couplings with the velocity nodes ``cols[cptr[r]:cptr[r + 1]]`` (CSR order, dofs
+    ``2 node + c``); ``psi[e]`` is the integral of e's bubble, so that
+    ``B_b[r, (e, d)] = psi[e] d_d lambda_r``."""
+    n = cptr.shape[0] - 1
+    for blk in prange(nblocks):
+        pos = np.full(nodal.shape[1], -1, np.int64)
+        for r in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+            base = 2 * cptr[r]
+            for k in range(cptr[r + 1] - cptr[r]):
+                pos[cols[cptr[r] + k]] = k
+                for c in range(2):
+                    indices_out[base + 2 * k + c] = nodal[c, cols[cptr[r] + k]]
+                    data_out[base + 2 * k + c] = 0.0
+            for t in range(inc_ptr[r], inc_ptr[r + 1]):
+                e = inc_e[t]
+                g0, g1 = gl[inc_l[t], 0, e], gl[inc_l[t], 1, e]
+                for q in range(nq):
+                    rq = e * nq + q
+                    for kk in range(indptr[rq], indptr[rq + 1]):
+                        d = base + 2 * pos[indices[kk]]
+                        wv = dx[e, q] * vals[kk]
+                        data_out[d] += wv * g0
+                        data_out[d + 1] += wv * g1
+                s0, S, o = ptr[e], ptr[e + 1] - ptr[e], off2[e]
+                b0, b1 = psi[e] * g0, psi[e] * g1
+                for i in range(S):
+                    d = base + 2 * pos[sten[s0 + i]]
+                    for c in range(2):
+                        data_out[d + c] -= (b0 * AiAbn[o + 2 * i + c]
+                                            + b1 * AiAbn[o + 2 * S + 2 * i + c])
+
+
 _bubbles_serial = serial_twin(_bubbles)
 _condensed_rows_serial = serial_twin(_condensed_rows)
+_divergence_rows_serial = serial_twin(_divergence_rows)
 
 
 class CondensedViscous:
@@ -169,8 +210,11 @@ class CondensedViscous:
     condensation needs: ``A`` (nu, nu) CSR, exactly symmetric; ``Ainv`` (nb, nb) the
     block-diagonal inverse of the bubbles' block; ``AiAbn`` (nb, nu) ``A_bb^-1 A_bn``."""
 
-    def __init__(self, A: sp.csr_matrix, Ainv: sp.csr_matrix, AiAbn: sp.csr_matrix):
+    def __init__(self, A: sp.csr_matrix, Ainv: sp.csr_matrix, AiAbn: sp.csr_matrix,
+                 local: tuple = ()):
         self.A, self.Ainv, self.AiAbn = A, Ainv, AiAbn
+        # (offsets, values) of A_bb^-1 A_bn triangle by triangle, for the divergence
+        self.local = local
 
 
 def _bubble_gradient(bbasis) -> np.ndarray:
@@ -229,7 +273,7 @@ def condensed_viscous(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
     r2 = np.repeat(bd.T, 2, axis=1).ravel()
     c2 = np.tile(bd.T, (1, 2)).ravel()
     Ainv_m = sp.csr_matrix((Ainv.ravel(), (r2, c2)), shape=(bbasis.N, bbasis.N))
-    return CondensedViscous(A, Ainv_m, AiAbn_m)
+    return CondensedViscous(A, Ainv_m, AiAbn_m, (off2, AiAbn))
 
 
 def _summed(ubasis, nodal, nq, w, offg, Gl, off2, X, Ainv, parallel) -> sp.csr_matrix:
@@ -247,3 +291,36 @@ def _summed(ubasis, nodal, nq, w, offg, Gl, off2, X, Ainv, parallel) -> sp.csr_m
     indptr[:-1] = (4 * cptr[:-1, None] + 2 * nv[:, None] * np.arange(2)[None]).ravel()
     indptr[-1] = nnz
     return sp.csr_matrix((data, indices, indptr), shape=(ubasis.N, ubasis.N))
+
+
+def condensed_divergence(ubasis, pbasis, bbasis, cv: CondensedViscous) -> sp.csr_matrix:
+    """The divergence block ``(u, grad q)`` of the natural-neighbour velocity ``ubasis``
+    and the P1 pressure ``pbasis``, with the bubbles of ``bbasis`` condensed out as in
+    ``cv`` (:func:`condensed_viscous`): ``B - B_b A_bb^-1 A_bn``, (np, nu) CSR over the
+    union of the stencils of each pressure node's triangles (kept with ``pbasis``)."""
+    nodal = _interleaved(ubasis)
+    tris = np.ascontiguousarray(pbasis.element_dofs, dtype=np.int64)     # (3, ne)
+    ne, nq = ubasis.dx.shape
+    npres = pbasis.N
+    parallel = parallel_kernels(ubasis)
+    pat = pbasis.__dict__.get("_stencil_union")
+    if pat is None:
+        inc = incidence(3 * np.arange(ne + 1), tris.T.ravel(), npres)
+        pat = inc + stencil_union(ubasis.stencil_ptr, ubasis.stencil_nodes, inc[0], inc[1],
+                                  npres, parallel)
+        pbasis.__dict__["_stencil_union"] = pat
+    inc_ptr, inc_e, inc_l, cptr, cols = pat
+    gl = np.ascontiguousarray(np.stack([np.asarray(pbasis.basis[k][0].grad)[:, :, 0]
+                                        for k in range(3)]))               # (3, 2, ne)
+    psi = (np.asarray(bbasis.basis[0][0].value)[0] * bbasis.dx).sum(axis=1)   # (ne,)
+    nnz = 2 * int(cptr[-1])
+    idt = np.int32 if max(nnz, ubasis.N) < 2**31 - 1 else np.int64
+    indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
+    Phi = ubasis.values_matrix
+    off2, AiAbn = cv.local
+    (_divergence_rows if parallel else _divergence_rows_serial)(
+        ubasis.stencil_ptr, ubasis.stencil_nodes, Phi.indptr, Phi.indices, Phi.data, nq,
+        np.ascontiguousarray(ubasis.dx), gl, psi, off2, AiAbn, inc_ptr, inc_e, inc_l, cptr,
+        cols, nodal, blocks(npres), indices, data)
+    indptr = (2 * cptr).astype(idt)
+    return sp.csr_matrix((data, indices, indptr), shape=(npres, ubasis.N))

@@ -106,7 +106,7 @@ import scipy.sparse.linalg as spla
 from skfem import BilinearForm, LinearForm
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
-from .condensation import condensed_viscous
+from .condensation import condensed_divergence, condensed_viscous
 from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
 from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_columns,
                            outline_flux, wall_dofs, walls_fix_pressure)
@@ -268,6 +268,28 @@ class StokesSystem:
     bubble: Optional[tuple] = None  # (A_bb^-1, A_bb^-1 A_bn, B_b, f_b) of the bubbles
 
 
+def _blocks_once(spaces: StokesSpaces) -> dict:
+    """The blocks independent of the coefficients, once per spaces: the divergence
+    ``"B"`` (without bubbles; with them it is assembled with their condensation), the
+    exact boundary term ``"flux"`` of its integration by parts (B is then -(div u, q)
+    also where the normal wall velocity is not zero), the bubbles' divergence ``"Bb"``
+    and the pressure functions' integrals ``"m"``."""
+    cache = spaces.__dict__.setdefault("_cache", {})
+    if "m" in cache:
+        return cache
+    ub, pb, bb = spaces.ubasis, spaces.pbasis, spaces.bbasis
+    bform = divergence if spaces.method == "taylor-hood" else weak_divergence
+    if bform is weak_divergence:
+        cache["flux"] = boundary_flux(spaces)
+    if bb is None:
+        B = bform.assemble(ub, pb).tocsr()
+        cache["B"] = (B - cache["flux"]).tocsr() if "flux" in cache else B
+    else:
+        cache["Bb"] = bform.assemble(bb, pb).tocsr()
+    cache["m"] = _unit.assemble(pb)
+    return cache
+
+
 def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
                     tau0: Optional[Field] = None) -> StokesSystem:
     """Assemble the Stokes blocks.
@@ -295,19 +317,7 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
             b = b + stress_load.assemble(basis, tau=t)
         return b
 
-    bform = divergence if spaces.method == "taylor-hood" else weak_divergence
-    cache = spaces.__dict__.setdefault("_cache", {})
-    if "B" not in cache:  # independent of the coefficients: once per spaces
-        B = bform.assemble(ub, pb).tocsr()
-        if bform is weak_divergence:
-            # the boundary term of the integration by parts, exactly: B is then
-            # -(div u, q) also where the normal wall velocity is not zero
-            B = (B - boundary_flux(spaces)).tocsr()
-        cache["B"] = B
-        cache["m"] = _unit.assemble(pb)
-        if spaces.bbasis is not None:
-            cache["Bb"] = bform.assemble(spaces.bbasis, pb).tocsr()
-    B = cache["B"]
+    cache = _blocks_once(spaces)
     b = loads(ub)
     inv = 1.0 / e
     Mp = weighted_mass.assemble(pb, c=inv).tocsr()
@@ -316,12 +326,13 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     S = _stabilisation(spaces, inv) if spaces.stabilised else sp.csr_matrix((pb.N, pb.N))
     if spaces.bbasis is None:
         A = viscous.assemble(ub, eta=e).tocsr()
-        return StokesSystem(0.5 * (A + A.T), B, 0.5 * (S + S.T), Mp, m, b, e, g, None)
+        return StokesSystem(0.5 * (A + A.T), cache["B"], 0.5 * (S + S.T), Mp, m, b, e, g,
+                            None)
     # static condensation of the bubbles, triangle by triangle (models.condensation)
     bb, Bb = spaces.bbasis, cache["Bb"]                      # Bb (np, nb)
     cv = condensed_viscous(ub, bb, e)
     fb = loads(bb)
-    B = (B - Bb @ cv.AiAbn).tocsr()
+    B = (condensed_divergence(ub, pb, bb, cv) - cache["flux"]).tocsr()
     S = (Bb @ cv.Ainv @ Bb.T).tocsr()
     b = b - cv.AiAbn.T @ fb
     g = -(Bb @ (cv.Ainv @ fb))

@@ -32,6 +32,7 @@ from numba import njit, prange
 from ..basis.assembly import parallel_kernels, stencil_position
 from ..basis.summation import blocks, incidence, node_pattern, stencil_union
 from ..jit import serial_twin
+from .stokes_bases import ElementTriBubble
 
 __all__ = ["CondensedViscous", "condensed_viscous", "condensed_divergence"]
 
@@ -222,6 +223,13 @@ def _bubble_gradient(bbasis) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(bbasis.basis[0][0].grad)[0])
 
 
+def _bubble_integral(bbasis) -> np.ndarray:
+    """(ne,) the quadrature's integral of each triangle's bubble (its values at the
+    reference points, as scikit-fem's assembly takes them)."""
+    phi = ElementTriBubble().lbasis(bbasis.quadrature[0], 0)[0]
+    return (bbasis.dx * phi[None]).sum(axis=1)
+
+
 def _rows_csr(rows: np.ndarray, indptr: np.ndarray, cols: np.ndarray, data: np.ndarray,
               shape: tuple) -> sp.csr_matrix:
     """CSR matrix of the given rows, in the order ``rows`` (a permutation of a subset)."""
@@ -312,7 +320,7 @@ def condensed_divergence(ubasis, pbasis, bbasis, cv: CondensedViscous) -> sp.csr
     inc_ptr, inc_e, inc_l, cptr, cols = pat
     gl = np.ascontiguousarray(np.stack([np.asarray(pbasis.basis[k][0].grad)[:, :, 0]
                                         for k in range(3)]))               # (3, 2, ne)
-    psi = (np.asarray(bbasis.basis[0][0].value)[0] * bbasis.dx).sum(axis=1)   # (ne,)
+    psi = _bubble_integral(bbasis)
     nnz = 2 * int(cptr[-1])
     idt = np.int32 if max(nnz, ubasis.N) < 2**31 - 1 else np.int64
     indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)

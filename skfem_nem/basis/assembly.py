@@ -32,6 +32,7 @@ from skfem.assembly.form import BilinearForm, LinearForm
 from skfem.assembly.form.form import FormExtraParams
 from skfem.element import DiscreteField, ElementVector
 
+from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 from .summation import sum_coo
 
@@ -422,10 +423,6 @@ def _chunks(ne, calls):
     return [(e0, min(ne, e0 + step)) for e0 in range(0, ne, step)]
 
 
-def _index_dtype(n):
-    return np.int32 if n < 2**31 - 1 else np.int64
-
-
 class _Touched(Exception):
     """The form used ``w``: its coefficients may vary between elements."""
 
@@ -572,7 +569,7 @@ def _whole_linear(form, v, kwargs):
     nq = v.dx.shape[1]
     off = np.zeros(ptr.shape[0], dtype=np.int64)
     np.cumsum(Dv * np.diff(ptr), out=off[1:])
-    rows = np.empty(off[-1], dtype=_index_dtype(v.N))
+    rows = np.empty(off[-1], dtype=index_dtype(v.N, 0))
     data = np.empty(off[-1])
     ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
     kernel = _contract_linear if _parallel(v) else _contract_linear_serial

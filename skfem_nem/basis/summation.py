@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 
 __all__ = ["blocks", "incidence", "node_pattern", "stencil_union", "sum_coo"]
@@ -177,10 +178,6 @@ def blocks(n: int) -> int:
     return max(1, min(n // 256, 4 * numba.get_num_threads()))
 
 
-def _index_dtype(n):
-    return np.int32 if n < 2**31 - 1 else np.int64
-
-
 def _summed(u, v, Du, Dv, off, K, parallel, idt):
     """Rows, columns and values of the summed element matrices, each entry once."""
     inc_ptr, inc_e, inc_l, cptr, cols = node_pattern(u, parallel)
@@ -201,5 +198,5 @@ def sum_coo(u, v, Du, Dv, off, K, parallel: bool = False):
     (element e's, (Dv S) x (Du S) row-major, at ``K[off[e]:off[e + 1]]``) of the
     ``Du``-vector trial basis ``u`` and the ``Dv``-vector test basis ``v`` (sharing
     their stencils) summed: each entry once."""
-    ind, data, _ = _summed(u, v, Du, Dv, off, K, parallel, _index_dtype(max(u.N, v.N)))
+    ind, data, _ = _summed(u, v, Du, Dv, off, K, parallel, index_dtype(max(u.N, v.N), 0))
     return ind, data

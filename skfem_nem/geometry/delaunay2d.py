@@ -17,11 +17,11 @@ from numba import njit
 
 from .predicates import incircle_sign, orient2d, orient2d_sign
 
-__all__ = ["adjacency", "split_in_three", "cavity_boundary", "circumcircle_table", "conflict_cycle",
+__all__ = ["adjacency", "cavity_boundary", "circumcircle_table", "conflict_cycle",
            "count_non_delaunay", "edge_violates", "exact_hull", "first_fold",
            "flip_edge", "grow_cavity", "in_cavity", "in_circumcircle", "insert_vertex",
            "is_segment", "lawson", "locate_many", "locate_walk", "orientations",
-           "segment_key"]
+           "segment_key", "split_in_three"]
 
 
 # ---------------------------------------------------------------------------

@@ -31,6 +31,7 @@ from numba import njit, prange
 
 from ..basis.assembly import parallel_kernels, stencil_position
 from ..basis.summation import blocks, incidence, node_pattern, stencil_union
+from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 from .stokes_bases import ElementTriBubble
 
@@ -212,7 +213,7 @@ class CondensedViscous:
     block-diagonal inverse of the bubbles' block; ``AiAbn`` (nb, nu) ``A_bb^-1 A_bn``."""
 
     def __init__(self, A: sp.csr_matrix, Ainv: sp.csr_matrix, AiAbn: sp.csr_matrix,
-                 local: tuple = ()):
+                 local: tuple):
         self.A, self.Ainv, self.AiAbn = A, Ainv, AiAbn
         # (offsets, values) of A_bb^-1 A_bn triangle by triangle, for the divergence
         self.local = local
@@ -289,7 +290,7 @@ def _summed(ubasis, nodal, nq, w, offg, Gl, off2, X, Ainv, parallel) -> sp.csr_m
     inc_ptr, inc_e, inc_l, cptr, cols = node_pattern(ubasis, parallel)
     n = cptr.shape[0] - 1
     nnz = 4 * int(cptr[-1])
-    idt = np.int32 if max(nnz, ubasis.N) < 2**31 - 1 else np.int64
+    idt = index_dtype(ubasis.N, nnz)
     indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
     (_condensed_rows if parallel else _condensed_rows_serial)(
         ubasis.stencil_ptr, ubasis.stencil_nodes, nq, w, offg, Gl, off2, X, Ainv, inc_ptr,
@@ -301,28 +302,36 @@ def _summed(ubasis, nodal, nq, w, offg, Gl, off2, X, Ainv, parallel) -> sp.csr_m
     return sp.csr_matrix((data, indices, indptr), shape=(ubasis.N, ubasis.N))
 
 
+def _divergence_data(ubasis, pbasis, bbasis, parallel: bool) -> tuple:
+    """What the divergence block needs that no coefficient changes, once per spaces (kept
+    with ``pbasis``): the pressure nodes' triangles and the union of their stencils
+    (``(inc_ptr, inc_e, inc_l, cptr, cols)``), the P1 gradients (3, 2, ne) and the
+    bubbles' integrals (ne,)."""
+    data = pbasis.__dict__.get("_divergence_data")
+    if data is None:
+        ne = ubasis.dx.shape[0]
+        tris = np.ascontiguousarray(pbasis.element_dofs, dtype=np.int64)     # (3, ne)
+        inc = incidence(3 * np.arange(ne + 1), tris.T.ravel(), pbasis.N)
+        pat = inc + stencil_union(ubasis.stencil_ptr, ubasis.stencil_nodes, inc[0], inc[1],
+                                  pbasis.N, parallel)
+        gl = np.ascontiguousarray(np.stack([np.asarray(pbasis.basis[k][0].grad)[:, :, 0]
+                                            for k in range(3)]))
+        data = pbasis.__dict__["_divergence_data"] = (pat, gl, _bubble_integral(bbasis))
+    return data
+
+
 def condensed_divergence(ubasis, pbasis, bbasis, cv: CondensedViscous) -> sp.csr_matrix:
     """The divergence block ``(u, grad q)`` of the natural-neighbour velocity ``ubasis``
     and the P1 pressure ``pbasis``, with the bubbles of ``bbasis`` condensed out as in
     ``cv`` (:func:`condensed_viscous`): ``B - B_b A_bb^-1 A_bn``, (np, nu) CSR over the
-    union of the stencils of each pressure node's triangles (kept with ``pbasis``)."""
+    union of the stencils of each pressure node's triangles."""
     nodal = _interleaved(ubasis)
-    tris = np.ascontiguousarray(pbasis.element_dofs, dtype=np.int64)     # (3, ne)
-    ne, nq = ubasis.dx.shape
-    npres = pbasis.N
+    nq, npres = ubasis.dx.shape[1], pbasis.N
     parallel = parallel_kernels(ubasis)
-    pat = pbasis.__dict__.get("_stencil_union")
-    if pat is None:
-        inc = incidence(3 * np.arange(ne + 1), tris.T.ravel(), npres)
-        pat = inc + stencil_union(ubasis.stencil_ptr, ubasis.stencil_nodes, inc[0], inc[1],
-                                  npres, parallel)
-        pbasis.__dict__["_stencil_union"] = pat
-    inc_ptr, inc_e, inc_l, cptr, cols = pat
-    gl = np.ascontiguousarray(np.stack([np.asarray(pbasis.basis[k][0].grad)[:, :, 0]
-                                        for k in range(3)]))               # (3, 2, ne)
-    psi = _bubble_integral(bbasis)
+    (inc_ptr, inc_e, inc_l, cptr, cols), gl, psi = _divergence_data(ubasis, pbasis, bbasis,
+                                                                    parallel)
     nnz = 2 * int(cptr[-1])
-    idt = np.int32 if max(nnz, ubasis.N) < 2**31 - 1 else np.int64
+    idt = index_dtype(ubasis.N, nnz)
     indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
     Phi = ubasis.values_matrix
     off2, AiAbn = cv.local

@@ -44,6 +44,7 @@ from .projection import (field_values, l2_project, normalize_elements, normalize
                          positions_in, projection_dofs, stencil_dofs)
 from .groups import GroupBasis, restrict_field
 from .stencils import fill_group, stencil_union
+from . import updates
 from .smoothing import cells_2d, cells_3d, combine, value_rule
 
 __all__ = ["NaturalNeighbourBasis", "NaturalNeighbourFacetBasis"]
@@ -74,23 +75,18 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         not Delaunay (refined, smoothed, imported), whose nodes were triangulated anew."""
         ok = self.__dict__.get("_hints_ok")
         if ok is None:
-            T = getattr(self.triangulation, "triangles", None)
-            ok = T is not None and T.shape == self.mesh.t.T.shape and bool(
-                np.array_equal(np.sort(T, axis=1), np.sort(self.mesh.t.T, axis=1)))
-            self._hints_ok = ok
+            ok = self._hints_ok = own_triangulation(self.mesh, self.triangulation)
         return ok
 
-    def _build(self, x, hint):
-        """Coordinates at the (dim, ne, nq) points x and their stencil groups."""
+    def _build(self, x, hint, dx):
+        """Coordinates and gradients at the (dim, ne, nq) points x (of weights dx)."""
         dim, ne, nq = x.shape
         pts = np.ascontiguousarray(x.transpose(1, 2, 0).reshape(-1, dim))
         Phi, D = self._coordinates(pts, gradient=True, hint=np.repeat(hint, nq))
         if Phi.nnz and not all(np.isfinite(Dk.data).all() for Dk in D):
-            Phi, D = self._fix_undefined(pts, Phi, D)
-        # gradients as one (dim, nnz) array on Phi's pattern; the CSR
-        # matrices of the gradients are views of its rows
-        G = np.stack([Dk.data for Dk in D]) if len(D) else np.empty((0, Phi.nnz))
-        self._set_functions(Phi, G, ne, nq)
+            Phi, D = self._fix_undefined(pts, Phi, D, dx, hint)
+        # gradients as one (dim, nnz) array on Phi's pattern
+        return Phi, np.stack([Dk.data for Dk in D]) if len(D) else np.empty((0, Phi.nnz))
 
     def _build_smoothed(self, x, elems, cell_of):
         """Values at the (dim, ne, nq) points x (in the elements ``elems``)
@@ -109,7 +105,7 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         import scipy.sparse as sp
         Phi = sp.csr_matrix((val, idx.astype(Phi.indices.dtype), ptr),
                             shape=(ne * nq, Phi.shape[1]))
-        self._set_functions(Phi, grad, ne, nq)
+        return Phi, grad
 
     def _set_functions(self, Phi, G, ne, nq):
         """Values (CSR, one row per quadrature point) and gradients (dim, nnz)
@@ -123,7 +119,7 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         self.values_matrix, self.gradient_entries = Phi, G
         self._D = [type(Phi)((G[k], Phi.indices, Phi.indptr), shape=Phi.shape)
                    for k in range(G.shape[0])]
-        ptr, sten = stencil_union(Phi.indptr.astype(np.int64), Phi.indices.astype(np.int64), nq, ne)
+        ptr, sten = stencil_union(Phi.indptr, Phi.indices, nq, ne)
         self.stencil_ptr, self.stencil_nodes = ptr, sten
         self.stencil_sizes = np.diff(ptr)
         self._groups = None
@@ -162,7 +158,7 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
             cache[k] = self._make_group(np.asarray(idx))
         return cache[k]
 
-    def _fix_undefined(self, pts, Phi, D):
+    def _fix_undefined(self, pts, Phi, D, dx, elems):
         """Undefined gradients at quadrature points: allowed only in cells of
         zero measure (Qhull's flat tetrahedra between co-spherical nodes, e.g.
         lattices), whose points carry no weight; their gradients become 0."""
@@ -170,9 +166,9 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         for Dk in D:
             finite &= np.isfinite(np.asarray(Dk.sum(axis=1)).ravel())
         bad = np.flatnonzero(~finite)
-        weight = self.dx.reshape(-1)[bad]
+        weight = dx.reshape(-1)[bad]
         if np.any(weight != 0.0):
-            e = int(bad[np.flatnonzero(weight != 0.0)[0]] // self.dx.shape[1])
+            e = int(elems[bad[np.flatnonzero(weight != 0.0)[0]] // dx.shape[1]])
             raise ValueError(
                 f"quadrature points at nodes or on the convex hull (first in element {e}): "
                 f"gradients of natural-neighbour functions are undefined there; use a "
@@ -252,6 +248,13 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
     def nstencil_entries(self) -> int:
         """Sum over elements of the stencil size squared (assembly work)."""
         return int((self.stencil_sizes.astype(np.int64) ** 2).sum())
+
+
+def own_triangulation(mesh, tri) -> bool:
+    """Are the mesh's triangles those of the triangulation ``tri``, one for one?"""
+    T = getattr(tri, "triangles", None)
+    return T is not None and T.shape == mesh.t.T.shape and bool(
+        np.array_equal(np.sort(T, axis=1), np.sort(mesh.t.T, axis=1)))
 
 
 def _check_method(mesh, coordinates, method):
@@ -353,6 +356,16 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
                  method: Optional[str] = None, integration: Optional[str] = None,
                  elements=None, mapping=None, dofs=None, disable_doflocs: bool = False):
         refuse_keywords("NaturalNeighbourBasis", mapping=mapping, dofs=dofs)
+        self._setup(mesh, elem, intorder, quadrature, npoints, coordinates, method,
+                    integration, elements, disable_doflocs)
+        elems = np.arange(self.nelems) if self.tind is None else self.tind
+        self._set_functions(*self._functions(elems), self.nelems, self.X.shape[1])
+
+    def _setup(self, mesh, elem=None, intorder=None, quadrature=None, npoints=None,
+               coordinates="sibson", method=None, integration=None, elements=None,
+               disable_doflocs=False):
+        """Everything but the functions: checks, triangulation, scikit-fem's mapping and
+        dofs, the quadrature and its weights ``dx``."""
         elem = element_for(mesh, elem, "NaturalNeighbourBasis")
         check_used_nodes(mesh, "NaturalNeighbourBasis")
         self.method = _check_method(mesh, coordinates, method)
@@ -375,17 +388,74 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
                 raise ValueError(f"elements={elements!r} selects no element")
             self.dx = np.abs(self.mapping.detDF(self.X, tind=self.tind)) * np.broadcast_to(
                 self.W, (self.nelems, self.W.shape[-1]))
-            x = self.mapping.F(self.X, tind=self.tind)
-            elems = np.arange(self.nelems) if self.tind is None else self.tind
-            if self.integration == "smoothed":
-                nq = self.X.shape[1]
-                # 2D: point q of a triangle lies in the cell of its vertex q;
-                # 3D: one cell per tetrahedron
-                cell_of = (np.arange(self.nelems * nq) if mesh.dim() == 2
-                           else np.repeat(np.arange(self.nelems), nq))
-                self._build_smoothed(x, elems, cell_of)
-            else:
-                self._build(x, elems)
+
+    def _functions(self, elems, positions=None):
+        """Values (CSR, nq rows per element) and gradients (dim, nnz) at the quadrature
+        points of the mesh's elements ``elems`` (sorted), at ``positions`` on the basis'
+        element axis (default all)."""
+        pos = slice(None) if positions is None else positions
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = self.mapping.F(self.X, tind=elems)
+        if self.integration == "gauss":
+            return self._build(x, elems, self.dx[pos])
+        nq = self.X.shape[1]
+        # 2D: point q of a triangle lies in the cell of its vertex q;
+        # 3D: one cell per tetrahedron
+        cell_of = (np.arange(elems.size * nq) if self.mesh.dim() == 2
+                   else np.repeat(np.arange(elems.size), nq))
+        return self._build_smoothed(x, elems, cell_of)
+
+    def updated(self, mesh: MeshTri) -> "NaturalNeighbourBasis":
+        """This basis on ``mesh``, a later state of its mesh (nodes moved, added or taken
+        out, triangles flipped or split: an evolving mesh's next step), recomputing the
+        functions only in the triangles whose stencils may have changed and copying the
+        others' (:mod:`skfem_nem.basis.updates` says which, and why that is exact).
+
+        Equal to ``NaturalNeighbourBasis(mesh, ...)`` with the same keywords to round-off.
+        Both meshes must be their own Delaunay triangulations, without segments, and this
+        basis a 2D one on all the mesh's triangles (else ``ValueError`` naming what
+        differs). ``update_report`` of the new basis: ``recomputed`` and ``kept``
+        triangles."""
+        new = type(self).__new__(type(self))
+        new._setup(mesh, self.elem, **self.construction_keywords())
+        reason = self.update_obstacle(mesh)
+        if reason is not None:
+            raise ValueError(reason)
+        old_c, new_c, marked = updates.changed_triangles(
+            self.mesh.p.T, self.mesh.t.T, mesh.p.T, mesh.t.T)
+        keep = updates.kept_elements(self.stencil_ptr, self.stencil_nodes, old_c, new_c,
+                                     marked)
+        redo = np.flatnonzero(~keep)
+        nq = self.X.shape[1]
+        if redo.size:
+            Phi, G = new._functions(redo, redo)
+            part = (Phi.indptr, Phi.indices, Phi.data, G)
+        else:
+            part = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
+                    np.zeros((self.gradient_entries.shape[0], 0)))
+        old = self.values_matrix
+        ptr, idx, val, grad = updates.splice_rows(
+            keep, nq, (old.indptr, old.indices, old.data, self.gradient_entries), part)
+        import scipy.sparse as sp
+        Phi = sp.csr_matrix((val, idx, ptr), shape=(mesh.nelements * nq, mesh.nvertices))
+        new._set_functions(Phi, grad, mesh.nelements, nq)
+        new.update_report = {"recomputed": int(redo.size), "kept": int(keep.sum())}
+        return new
+
+    def update_obstacle(self, mesh) -> Optional[str]:
+        """Why :meth:`updated` cannot move this basis to ``mesh`` (a sentence), or None."""
+        if self.tind is not None or self.mesh.dim() != 2 or self.method != "area":
+            return ("updated() needs a 2D basis on all of its mesh's triangles with the "
+                    "area method; build a new basis")
+        if not isinstance(mesh, MeshTri):
+            return f"updated() needs a MeshTri, got {type(mesh).__name__}"
+        for what, m in (("this basis' mesh", self.mesh), ("the new mesh", mesh)):
+            tri = adopt(m, self.method)
+            if tri.segment_keys.size or not own_triangulation(m, tri):
+                return (f"{what} is not its own unconstrained Delaunay triangulation "
+                        f"(segments, a non-convex boundary or other triangles): build a "
+                        f"new basis")
+        return None
 
     def global_coordinates(self) -> DiscreteField:
         # cached here: scikit-fem's own cache attributes differ between versions
@@ -580,9 +650,10 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
         self.normals = geom.normals
         x = np.asarray(geom.global_coordinates())
         if integration == "gauss":
-            self._build(x, geom.tind)
+            Phi, G = self._build(x, geom.tind, self.dx)
         else:
-            self._build_smoothed(x, geom.tind, self._cells_of(x, geom.tind))
+            Phi, G = self._build_smoothed(x, geom.tind, self._cells_of(x, geom.tind))
+        self._set_functions(Phi, G, *self.dx.shape)
 
     def project(self, interp, facets=None, dtype=None) -> ndarray:
         """L2 projection of ``interp`` (callable of x, DiscreteField, array or tuple of
@@ -643,7 +714,7 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
         d = ((x[:, None, :, :] - V[:, :, :, None]) ** 2).sum(axis=0)   # (3, nf, nq)
         return (3 * j[:, None] + d.argmin(axis=0)).ravel()
 
-    def _fix_undefined(self, pts, Phi, D):
+    def _fix_undefined(self, pts, Phi, D, dx, elems):
         # gradients on the hull: one-sided limit, evaluated just inside
         import scipy.sparse as sp
         dim = pts.shape[1]
@@ -672,9 +743,6 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
         pattern.data[:] = 1.0
         pattern.sort_indices()
         return _on_pattern(Phi, pattern), [_on_pattern(Dk, pattern) for Dk in out]
-
-    def _build(self, x, hint):
-        super()._build(x, hint)
 
     def default_parameters(self):
         return {"x": self.global_coordinates(), "h": self.mesh_parameters(), "n": self.normals}

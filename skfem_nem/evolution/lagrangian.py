@@ -154,7 +154,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         self.node_map = np.arange(n)
         self.history = []
         self._version = 0
-        self._cache = {}
+        self._cache, self._previous = {}, {}
         self._touched = []
 
     # -- views ----------------------------------------------------------------
@@ -200,9 +200,13 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         from ..basis import NaturalNeighbourBasis
         key = ("basis", None if elem is None else repr(elem), integration)
         if key not in self._cache:
-            rule = {"quadrature": (_X3, _W3)} if integration == "gauss" else {}
-            self._cache[key] = NaturalNeighbourBasis(self.mesh, elem, integration=integration,
-                                                     **rule)
+            old = self._previous.get(key)
+            if old is not None and old.update_obstacle(self.mesh) is None:
+                self._cache[key] = old.updated(self.mesh)
+            else:
+                rule = {"quadrature": (_X3, _W3)} if integration == "gauss" else {}
+                self._cache[key] = NaturalNeighbourBasis(self.mesh, elem,
+                                                         integration=integration, **rule)
         return self._cache[key]
 
     def node_areas(self) -> np.ndarray:
@@ -521,6 +525,10 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             self.ip_fields[name] = flat.reshape(F.shape)
 
     def _invalidate(self):
+        # the bases of the last mesh stay until the next basis() call: updated to the new
+        # mesh, they recompute only the triangles whose stencils may have changed
+        self._previous = {**self._previous, **{k: v for k, v in self._cache.items()
+                                               if k[0] == "basis"}}
         self._cache = {}
         self._version += 1
 
@@ -638,6 +646,6 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             self.history = meta["history"]
             self.node_map = np.arange(tri.npoints)
             self._version = 0
-            self._cache = {}
+            self._cache, self._previous = {}, {}
             self._touched = []
         return self

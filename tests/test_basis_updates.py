@@ -83,7 +83,7 @@ def test_unchanged_mesh_recomputes_nothing():
     b = NaturalNeighbourBasis(mesh)
     same = MeshTri(mesh.p.copy(), mesh.t.copy(), sort_t=False)
     u = b.updated(same)
-    assert u.update_report == {"recomputed": 0, "kept": mesh.nelements}
+    assert (u.update_report["recomputed"], u.update_report["kept"]) == (0, mesh.nelements)
     assert_same_functions(u, b)
 
 

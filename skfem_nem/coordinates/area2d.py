@@ -597,13 +597,17 @@ def _snap_to_hull(tri, q, rows, hull_tol, tri_out):
     return np.array(moved, dtype=np.int64)
 
 
+_NO_GRID = (np.zeros(2), np.ones(2), 1, np.zeros(1, dtype=np.int64))
+
+
 def _run(tri, q, start, ikind, gradient, general, width, room, chunk, status, tri_out):
     """The kernel :func:`_query_all` on the points q (m, 2); returns a
     :class:`RowStore` of the rows and fills ``status``, ``tri_out`` (m,)."""
     import numba
     m = q.shape[0]
     n = tri.npoints
-    lo, span, nc, grid = tri.seed_grid()
+    # a walk from a given start needs no seed grid (an O(triangles) table)
+    lo, span, nc, grid = tri.seed_grid() if not start.shape[0] else _NO_GRID
     indptr = np.empty(m + 1, dtype=np.int64)
     proto = np.empty(0, dtype=index_dtype(n, m * width))
     with numba.parallel_chunksize(1):

@@ -8,6 +8,7 @@ from skfem.helpers import dot, grad
 
 from helpers import square_nodes
 from skfem_nem import LagrangianMesh, NaturalNeighbourBasis, delaunay_mesh
+from skfem_nem.basis.updates import updated_matrix
 
 TOL = 1e-12  # round-off: the recomputed rows may add the same terms in another order
 
@@ -115,3 +116,38 @@ def test_lagrangian_mesh_with_segments_rebuilds():
     b = lm.basis()
     assert not hasattr(b, "update_report")
     assert_same_functions(b, NaturalNeighbourBasis(lm.mesh))
+
+
+def test_vortex_flow_updated_matrices_equal_assembled_ones():
+    """Laplace and elasticity matrices carried through 20 steps by replacing the
+    recomputed triangles' contributions only."""
+    from skfem import ElementVector
+    from skfem.models.elasticity import lame_parameters, linear_elasticity
+    from skfem_nem import ElementNaturalNeighbour
+    elasticity = linear_elasticity(*lame_parameters(1e3, 0.3))
+    lm = LagrangianMesh(square_nodes(500, 12, seed=5))
+    vec = ElementVector(ElementNaturalNeighbour())
+    b, v = lm.basis(), lm.basis(vec)
+    A, K = laplace.assemble(b), elasticity.assemble(v)
+    for _ in range(20):
+        lm.advance(local_vortex, 0.25, inject=1.3)
+        b_new, v_new = lm.basis(), lm.basis(vec)
+        A, K = updated_matrix(laplace, A, b, b_new), updated_matrix(elasticity, K, v, v_new)
+        b, v = b_new, v_new
+        for M, form, basis in ((A, laplace, b), (K, elasticity, v)):
+            ref = form.assemble(basis)
+            assert M.shape == ref.shape
+            assert abs(M - ref).max() <= TOL * abs(ref).max()
+    assert lm.triangulation.npoints > 500 + 4 + 4 * 11  # nodes were injected
+
+
+def test_updated_matrix_needs_an_update():
+    mesh = delaunay_mesh(square_nodes(40, 5, seed=6))
+    b = NaturalNeighbourBasis(mesh)
+    A = laplace.assemble(b)
+    with pytest.raises(ValueError, match="not an update"):
+        updated_matrix(laplace, A, b, NaturalNeighbourBasis(mesh))
+    with pytest.raises(ValueError, match="A has shape"):
+        updated_matrix(laplace, A[:5, :5], b, b.updated(mesh))
+    with pytest.raises(ValueError, match="subset\\(\\) of a subdomain basis"):
+        b.subset([1, 2]).subset([1])

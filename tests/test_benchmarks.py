@@ -453,3 +453,26 @@ def test_scaling_names_an_unknown_plate_solver(capsys):
         bench.main(["--sizes", "--plate-nodes", "300", "--plate-solvers", "schur:fast"])
     assert exc.value.code == 2
     assert "unknown solver 'schur:fast'" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------
+# basis_update: local basis updates against rebuilt bases
+# --------------------------------------------------------------------------
+
+def test_basis_update_recomputes_what_the_disc_moved(capsys):
+    """A small disc recomputes a few percent of the triangles, the cellular vortex all of
+    them; the table prints a row per case whose parts add up; a radius past the square's
+    half is named."""
+    bench = load_benchmark("basis_update")
+    rows = bench.main(["--nodes", "3000", "--radii", "0.05", "all", "--repeat", "1"])
+    small, whole = rows
+    assert 0 < small["k"] < 0.05 * small["triangles"] and small["flips"] > 0
+    assert whole["k"] == whole["triangles"]
+    for r in rows:
+        assert r["recompute"] + r["rest"] == pytest.approx(r["update"])
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("| nodes |") and len(out) == 4
+    assert out[2].split("|")[5].strip() == f"{small['k']:,}"
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--radii", "0.7"])
+    assert exc.value.code == 2 and "'0.7'" in capsys.readouterr().err

@@ -36,7 +36,7 @@ from skfem.element import DiscreteField, Element, ElementTetP1, ElementTriP1, El
 
 from . import assembly, nonlinear, plotting
 from ..coordinates import natural_neighbour_coordinates
-from ..geometry.meshes import adopt
+from ..geometry.meshes import adopt, own_triangulation
 from .domain import check_used_nodes, into_domain
 from .elements import element_for, gauss_rule, integration_scheme
 from .companions import companion_basis, is_natural_neighbour, refuse_keywords
@@ -255,13 +255,6 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         return int((self.stencil_sizes.astype(np.int64) ** 2).sum())
 
 
-def own_triangulation(mesh, tri) -> bool:
-    """Are the mesh's triangles those of the triangulation ``tri``, one for one?"""
-    T = getattr(tri, "triangles", None)
-    return T is not None and T.shape == mesh.t.T.shape and bool(
-        np.array_equal(np.sort(T, axis=1), np.sort(mesh.t.T, axis=1)))
-
-
 def _check_method(mesh, coordinates, method):
     if coordinates not in ("sibson", "laplace"):
         raise ValueError(f"coordinates must be 'sibson' or 'laplace', got {coordinates!r}")
@@ -437,19 +430,12 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         redo = np.flatnonzero(~keep)
         nq = self.X.shape[1]
         t0 = time.perf_counter()
-        if redo.size:
-            Phi, G = new._functions(redo, redo)
-            part = (Phi.indptr, Phi.indices, Phi.data, G)
-        else:
-            part = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
-                    np.zeros((self.gradient_entries.shape[0], 0)))
+        part = new._functions(redo, redo) if redo.size else None
         t1 = time.perf_counter()
-        old = self.values_matrix
-        ptr, idx, val, grad = updates.splice_rows(
-            keep, nq, (old.indptr, old.indices, old.data, self.gradient_entries), part)
-        import scipy.sparse as sp
-        Phi = sp.csr_matrix((val, idx, ptr), shape=(mesh.nelements * nq, mesh.nvertices))
+        Phi, grad = updates.splice_rows(keep, nq, (self.values_matrix, self.gradient_entries),
+                                        part, mesh.nvertices)
         new._set_functions(Phi, grad, mesh.nelements, nq)
+        new.kept_elements = keep
         new.update_report = {"recomputed": int(redo.size), "kept": int(keep.sum()),
                              "recompute_seconds": t1 - t0,
                              "seconds": time.perf_counter() - start}
@@ -457,18 +443,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
 
     def update_obstacle(self, mesh) -> Optional[str]:
         """Why :meth:`updated` cannot move this basis to ``mesh`` (a sentence), or None."""
-        if self.tind is not None or self.mesh.dim() != 2 or self.method != "area":
-            return ("updated() needs a 2D basis on all of its mesh's triangles with the "
-                    "area method; build a new basis")
-        if not isinstance(mesh, MeshTri):
-            return f"updated() needs a MeshTri, got {type(mesh).__name__}"
-        for what, m in (("this basis' mesh", self.mesh), ("the new mesh", mesh)):
-            tri = adopt(m, self.method)
-            if tri.segment_keys.size or not own_triangulation(m, tri):
-                return (f"{what} is not its own unconstrained Delaunay triangulation "
-                        f"(segments, a non-convex boundary or other triangles): build a "
-                        f"new basis")
-        return None
+        return updates.obstacle(self, mesh)
 
     def global_coordinates(self) -> DiscreteField:
         # cached here: scikit-fem's own cache attributes differ between versions
@@ -496,6 +471,22 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         """The same element and integration on a subset of the mesh's elements (or all)."""
         return type(self)(self.mesh, self.elem, **{**self.construction_keywords(),
                                                    "elements": elements})
+
+    def subset(self, elements) -> "NaturalNeighbourBasis":
+        """:meth:`with_elements` without computing anything: the subdomain basis on
+        ``elements`` (of a basis on all the mesh's triangles) takes this basis' functions
+        there, copied (for :func:`~skfem_nem.basis.updates.updated_matrix`)."""
+        if self.tind is not None:
+            raise ValueError("subset() of a subdomain basis: take the subset of the basis "
+                             "on all the mesh's triangles")
+        sub = type(self).__new__(type(self))
+        sub._setup(self.mesh, self.elem, **{**self.construction_keywords(),
+                                            "elements": elements})
+        sub._hints_ok = self._hints_valid()
+        nq = self.X.shape[1]
+        Phi, G = updates.gather_rows(sub.tind, nq, self.values_matrix, self.gradient_entries)
+        sub._set_functions(Phi, G, sub.nelems, nq)
+        return sub
 
     def construction_keywords(self) -> dict:
         """The keywords that rebuild this basis (coordinates, method, integration, rule,

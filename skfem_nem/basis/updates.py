@@ -23,9 +23,14 @@ more vertices of removed or new triangles: a test on the stencils alone, conserv
 exact in what it keeps.
 """
 import numpy as np
+import scipy.sparse as sp
 from numba import njit
+from skfem import MeshTri
 
-__all__ = ["changed_triangles", "kept_elements", "splice_rows"]
+from ..geometry.meshes import adopt, own_triangulation
+
+__all__ = ["changed_triangles", "gather_rows", "kept_elements", "obstacle", "splice_rows",
+           "updated_matrix"]
 
 
 def changed_triangles(p_old, t_old, p_new, t_new):
@@ -76,13 +81,76 @@ def _drop_marked(ptr, sten, marked, keep):
             keep[e] = False
 
 
-def splice_rows(keep, nq, old, new):
-    """The rows of the new basis: element e's ``nq`` rows from the old basis where
-    ``keep[e]`` (same slot), else the next ones of the recomputed elements (in slot order).
+def obstacle(basis, mesh):
+    """Why ``basis.updated(mesh)`` cannot be (a sentence), or None."""
+    if basis.tind is not None or basis.mesh.dim() != 2 or basis.method != "area":
+        return ("updated() needs a 2D basis on all of its mesh's triangles with the area "
+                "method; build a new basis")
+    if not isinstance(mesh, MeshTri):
+        return f"updated() needs a MeshTri, got {type(mesh).__name__}"
+    for what, m in (("this basis' mesh", basis.mesh), ("the new mesh", mesh)):
+        tri = adopt(m, basis.method)
+        if tri.segment_keys.size or not own_triangulation(m, tri):
+            return (f"{what} is not its own unconstrained Delaunay triangulation (segments, "
+                    f"a non-convex boundary or other triangles): build a new basis")
+    return None
 
-    ``old`` and ``new`` are (indptr, indices, data, grads (dim, nnz)) of CSR rows; returns
-    the same for ``keep.size * nq`` rows."""
+
+def updated_matrix(form, A, old, new):
+    """The bilinear ``form`` assembled on the basis ``new`` (``old.updated(mesh)``), from
+    ``A``, the same form assembled on ``old``: the contributions of the triangles that
+    ``new`` recomputed replace those ``old`` had in their slots, so the cost is the
+    assembly on those triangles plus one sparse sum. Equal to ``form.assemble(new)`` to
+    round-off, for forms whose coefficients are the quadrature points (``w.x``) and
+    constants: nothing else is passed to the form."""
+    keep = getattr(new, "kept_elements", None)
+    if keep is None:
+        raise ValueError("the new basis is not an update (old.updated(mesh)): assemble it")
+    if A.shape != (old.N, old.N):
+        raise ValueError(f"A has shape {A.shape}, the old basis {old.N} dofs")
+    nto = old.nelems
+    kept_old = np.zeros(nto, dtype=bool)
+    kept_old[:min(nto, keep.size)] = keep[:nto]
+    out = _padded(A.tocsr(), new.N)
+    for basis, elems, sign in ((old, np.flatnonzero(~kept_old), -1.0),
+                               (new, np.flatnonzero(~keep), 1.0)):
+        if elems.size:
+            out = out + sign * _padded(form.assemble(basis.subset(elems)).tocsr(), new.N)
+    return out.tocsr()
+
+
+def _padded(A, N):
+    """The CSR matrix A (n, n) as an (N, N) one (new dofs last, rows and columns empty)."""
+    ptr = np.r_[A.indptr, np.full(N - A.shape[0], A.indptr[-1])]
+    return sp.csr_matrix((A.data, A.indices, ptr), shape=(N, N))
+
+
+def gather_rows(elems, nq, V, G):
+    """Values (CSR) and gradients (dim, nnz) of the elements ``elems``' rows of ``V`` and
+    ``G`` (``nq`` rows per element), in that order."""
+    first = V.indptr[elems * nq]
+    length = V.indptr[elems * nq + nq] - first
+    pos = np.repeat(first - np.cumsum(length) + length, length) + np.arange(length.sum())
+    rows = (elems[:, None] * nq + np.arange(nq)).ravel()
+    ptr = np.r_[0, np.cumsum(np.diff(V.indptr)[rows])]
+    return sp.csr_matrix((V.data[pos], V.indices[pos], ptr),
+                         shape=(rows.size, V.shape[1])), G[:, pos]
+
+
+def splice_rows(keep, nq, old, part, ncols):
+    """Values (CSR) and gradients (dim, nnz) of the new basis: element e's ``nq`` rows
+    from the old basis where ``keep[e]`` (same slot), else the next ones of the
+    recomputed elements (in slot order).
+
+    ``old`` and ``part`` (None if nothing was recomputed) are (CSR values, gradients on
+    their pattern); ``ncols`` the new number of nodes."""
     keep = np.ascontiguousarray(keep)
+    V, G = old
+    old = (V.indptr, V.indices, V.data, G)
+    if part is None:
+        new = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0), G[:, :0])
+    else:
+        new = (part[0].indptr, part[0].indices, part[0].data, part[1])
     count = np.zeros(keep.size * nq + 1, np.int64)
     _row_lengths(keep, nq, old[0], new[0], count)
     ptr = np.cumsum(count)
@@ -92,7 +160,7 @@ def splice_rows(keep, nq, old, new):
     val = np.empty(nnz)
     grad = np.empty((old[3].shape[0], nnz))
     _copy_rows(keep, nq, *old, *new, ptr, idx, val, grad)
-    return ptr, idx, val, grad
+    return sp.csr_matrix((val, idx, ptr), shape=(keep.size * nq, ncols)), grad
 
 
 @njit(cache=True)

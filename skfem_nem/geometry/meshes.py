@@ -390,6 +390,14 @@ def _in_mesh(mesh, x):
     return out
 
 
+def own_triangulation(mesh, tri) -> bool:
+    """Are the mesh's triangles those of the triangulation ``tri``, one for one (same
+    slots, vertices in any order)?"""
+    T = getattr(tri, "triangles", None)
+    return T is not None and T.shape == mesh.t.T.shape and bool(
+        np.array_equal(np.sort(T, axis=1), np.sort(mesh.t.T, axis=1)))
+
+
 def adopt(mesh, method):
     """The triangulation a basis on ``mesh`` queries with ``method`` (cached)."""
     tri = triangulation_of(mesh)

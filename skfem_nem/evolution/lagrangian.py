@@ -336,9 +336,9 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         if self.triangulation.segment_keys.size:
             self._check_segments()
         report["min_angle"] = self.min_angle()
-        # locality: triangles changed by flips / injection / relocation, and the
-        # stencils (triangles whose quadrature points may have other natural
-        # neighbours now) that a basis update would recompute
+        # locality: triangles changed by flips / injection / relocation, and those with
+        # their edge neighbours (a basis update tests the stencils and recomputes more:
+        # NaturalNeighbourBasis.updated)
         changed = (np.unique(np.concatenate(self._touched)) if self._touched
                    else np.zeros(0, np.int64))
         changed = changed[changed < self.triangles.shape[0]]

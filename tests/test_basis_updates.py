@@ -60,12 +60,17 @@ def test_vortex_flow_updates_equal_rebuilt_bases(integration):
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.integers(0, 2**31 - 1), st.integers(10, 80), st.floats(0.02, 0.4))
-def test_random_local_moves(seed, n, size):
+@given(st.integers(0, 2**31 - 1), st.integers(10, 80), st.floats(0.02, 0.4), st.booleans())
+def test_random_local_moves(seed, n, size, interface):
     """Some interior nodes moved by up to ``size`` of the mean spacing (flips follow), and
-    a node injected: the update equals the rebuilt basis."""
+    nodes injected, with or without a line of segments: the update equals the rebuilt
+    basis."""
     rng = np.random.default_rng(seed)
-    lm = LagrangianMesh(square_nodes(n, 5, seed=seed, margin=0.05))
+    P = square_nodes(n, 5, seed=seed, margin=0.05)
+    segments = None
+    if interface:
+        P, segments = line_of_nodes(P, 0.5, 6)
+    lm = LagrangianMesh(P, segments=segments)
     old = lm.basis()
     P = lm.nodes
     d = np.zeros_like(P)
@@ -94,8 +99,8 @@ def test_what_cannot_be_updated_is_named():
     cases = [(NaturalNeighbourBasis(mesh, elements=np.arange(10)), mesh,
               "all of its mesh's triangles"),
              (NaturalNeighbourBasis(mesh, method="lasserre"), mesh, "area method"),
-             (NaturalNeighbourBasis(mesh), delaunay_mesh(P, segments=[[0, 2]]),
-              "the new mesh is not its own unconstrained")]
+             (NaturalNeighbourBasis(mesh), MeshTri.init_lshaped().refined(2),
+              "the new mesh is not its own")]
     for basis, target, words in cases:
         assert words in basis.update_obstacle(target)
         with pytest.raises(ValueError, match=words):
@@ -108,14 +113,28 @@ def test_what_cannot_be_updated_is_named():
     assert "not its own" in b.update_obstacle(refined)
 
 
-def test_lagrangian_mesh_with_segments_rebuilds():
-    P = square_nodes(200, 8, seed=4)
-    lm = LagrangianMesh(P, segments=[[0, 2]])
+def line_of_nodes(P, y, k):
+    """P with k nodes added on the line at height y, and the segments joining them."""
+    x = np.linspace(0.05, 0.95, k)
+    nodes = np.r_[P[np.abs(P[:, 1] - y) > 0.02], np.c_[x, np.full(k, y)]]
+    first = nodes.shape[0] - k
+    return nodes, np.c_[np.arange(first, first + k - 1), np.arange(first + 1, first + k)]
+
+
+def test_vortex_across_an_interface_updates_the_constrained_basis():
+    """Segments through the stirred disc: they move, stretch and are split (injection);
+    every updated constrained basis equals the rebuilt one."""
+    P, segments = line_of_nodes(square_nodes(600, 12, seed=4), 0.52, 25)
+    lm = LagrangianMesh(P, segments=segments)
     lm.basis()
-    lm.advance(local_vortex, 0.2)
-    b = lm.basis()
-    assert not hasattr(b, "update_report")
-    assert_same_functions(b, NaturalNeighbourBasis(lm.mesh))
+    recomputed = []
+    for _ in range(15):
+        lm.advance(local_vortex, 0.25, inject=1.3)
+        b = lm.basis()
+        assert_same_functions(b, NaturalNeighbourBasis(lm.mesh))
+        recomputed.append(b.update_report["recomputed"] / b.nelems)
+    assert lm.triangulation.segments.shape[0] > segments.shape[0]   # segments were split
+    assert max(recomputed) < 0.5
 
 
 def test_vortex_flow_updated_matrices_equal_assembled_ones():
@@ -151,3 +170,23 @@ def test_updated_matrix_needs_an_update():
         updated_matrix(laplace, A[:5, :5], b, b.updated(mesh))
     with pytest.raises(ValueError, match="subset\\(\\) of a subdomain basis"):
         b.subset([1, 2]).subset([1])
+
+
+def test_an_edge_made_a_segment_is_a_change():
+    """The same triangles with an interior edge path made segments: the triangles along
+    it change their functions (the walks no longer cross it), though none changed."""
+    from skfem_nem import Triangulation
+    from skfem_nem.geometry.meshes import triangulation_mesh
+    tri = Triangulation(square_nodes(150, 8, seed=7))
+    mesh = triangulation_mesh(Triangulation.from_arrays(tri.nodes, tri.triangles,
+                                                        tri.neighbours))
+    edges = tri.edges
+    inner = edges[(tri.nodes[edges] % 1.0 != 0).all(axis=(1, 2))][:6]   # off the walls
+    constrained = triangulation_mesh(Triangulation.from_arrays(
+        tri.nodes, tri.triangles, tri.neighbours, inner))
+    np.testing.assert_array_equal(constrained.t, mesh.t)
+    b = NaturalNeighbourBasis(mesh).updated(constrained)
+    ref = NaturalNeighbourBasis(constrained)
+    assert b.update_report["recomputed"] > 0
+    assert abs(ref.values_matrix - NaturalNeighbourBasis(mesh).values_matrix).max() > 1e-3
+    assert_same_functions(b, ref)

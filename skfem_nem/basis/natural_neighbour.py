@@ -410,9 +410,9 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         others' (:mod:`skfem_nem.basis.updates` says which, and why that is exact).
 
         Equal to ``NaturalNeighbourBasis(mesh, ...)`` with the same keywords to round-off.
-        Both meshes must be their own Delaunay triangulations, without segments, and this
-        basis a 2D one on all the mesh's triangles (else ``ValueError`` naming what
-        differs). ``update_report`` of the new basis: ``recomputed`` and ``kept``
+        Both meshes must be their own (constrained) Delaunay triangulations, with or
+        without segments, and this basis a 2D one on all the mesh's triangles (else
+        ``ValueError`` naming what differs). ``update_report`` of the new basis: ``recomputed`` and ``kept``
         triangles, the seconds of the recomputation (``recompute_seconds``, O(recomputed))
         and of the whole update (``seconds``: with the O(triangles) copies and the new
         mesh's scikit-fem mapping and dofs)."""
@@ -425,6 +425,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         new._hints_ok = True  # checked by update_obstacle
         old_c, new_c, marked = updates.changed_triangles(
             self.mesh.p.T, self.mesh.t.T, mesh.p.T, mesh.t.T)
+        marked[updates.segment_change(self.triangulation, new.triangulation)] = True
         keep = updates.kept_elements(self.stencil_ptr, self.stencil_nodes, old_c, new_c,
                                      marked)
         redo = np.flatnonzero(~keep)

@@ -20,17 +20,19 @@ triangle in S(x) has all three vertices among x's natural neighbours, one next t
 shares an edge with it, so two. Hence a triangle whose slot and vertices are unchanged keeps
 its functions unless its stencil (the natural neighbours of all its points) holds two or
 more vertices of removed or new triangles: a test on the stencils alone, conservative, and
-exact in what it keeps.
+exact in what it keeps. On a constrained triangulation the walk does not cross segments:
+the ends of an edge that became or ceased to be a segment count as such vertices too.
 """
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
 from skfem import MeshTri
 
+from ..geometry.constrained import segments_of
 from ..geometry.meshes import adopt, own_triangulation
 
-__all__ = ["changed_triangles", "gather_rows", "kept_elements", "obstacle", "splice_rows",
-           "updated_matrix"]
+__all__ = ["changed_triangles", "gather_rows", "kept_elements", "obstacle",
+           "segment_change", "splice_rows", "updated_matrix"]
 
 
 def changed_triangles(p_old, t_old, p_new, t_new):
@@ -89,11 +91,17 @@ def obstacle(basis, mesh):
     if not isinstance(mesh, MeshTri):
         return f"updated() needs a MeshTri, got {type(mesh).__name__}"
     for what, m in (("this basis' mesh", basis.mesh), ("the new mesh", mesh)):
-        tri = adopt(m, basis.method)
-        if tri.segment_keys.size or not own_triangulation(m, tri):
-            return (f"{what} is not its own unconstrained Delaunay triangulation (segments, "
-                    f"a non-convex boundary or other triangles): build a new basis")
+        if not own_triangulation(m, adopt(m, basis.method)):
+            return (f"{what} is not its own (constrained) Delaunay triangulation (a "
+                    f"non-convex boundary, holes or other triangles): build a new basis")
     return None
+
+
+def segment_change(old_tri, new_tri) -> np.ndarray:
+    """The nodes of the segments that are constrained in one triangulation and not in the
+    other: the walks for conflict sets cross an edge unless it is a segment, so a
+    triangle next to such an edge counts as changed."""
+    return segments_of(np.setxor1d(old_tri.segment_keys, new_tri.segment_keys)).ravel()
 
 
 def updated_matrix(form, A, old, new):

@@ -412,8 +412,8 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         Equal to ``NaturalNeighbourBasis(mesh, ...)`` with the same keywords to round-off.
         Both meshes must be their own (constrained) Delaunay triangulations, with or
         without segments, and this basis a 2D one on all the mesh's triangles (else
-        ``ValueError`` naming what differs). ``update_report`` of the new basis: ``recomputed`` and ``kept``
-        triangles, the seconds of the recomputation (``recompute_seconds``, O(recomputed))
+        ``ValueError`` naming what differs). ``update_report`` of the new basis:
+        ``recomputed`` and ``kept`` triangles, the seconds of the recomputation (``recompute_seconds``, O(recomputed))
         and of the whole update (``seconds``: with the O(triangles) copies and the new
         mesh's scikit-fem mapping and dofs)."""
         start = time.perf_counter()

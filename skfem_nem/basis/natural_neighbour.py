@@ -413,9 +413,9 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         Both meshes must be their own (constrained) Delaunay triangulations, with or
         without segments, and this basis a 2D one on all the mesh's triangles (else
         ``ValueError`` naming what differs). ``update_report`` of the new basis:
-        ``recomputed`` and ``kept`` triangles, the seconds of the recomputation (``recompute_seconds``, O(recomputed))
-        and of the whole update (``seconds``: with the O(triangles) copies and the new
-        mesh's scikit-fem mapping and dofs)."""
+        ``recomputed`` and ``kept`` triangles, the seconds of the recomputation
+        (``recompute_seconds``, O(recomputed)) and of the whole update (``seconds``: with
+        the O(triangles) copies and the new mesh's scikit-fem mapping and dofs)."""
         start = time.perf_counter()
         new = type(self).__new__(type(self))
         new._setup(mesh, self.elem, **self.construction_keywords())

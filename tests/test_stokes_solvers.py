@@ -168,16 +168,29 @@ def test_schur_reuses_its_factorisation_while_it_pays(square):
     assert not s4.info["factor_reused"] and cache.factorisations == 3
 
 
-@pytest.mark.parametrize("contrast", [1.0, 1e6])
-def test_schur_single_precision_factors_reach_the_direct_solution(square, contrast):
-    """The default factors are single precision; the solve still meets tol on the
-    true residual and agrees with the direct solve at a 1e6 jump."""
+@pytest.mark.parametrize("contrast, precision", [(1.0, "float32"), (1e2, "float32"),
+                                                 (1e6, "float64")])
+def test_schur_factor_precision_follows_the_contrast(square, contrast, precision):
+    """Single-precision factors up to a viscosity contrast of SINGLE_CONTRAST, double
+    precision above it (forced single precision too, at 1e6); the solve meets tol on the
+    true residual and agrees with the direct solve. The contrast the discretisation sees
+    is SolCx's own."""
     sp_, _ = square
     ex = SolCx(1.0, contrast)
     ref = solve_stokes(sp_, ex.viscosity, ex.force, solver="direct")
-    s = solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", tol=1e-10, maxiter=3000)
-    assert s.info["factor_precision"] == "float32" and s.residual < 1e-10
-    _close(s, ref, 1e-8)
+    seen = []
+    kinds = [precision] + (["float32"] if precision == "float64" else [])
+    for kind in kinds:
+        limit = np.inf if kind != precision else solvers.SINGLE_CONTRAST
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(solvers, "SINGLE_CONTRAST", limit)
+            mp.setitem(SOLVERS, "schur", lambda pr, *a, **k: seen.append(
+                solvers.viscosity_contrast(pr)) or solvers.solve_schur(pr, *a, **k))
+            s = solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", tol=1e-10,
+                             maxiter=3000)
+        assert s.info["factor_precision"] == kind and s.residual < 1e-10
+        _close(s, ref, 1e-8)
+    assert seen[0] == pytest.approx(contrast, rel=1e-9)
 
 
 def test_schur_goes_on_in_double_precision(square, monkeypatch):
@@ -191,6 +204,7 @@ def test_schur_goes_on_in_double_precision(square, monkeypatch):
     ref = solve_stokes(sp_, ex.viscosity, ex.force, solver="direct")
     made = []
     monkeypatch.setattr(solvers, "PRECISION_ITERATIONS", 3)
+    monkeypatch.setattr(solvers, "SINGLE_CONTRAST", np.inf)
     monkeypatch.setattr(solvers, "ViscousFactor", lambda A, dtype: made.append(dtype)
                         or ViscousFactor(A, dtype))
     cache = StokesCache()

@@ -104,6 +104,12 @@ REUSE_FACTOR = True
 # goes on from where it stands with double-precision factors and conjugate gradients on
 # the pressure Schur complement, the solve of "schur" before (docs/stokes.md)
 FACTOR_DTYPE = np.float32
+# the viscosity contrast up to which "schur" factorises in FACTOR_DTYPE; above it, in double
+# precision from the start (factor_dtype). SolCx at a contrast of 1e6 with single-precision
+# factors: 96, 123 and 260 iterations at 1,107, 10,338 and 101,054 nodes (the last fell
+# back to double precision after 150, 112 s); with double-precision factors 66, 81 and 86
+# (54.5 s). The sinking plate's contrasts are about 10 (docs/stokes.md)
+SINGLE_CONTRAST = 1e3
 # FGMRES iterations with the single-precision factors (one restart cycle)
 PRECISION_ITERATIONS = FGMRES_RESTART
 # a restart cycle of FGMRES preconditioned by factors that does not reduce the true
@@ -213,7 +219,8 @@ def solve_direct(problem: SaddlePointProblem, tol: float, maxiter: int,
 def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
                 info: dict, cache: Optional[StokesCache] = None) -> SaddlePointSolution:
     """Sparse LU of the viscous block in single precision (:class:`ViscousFactor`,
-    :data:`FACTOR_DTYPE`), :func:`fgmres` on the whole system preconditioned by it
+    :data:`FACTOR_DTYPE`; in double precision above a viscosity contrast of
+    :data:`SINGLE_CONTRAST`, :func:`factor_dtype`), :func:`fgmres` on the whole system preconditioned by it
     (:func:`_factor_fgmres`): with exact factors, the iterations of conjugate
     gradients on the pressure Schur complement (hence the name). If that has not met
     ``tol`` after :data:`PRECISION_ITERATIONS` or stalls (:data:`FACTOR_STALL`), the
@@ -238,7 +245,7 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
     matvec = saddle_matvec(problem)
     x0 = None if cache is None else _warm_start(cache, matvec, problem.rhs)
     info["warm_start"] = x0 is not None
-    lu = ViscousFactor(problem.A, FACTOR_DTYPE)
+    lu = ViscousFactor(problem.A, factor_dtype(problem))
     x, its, res = _factor_fgmres(problem, lu, matvec, x0, tol,
                                  min(maxiter, PRECISION_ITERATIONS))
     if res <= tol:
@@ -260,6 +267,21 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
         if REUSE_FACTOR:
             cache.keep_factor(lu, problem.A, sol.iterations)
     return sol
+
+
+def viscosity_contrast(problem: SaddlePointProblem) -> float:
+    """The largest over the smallest mean inverse viscosity of the pressure nodes' supports
+    (the lumped 1/eta-weighted pressure mass over the plain one): the viscosity contrast
+    the discretisation sees."""
+    on = problem.m > 0                      # pressure nodes (not constraint multipliers)
+    inv = problem.dp[on] / problem.m[on]
+    return float(inv.max() / inv.min()) if inv.size else 1.0
+
+
+def factor_dtype(problem: SaddlePointProblem):
+    """:data:`FACTOR_DTYPE` up to a viscosity contrast of :data:`SINGLE_CONTRAST`, double
+    precision above it."""
+    return FACTOR_DTYPE if viscosity_contrast(problem) <= SINGLE_CONTRAST else np.float64
 
 
 class ViscousFactor:

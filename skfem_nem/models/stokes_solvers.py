@@ -220,8 +220,8 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
                 info: dict, cache: Optional[StokesCache] = None) -> SaddlePointSolution:
     """Sparse LU of the viscous block in single precision (:class:`ViscousFactor`,
     :data:`FACTOR_DTYPE`; in double precision above a viscosity contrast of
-    :data:`SINGLE_CONTRAST`, :func:`factor_dtype`), :func:`fgmres` on the whole system preconditioned by it
-    (:func:`_factor_fgmres`): with exact factors, the iterations of conjugate
+    :data:`SINGLE_CONTRAST`, :func:`factor_dtype`), :func:`fgmres` on the whole system
+    preconditioned by it (:func:`_factor_fgmres`): with exact factors, the iterations of conjugate
     gradients on the pressure Schur complement (hence the name). If that has not met
     ``tol`` after :data:`PRECISION_ITERATIONS` or stalls (:data:`FACTOR_STALL`), the
     viscous block is factorised in double precision and :func:`schur_pressure_cg`

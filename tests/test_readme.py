@@ -21,3 +21,14 @@ def test_readme_block_runs(k, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     exec(compile(BLOCKS[k], f"README.md, python block {k + 1}", "exec"),
          {"__name__": "__readme__"})
+
+
+def test_readme_lists_every_module():
+    """The "What is here" table names each sub-package's modules, all of them."""
+    package = README.parent / "skfem_nem"
+    rows = re.findall(r"^\| `skfem_nem\.(\w+)` \| (.*?) \|", README.read_text(encoding="utf-8"),
+                      re.M)
+    listed = {sub: set(re.findall(r"`(\w+)`", names)) for sub, names in rows}
+    actual = {p.name: {m.stem for m in p.glob("*.py") if m.stem != "__init__"}
+              for p in package.iterdir() if (p / "__init__.py").exists()}
+    assert listed == actual

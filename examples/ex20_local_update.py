@@ -23,6 +23,7 @@ from skfem.helpers import dot, grad
 
 from skfem_nem import LagrangianMesh, NaturalNeighbourBasis
 from skfem_nem.basis.updates import updated_matrix
+from skfem_nem.geometry.nodesets import box_nodes
 
 N_NODES = 3000
 N_STEPS = 20
@@ -50,17 +51,6 @@ def stir(x):
     return np.c_[-dy * s, dx * s]
 
 
-def box_nodes(n, seed=SEED):
-    """n random nodes in the unit square, ~sqrt(n) jittered nodes per side, the corners."""
-    rng = np.random.default_rng(seed)
-    k = int(round(np.sqrt(n)))
-    s = (np.arange(1, k) + 0.5 * (rng.random((4, k - 1)) - 0.5)) / k
-    z, o = np.zeros(k - 1), np.ones(k - 1)
-    return np.vstack([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
-                      np.c_[s[0], z], np.c_[s[1], o], np.c_[z, s[2]], np.c_[o, s[3]],
-                      rng.random((n, 2))])
-
-
 def heat(basis, A):
     """The solution of -div grad u = 1, u = 0 on the walls, with the stiffness matrix A."""
     return solve(*condense(A, source.assemble(basis), D=basis.get_dofs()))
@@ -68,7 +58,7 @@ def heat(basis, A):
 
 def run(n_nodes=N_NODES, n_steps=N_STEPS):
     """Stir, update basis and matrix, solve; the last step's basis, matrix and solution."""
-    lm = LagrangianMesh(box_nodes(n_nodes))
+    lm = LagrangianMesh(box_nodes(n_nodes, seed=SEED))
     basis = lm.basis()
     A = laplace.assemble(basis)
     steps = []

@@ -168,6 +168,9 @@ def test_updated_matrix_needs_an_update():
         updated_matrix(laplace, A, b, NaturalNeighbourBasis(mesh))
     with pytest.raises(ValueError, match="A has shape"):
         updated_matrix(laplace, A[:5, :5], b, b.updated(mesh))
+    other = NaturalNeighbourBasis(mesh)
+    with pytest.raises(ValueError, match="an update of another basis"):
+        updated_matrix(laplace, A, other, b.updated(mesh))
     with pytest.raises(ValueError, match="subset\\(\\) of a subdomain basis"):
         b.subset([1, 2]).subset([1])
 

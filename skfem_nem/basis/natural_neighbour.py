@@ -26,6 +26,7 @@ the stencil size squared, not with the largest stencil.
 from __future__ import annotations
 
 import time
+import weakref
 from typing import Optional, Tuple
 
 import numpy as np
@@ -436,7 +437,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         Phi, grad = updates.splice_rows(keep, nq, (self.values_matrix, self.gradient_entries),
                                         part, mesh.nvertices)
         new._set_functions(Phi, grad, mesh.nelements, nq)
-        new.kept_elements = keep
+        new.kept_elements, new.update_source = keep, weakref.ref(self)
         new.update_report = {"recomputed": int(redo.size), "kept": int(keep.sum()),
                              "recompute_seconds": t1 - t0,
                              "seconds": time.perf_counter() - start}

@@ -114,6 +114,9 @@ def updated_matrix(form, A, old, new):
     keep = getattr(new, "kept_elements", None)
     if keep is None:
         raise ValueError("the new basis is not an update (old.updated(mesh)): assemble it")
+    if new.update_source() is not old:
+        raise ValueError("the new basis is an update of another basis than old: pass the "
+                         "basis it was updated from")
     if A.shape != (old.N, old.N):
         raise ValueError(f"A has shape {A.shape}, the old basis {old.N} dofs")
     nto = old.nelems

@@ -191,6 +191,7 @@ def test_schur_factor_precision_follows_the_contrast(square, contrast, precision
         assert s.info["factor_precision"] == kind and s.residual < 1e-10
         _close(s, ref, 1e-8)
     assert seen[0] == pytest.approx(contrast, rel=1e-9)
+    assert s.info["viscosity_contrast"] == seen[0]
 
 
 def test_schur_goes_on_in_double_precision(square, monkeypatch):

@@ -225,7 +225,8 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
     gradients on the pressure Schur complement (hence the name). If that has not met
     ``tol`` after :data:`PRECISION_ITERATIONS` or stalls (:data:`FACTOR_STALL`), the
     viscous block is factorised in double precision and :func:`schur_pressure_cg`
-    goes on from the pressure reached; ``info["factor_precision"]``.
+    goes on from the pressure reached; ``info["factor_precision"]``,
+    ``info["viscosity_contrast"]``.
 
     With a ``cache`` (a :class:`StokesCache`), the solve starts from the last solution
     where the sizes agree and it is a better start than zero (the Picard iterations
@@ -245,7 +246,7 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
     matvec = saddle_matvec(problem)
     x0 = None if cache is None else _warm_start(cache, matvec, problem.rhs)
     info["warm_start"] = x0 is not None
-    lu = ViscousFactor(problem.A, factor_dtype(problem))
+    lu = ViscousFactor(problem.A, factor_dtype(problem, info))
     x, its, res = _factor_fgmres(problem, lu, matvec, x0, tol,
                                  min(maxiter, PRECISION_ITERATIONS))
     if res <= tol:
@@ -278,10 +279,13 @@ def viscosity_contrast(problem: SaddlePointProblem) -> float:
     return float(inv.max() / inv.min()) if inv.size else 1.0
 
 
-def factor_dtype(problem: SaddlePointProblem):
+def factor_dtype(problem: SaddlePointProblem, info: Optional[dict] = None):
     """:data:`FACTOR_DTYPE` up to a viscosity contrast of :data:`SINGLE_CONTRAST`, double
-    precision above it."""
-    return FACTOR_DTYPE if viscosity_contrast(problem) <= SINGLE_CONTRAST else np.float64
+    precision above it; the contrast goes to ``info["viscosity_contrast"]``."""
+    contrast = viscosity_contrast(problem)
+    if info is not None:
+        info["viscosity_contrast"] = contrast
+    return FACTOR_DTYPE if contrast <= SINGLE_CONTRAST else np.float64
 
 
 class ViscousFactor:

@@ -192,8 +192,9 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         return self._cache["mesh"]
 
     def basis(self, elem=None, integration: str = "smoothed"):
-        """A :class:`~skfem_nem.NaturalNeighbourBasis` on the current mesh
-        (cached until the mesh changes) whose integration points are the
+        """A :class:`~skfem_nem.NaturalNeighbourBasis` on the current mesh (cached until the
+        mesh changes, then the last one updated where it can be:
+        :meth:`~skfem_nem.NaturalNeighbourBasis.updated`) whose integration points are the
         integration-point fields' slots: point k of triangle t near its
         vertex k. ``integration="smoothed"`` (default): gradients smoothed
         over the vertex cells of the triangles; ``"gauss"``: the 3-point rule."""

@@ -418,12 +418,10 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         (``recompute_seconds``, O(recomputed)) and of the whole update (``seconds``: with
         the O(triangles) copies and the new mesh's scikit-fem mapping and dofs)."""
         start = time.perf_counter()
-        new = type(self).__new__(type(self))
-        new._setup(mesh, self.elem, **self.construction_keywords())
         reason = self.update_obstacle(mesh)
         if reason is not None:
             raise ValueError(reason)
-        new._hints_ok = True  # checked by update_obstacle
+        new = self._unfilled(mesh, hints_ok=True)  # checked by update_obstacle
         old_c, new_c, marked = updates.changed_triangles(
             self.mesh.p.T, self.mesh.t.T, mesh.p.T, mesh.t.T)
         marked[updates.segment_change(self.triangulation, new.triangulation)] = True
@@ -474,6 +472,14 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         return type(self)(self.mesh, self.elem, **{**self.construction_keywords(),
                                                    "elements": elements})
 
+    def _unfilled(self, mesh, hints_ok: bool, **keywords) -> "NaturalNeighbourBasis":
+        """A basis like this one on ``mesh`` (with ``keywords`` replacing its construction
+        keywords) whose functions the caller fills in."""
+        out = type(self).__new__(type(self))
+        out._setup(mesh, self.elem, **{**self.construction_keywords(), **keywords})
+        out._hints_ok = hints_ok
+        return out
+
     def subset(self, elements) -> "NaturalNeighbourBasis":
         """:meth:`with_elements` without computing anything: the subdomain basis on
         ``elements`` (of a basis on all the mesh's triangles) takes this basis' functions
@@ -481,10 +487,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         if self.tind is not None:
             raise ValueError("subset() of a subdomain basis: take the subset of the basis "
                              "on all the mesh's triangles")
-        sub = type(self).__new__(type(self))
-        sub._setup(self.mesh, self.elem, **{**self.construction_keywords(),
-                                            "elements": elements})
-        sub._hints_ok = self._hints_valid()
+        sub = self._unfilled(self.mesh, self._hints_valid(), elements=elements)
         nq = self.X.shape[1]
         Phi, G = updates.gather_rows(sub.tind, nq, self.values_matrix, self.gradient_entries)
         sub._set_functions(Phi, G, sub.nelems, nq)

@@ -52,8 +52,7 @@ import scipy.sparse as sp
 import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
-from .stokes_amg import (amg_cg, norm, refresh_amg,
-                         rigid_modes, viscous_amg)
+from .stokes_amg import norm, rigid_modes, scaled_block, unit_scale, viscous_amg
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "CACHED_SOLVERS",
            "StokesCache", "check_solver", "solve_direct", "solve_schur", "solve_schur_amg",
@@ -301,14 +300,8 @@ class ViscousFactor:
         # (no conversion of the block; solves then use the transposed factors)
         self.trans = "T" if A.format == "csr" else "N"
         M = A.T if self.trans == "T" else sp.csc_matrix(A)
-        d = M.diagonal()
-        if not (d > 0).all():
-            raise RuntimeError(f"the viscous block has {int((d <= 0).sum())} diagonal "
-                               f"entries <= 0: check the viscosity")
-        self.scale = s = 1.0 / np.sqrt(d)
-        cols = np.repeat(s, np.diff(M.indptr))
-        scaled = sp.csc_matrix(((M.data * s[M.indices] * cols).astype(dtype), M.indices,
-                                M.indptr), shape=M.shape)
+        self.scale = unit_scale(M)
+        scaled = scaled_block(M, self.scale, dtype)
         self.dtype = np.dtype(dtype)
         try:
             self.lu = spla.splu(scaled, permc_spec="MMD_AT_PLUS_A",
@@ -420,7 +413,7 @@ def solve_schur_amg(problem: SaddlePointProblem, tol: float, maxiter: int,
     iteration count goes to ``info["inner_iterations"]``."""
     ml = viscous_amg(problem)
     inner = {"its": 0}
-    lu = AMGViscousSolve(problem.A, ml.aspreconditioner(cycle="V"),
+    lu = AMGViscousSolve(problem.A, ml.preconditioner(),
                          min(INNER_RTOL, tol * 1e-2), inner)
     info["inner_iterations"] = inner
     return schur_pressure_cg(problem, lu, tol, maxiter)
@@ -464,7 +457,7 @@ def solve_minres(problem: SaddlePointProblem, tol: float, maxiter: int,
     ``info["restarts"]`` and ``info["amg_levels"]``."""
     ml = viscous_amg(problem)
     n1 = problem.n_velocity
-    matvec, K, M = minres_operators(problem, ml.aspreconditioner(cycle="V"))
+    matvec, K, M = minres_operators(problem, ml.preconditioner())
     x, res_m, restarts, its = restarted_minres(matvec, K, M, problem.rhs, tol,
                                                maxiter)
     res = problem.residual(x[:n1], x[n1:])
@@ -476,7 +469,7 @@ def solve_minres(problem: SaddlePointProblem, tol: float, maxiter: int,
                            f"{MINRES_TOL_FACTOR * tol:.1e} (raise maxiter, or use "
                            f"solver='schur' for strong viscosity contrasts)")
     p = problem.mean_free(x[n1:])
-    info["amg_levels"] = len(ml.levels)
+    info["amg_levels"] = ml.n_levels
     return SaddlePointSolution(x[:n1], p, its, res)
 
 
@@ -544,10 +537,11 @@ class StokesCache:
 
     Pass one object to a sequence of solves of similar problems (the Picard
     iterations of a time step, successive time steps). The hierarchy is
-    reused, with the new matrix values put into it (:func:`refresh_amg`),
-    while the viscous block keeps its sparsity pattern, and rebuilt when the
-    pattern changes or a solve needs more than ``REBUILD_GROWTH`` times the
-    iterations of the solve it was built for. The last solution is the
+    reused, with the new matrix values put into it
+    (:meth:`~skfem_nem.models.stokes_amg.ViscousAMG.refresh`), while the viscous
+    block keeps its sparsity pattern, and rebuilt when the pattern changes or a
+    solve needs more than ``REBUILD_GROWTH`` times the iterations of the solve it
+    was built for. The last solution is the
     next solve's start where the sizes agree and it is a better start than
     zero. ``builds`` and ``reuses`` count what happened (``factorisations`` and
     ``factor_reuses`` for the factorisation, kept while the pattern is the same and a
@@ -576,7 +570,7 @@ class StokesCache:
                  and self.last_iterations > REBUILD_GROWTH * self.base_iterations
                  + REBUILD_SLACK)
         if self.hierarchy is not None and not stale and _same_pattern(self.pattern, pattern):
-            refresh_amg(self.hierarchy, A)
+            self.hierarchy.refresh(A)
             self.reuses += 1
             return self.hierarchy, False
         self.hierarchy = viscous_amg(problem)
@@ -646,15 +640,13 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
     """
     cache = StokesCache() if cache is None else cache
     ml, rebuilt = cache.amg(problem)
-    A = ml.levels[0].A                             # A as CSR: faster products
-    matvec = saddle_matvec(problem, A)
-    precondition = _triangular_preconditioner(
-        problem, lambda r: amg_cg(ml, A, r, VISCOUS_CG_STEPS))
+    matvec = saddle_matvec(problem, problem.A.tocsr())
+    precondition = _triangular_preconditioner(problem, lambda r: ml.cg(r, VISCOUS_CG_STEPS))
 
     rhs = problem.rhs
     x0 = _warm_start(cache, matvec, rhs)
     x, its, res = fgmres(matvec, precondition, rhs, x0, tol, maxiter)
-    info.update(amg_levels=len(ml.levels), amg_rebuilt=rebuilt, warm_start=x0 is not None)
+    info.update(amg_levels=ml.n_levels, amg_rebuilt=rebuilt, warm_start=x0 is not None)
     if not res <= tol:
         cache.last_iterations = its  # a failed solve asks for a new hierarchy next time
         raise RuntimeError(f"FGMRES did not converge: {its} iterations (maxiter), relative "

@@ -34,9 +34,10 @@ upper-triangular preconditioner: AMG V-cycles for the viscous block, the
 lumped 1/eta-weighted pressure mass for the Schur complement; no
 factorisation, so its memory and the cost of an iteration grow linearly with
 the unknowns (the iterations grow with the contrast like those of
-``"schur"``, and it is slower than ``"schur"`` up to 100,000 nodes; see
-``docs/stokes.md``), and a :class:`StokesCache` keeps its AMG hierarchy and last solution between
-solves (Picard iterations, time steps). The iterative solvers fix the mean
+``"schur"``; a single solve is faster than ``"schur"``'s from about 100,000
+nodes, the sinking plate's steps are not; see ``docs/stokes.md``), and a
+:class:`StokesCache` keeps its AMG hierarchy and last solution between solves
+(Picard iterations, time steps). The iterative solvers fix the mean
 pressure by a rank-one term ``c m m^T`` of the size of 1/eta. ``"petsc"`` is
 ``"fgmres"``'s method on PETSc over MPI (optional petsc4py; the mean pressure as
 PETSc's null space instead of the rank-one term; :mod:`skfem_nem.parallel`, imported
@@ -76,11 +77,11 @@ MINRES_MAX_RTOL = 0.5
 # every 150 converged in 285
 FGMRES_RESTART = 150
 # conjugate-gradient steps (each preconditioned by one AMG V-cycle) per application
-# of the viscous-block preconditioner. The V-cycle alone is a weak solver here
-# (wide natural-neighbour stencils coarsen by a factor of about 30), and with one
-# cycle the outer iterations grow 4-7 fold at a viscosity contrast of 1e6; two
-# steps were the fastest of 1-4 steps and of 1-2 stationary cycles at 4,000 and
-# 16,000 nodes (SolCx, contrasts 1 and 1e6)
+# of the viscous-block preconditioner. Two were the fastest of 1-4 steps and of 1-2
+# stationary cycles at 4,000 and 16,000 nodes (SolCx, contrasts 1 and 1e6; the
+# hierarchy on the unscaled block). With the scaled one (stokes_amg): 202, 156 and 129
+# outer iterations for 1, 2 and 3 steps at 10,338 nodes (3.7, 3.9 and 4.7 s), 266 and
+# 158 for 1 and 2 at 101,054 nodes, 144 for 3 (54 s against 43 s for 2)
 VISCOUS_CG_STEPS = 2
 # a cached AMG hierarchy is rebuilt (a kept factorisation of "schur" made again) when a
 # solve needs more than this factor times the iterations of the solve it was built for

@@ -121,7 +121,7 @@ def scaled_block(A: sp.spmatrix, s: np.ndarray, dtype=np.float64) -> sp.spmatrix
     """``diag(s) A diag(s)`` of a CSR or CSC matrix ``A``, in its format (the index
     arrays shared, not copied), with values of ``dtype``."""
     outer = np.repeat(s, np.diff(A.indptr))
-    data = (A.data * outer * s[A.indices]).astype(dtype)
+    data = (A.data * s[A.indices] * outer).astype(dtype)
     return type(A)((data, A.indices, A.indptr), shape=A.shape)
 
 

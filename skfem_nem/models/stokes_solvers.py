@@ -474,11 +474,10 @@ def solve_minres(problem: SaddlePointProblem, tol: float, maxiter: int,
     return SaddlePointSolution(x[:n1], p, its, res)
 
 
-def saddle_matvec(problem: SaddlePointProblem, A: Optional[sp.spmatrix] = None) -> Callable:
+def saddle_matvec(problem: SaddlePointProblem) -> Callable:
     """The product with the whole saddle-point matrix (mean-pressure term
-    included); ``A`` replaces ``problem.A`` (the same matrix in another format)."""
-    B, S, m, c = problem.B, problem.S, problem.m, problem.mean_weight
-    A = problem.A if A is None else A
+    included)."""
+    A, B, S, m, c = problem.A, problem.B, problem.S, problem.m, problem.mean_weight
     n1 = problem.n_velocity
 
     def matvec(x):
@@ -641,7 +640,7 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
     """
     cache = StokesCache() if cache is None else cache
     ml, rebuilt = cache.amg(problem)
-    matvec = saddle_matvec(problem, problem.A.tocsr())
+    matvec = saddle_matvec(problem)
     precondition = _triangular_preconditioner(problem, lambda r: ml.cg(r, VISCOUS_CG_STEPS))
 
     rhs = problem.rhs

@@ -2,7 +2,8 @@
 and the step of the sinking-plate app, with the old and the new solver.
 
 **SolCx** (``skfem_nem.models.analytic.SolCx``, the random nodes of
-``examples/ex07_solcx.py`` without interface segments, natural-neighbour
+``examples/ex07_solcx.py``, without interface segments or, with ``--segments``, with
+the interface x = 0.5 as segments as in the example, natural-neighbour
 velocity with bubbles, free slip, ``tol`` 1e-10): for each node count and
 contrast the system is assembled once and each solver runs in a forked child
 process (so that its peak memory is its own): iterations, seconds (best of
@@ -43,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
-from ex07_solcx import nodes  # noqa: E402
+from ex07_solcx import make_mesh, nodes  # noqa: E402
 
 from skfem_nem import delaunay_mesh  # noqa: E402
 from skfem_nem.models.analytic import SolCx  # noqa: E402
@@ -114,15 +115,17 @@ def measure(spaces, system, solver, repeat, max_seconds, maxiter):
     return dict(status="ok", iterations=its, seconds=sec, u=u, peak_mb=peak)
 
 
-def solcx_table(sizes, contrasts, solvers, repeat, max_seconds, maxiter):
-    """Markdown rows of the SolCx study (printed as they come)."""
-    print("SolCx, tol 1e-10: iterations, seconds (best of "
-          f"{repeat}), relative velocity difference to the reference, peak memory added\n")
+def solcx_table(sizes, contrasts, solvers, repeat, max_seconds, maxiter, segments=False):
+    """Markdown rows of the SolCx study (printed as they come); ``segments``: the
+    interface x = 0.5 as segments (constrained natural neighbours)."""
+    print(f"SolCx ({'interface as segments' if segments else 'no segments'}), tol 1e-10: "
+          f"iterations, seconds (best of {repeat}), relative velocity difference to the "
+          "reference, peak memory added\n")
     print("| nodes | unknowns | contrast | solver | iterations | seconds | du (ref) | peak MB |")
     print("|---|---|---|---|---|---|---|---|")
     skip = set()
     for n in sizes:
-        mesh = delaunay_mesh(nodes(n))
+        mesh = make_mesh(n, constrained=segments)
         sp_ = stokes_spaces(mesh, "nem")
         nn = mesh.p.shape[1]
         for contrast in contrasts:
@@ -218,6 +221,8 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--max-seconds", type=float, default=600.0)
     ap.add_argument("--maxiter", type=int, default=3000)
+    ap.add_argument("--segments", action="store_true",
+                    help="SolCx with the interface x = 0.5 as segments")
     a = ap.parse_args(argv)
     for name in a.plate_solvers:
         if name not in SOLVERS and name not in VARIANTS:
@@ -228,7 +233,8 @@ def main(argv=None):
     solvers = sorted(a.solvers, key=lambda s: SOLVER_ORDER.index(s) if s in SOLVER_ORDER
                      else len(SOLVER_ORDER))
     if a.sizes:
-        solcx_table(a.sizes, a.contrasts, solvers, a.repeat, a.max_seconds, a.maxiter)
+        solcx_table(a.sizes, a.contrasts, solvers, a.repeat, a.max_seconds, a.maxiter,
+                    a.segments)
     if a.plate_nodes:
         plate_table(a.plate_nodes, a.plate_solvers, a.repeat)
 

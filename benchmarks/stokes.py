@@ -44,7 +44,7 @@ def main(argv=None):
             t1 = time.perf_counter()
             sy = assemble_stokes(sp_, exact.viscosity, exact.force)
             t2 = time.perf_counter()
-            s = solve_stokes(sp_, None, system=sy, maxiter=5000)
+            s = solve_stokes(sp_, None, system=sy, solver="schur", maxiter=5000)
             t3 = time.perf_counter()
             tot[method] = t3 - t0
             eu, _ = errors(sp_, s, exact)

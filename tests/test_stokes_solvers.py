@@ -10,7 +10,8 @@ from skfem_nem.models.stokes import StokesCache, outline_flux, solve_stokes, sto
 import scipy.sparse as sps
 
 import skfem_nem.models.stokes_solvers as solvers
-from skfem_nem.models.stokes_solvers import SOLVERS, ViscousFactor, fgmres
+from skfem_nem.models.krylov import FGMRES_RESTART, fgmres
+from skfem_nem.models.stokes_solvers import SOLVERS, ViscousFactor
 
 from helpers import plastic_inclusion
 
@@ -235,7 +236,7 @@ def test_factor_fgmres_stops_where_rounding_stalls_it(square, monkeypatch):
     monkeypatch.setattr(solvers, "PRECISION_ITERATIONS", 2000)
     s = solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", tol=1e-17, maxiter=3000)
     [(its, res)] = runs
-    assert res > 1e-17 and its < 4 * solvers.FGMRES_RESTART
+    assert res > 1e-17 and its < 4 * FGMRES_RESTART
     assert s.info["factor_precision"] == "float64" and s.iterations > its
     _close(s, solve_stokes(sp_, ex.viscosity, ex.force, solver="direct"), 1e-8)
 
@@ -349,3 +350,23 @@ def test_mean_free_shifts_the_pressures_not_the_multipliers(square):
     p = np.r_[np.full(sp_.n_pressure, 2.5), 7.0]
     q = problem.mean_free(p)
     assert problem.pressure_mean and np.abs(q[:-1]).max() < 1e-13 and q[-1] == 7.0
+
+
+@pytest.mark.parametrize("threshold, cached, chosen", [
+    (10, False, "fgmres"), (10, True, "schur"), (10 ** 9, False, "schur")])
+def test_auto_chooses_by_size_and_cache(square, monkeypatch, threshold, cached, chosen):
+    """The default solver ``"auto"`` takes ``"fgmres"`` for a single solve from
+    ``AUTO_FGMRES_UNKNOWNS`` velocity unknowns on and ``"schur"`` below that or with a
+    cache, names its choice, and solves with it (the chosen solver's own records, the
+    direct solve's velocity and pressure)."""
+    sp_, _ = square
+    ex = SolCx(1.0, 1e6)
+    monkeypatch.setattr(solvers, "AUTO_FGMRES_UNKNOWNS", threshold)
+    cache = StokesCache() if cached else None
+    s = solve_stokes(sp_, ex.viscosity, ex.force, tol=1e-12, maxiter=3000, cache=cache)
+    assert s.info["solver"] == chosen
+    assert ("amg_levels" in s.info) == (chosen == "fgmres")
+    assert ("factor_precision" in s.info) == (chosen == "schur")
+    if cached:
+        assert cache.factorisations == 1 and cache.builds == 0
+    _close(s, solve_stokes(sp_, ex.viscosity, ex.force, solver="direct"), 1e-8)

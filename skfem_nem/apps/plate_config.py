@@ -76,7 +76,7 @@ class PlateConfig:
     #: Picard tolerance of the plastic iterations
     picard_tol: float = 1e-3
     #: Stokes solver of the Picard iterations (``solve_stokes``'s ``solver``)
-    solver: str = "schur"
+    solver: str = "auto"
     #: write a checkpoint every this many steps
     checkpoint_every: int = 10
     #: keep the plate outline and the layer interface as segments (constrained mesh: no
@@ -170,10 +170,11 @@ HELP = {
     'integration': 'integration of the velocity gradients: "smoothed" (consistent) or "gauss" '
                    '(3-point rule)',
     'picard_tol': 'Picard tolerance of the plastic iterations',
-    'solver': 'Stokes solver of the Picard iterations: "schur" (sparse LU of the viscous '
-              'block, pressure CG), "fgmres" (AMG-preconditioned flexible GMRES, linear cost '
-              'and memory), "schur-amg", "minres", "direct", or "petsc" (PETSc over MPI: '
-              'mpiexec -n N skfem-nem sinking-plate --solver petsc; rank 0 writes)',
+    'solver': 'Stokes solver of the Picard iterations: "auto" ("schur" for the '
+              'Picard iterations, which share its factorisation), "schur" (sparse LU of the '
+              'viscous block, pressure CG), "fgmres" (AMG-preconditioned flexible GMRES, '
+              'linear cost and memory), "schur-amg", "minres", "direct", or "petsc" (PETSc '
+              'over MPI: mpiexec -n N skfem-nem sinking-plate --solver petsc; rank 0 writes)',
     'checkpoint_every': 'write a checkpoint every this many steps',
     'segments': 'keep the plate outline and the layer interface (a line of nodes) as edges '
                 'of the mesh: a constrained Delaunay triangulation, constrained '

@@ -382,7 +382,7 @@ def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
                     prescribed: Optional[Tuple[np.ndarray, np.ndarray]] = None,
                     free_slip: Union[str, Sequence[str], None] = "all",
                     no_slip: Union[str, Sequence[str], None] = None,
-                    pressure_mean: Optional[bool] = None, solver: str = "schur",
+                    pressure_mean: Optional[bool] = None, solver: str = "auto",
                     tol: float = 1e-10, constraints=None, maxiter: int = 2000,
                     cache: Optional[StokesCache] = None) -> StokesSolution:
     """Stokes solve with prescribed velocities: :func:`skfem_nem.models.stokes.solve_stokes`
@@ -402,8 +402,8 @@ def solve_stokes_bc(spaces: StokesSpaces, eta, f=0.0, tau0=None,
         Fix the pressure by its mean (zero). Default: only if every boundary
         node has a constrained velocity component (no free surface).
     solver, tol, maxiter, constraints, cache
-        As for :func:`skfem_nem.models.stokes.solve_stokes` (default solver:
-        the Schur-complement CG).
+        As for :func:`skfem_nem.models.stokes.solve_stokes` (default solver
+        ``"auto"``).
 
     Returns
     -------
@@ -488,7 +488,7 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
              rotation: str = "jaumann", tol: float = 1e-6, maxiter: int = 100,
              min_viscosity: Optional[float] = None, u_guess: Optional[np.ndarray] = None,
              constraints=None, eta_guess: Optional[np.ndarray] = None,
-             solver: str = "schur", cache: Optional[StokesCache] = None,
+             solver: str = "auto", cache: Optional[StokesCache] = None,
              linear_tol: Optional[float] = None) -> VEPStep:
     """One visco-elasto-plastic time step (see the module docstring).
 
@@ -532,8 +532,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         Extra linear constraints on the velocity, ``C`` for ``C u = 0`` or ``(C, c)`` for
         ``C u = c`` (e.g. the net flux through a material outline), see :func:`solve_stokes_bc`.
     solver, cache
-        Stokes solver of the Picard iterations and, for ``"fgmres"``, a
-        :class:`~skfem_nem.models.stokes.StokesCache` kept across steps
+        Stokes solver of the Picard iterations (``"auto"``: ``"schur"``, as they share
+        a cache) and a :class:`~skfem_nem.models.stokes.StokesCache` kept across steps
         (default: a new one per step, shared by its Picard iterations).
 
     Raises

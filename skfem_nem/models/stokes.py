@@ -68,11 +68,12 @@ pressure is fixed by its mean (zero) through a Lagrange multiplier.
 
 Solvers
 -------
-``solver="schur"`` (default), ``"schur-amg"``, ``"direct"``, ``"minres"``,
+``solver="auto"`` (default: ``"fgmres"`` for a single large solve, ``"schur"``
+otherwise), ``"schur"``, ``"schur-amg"``, ``"direct"``, ``"minres"``,
 ``"fgmres"`` and ``"petsc"`` (MPI, ``docs/parallel.md``): see
 :mod:`skfem_nem.models.stokes_solvers`. Iteration
 counts are reported in :class:`StokesSolution`; a :class:`StokesCache`
-carries the AMG hierarchy and the last solution of ``"fgmres"`` from one
+carries the factorisation or AMG hierarchy and the last solution from one
 solve to the next.
 
 Module layout
@@ -344,7 +345,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
                  tau0: Optional[Field] = None,
                  free_slip: Union[str, Sequence[str], None] = "all",
                  no_slip: Union[str, Sequence[str], None] = None,
-                 solver: str = "schur", tol: float = 1e-10, maxiter: int = 2000,
+                 solver: str = "auto", tol: float = 1e-10, maxiter: int = 2000,
                  system: Optional[StokesSystem] = None,
                  prescribed: Optional[tuple] = None,
                  pressure_mean: Optional[bool] = None,
@@ -361,10 +362,10 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     free_slip, no_slip
         Walls (see :func:`wall_dofs`); default free slip everywhere.
     solver
-        ``"schur"`` (default, LU of the viscous block and CG on the pressure
-        Schur complement), ``"schur-amg"``, ``"direct"``, ``"minres"``,
-        ``"fgmres"`` (memory linear in the unknowns) or ``"petsc"`` (MPI,
-        distributed assembly): see :mod:`skfem_nem.models.stokes_solvers`.
+        ``"auto"`` (default: ``"fgmres"`` for a large single solve, else ``"schur"``,
+        named in ``info["solver"]``), ``"schur"`` (LU of the viscous block), ``"fgmres"``
+        (AMG, linear memory), ``"schur-amg"``, ``"direct"``, ``"minres"`` or ``"petsc"``
+        (MPI): see :mod:`skfem_nem.models.stokes_solvers`.
     tol, maxiter
         Relative tolerance and iteration limit of the iterative parts.
     system
@@ -383,8 +384,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         imposed by Lagrange multipliers (returned in ``info["multipliers"]``);
         e.g. the net flux through a material outline (:func:`outline_flux`).
     cache
-        A :class:`StokesCache` shared by solves with ``solver="schur"`` (start
-        vector) or ``"fgmres"`` (and AMG hierarchy); ``ValueError`` with others.
+        A :class:`StokesCache` shared by solves with ``"auto"``, ``"schur"`` (start
+        vector, factors) or ``"fgmres"`` (and AMG hierarchy); ``ValueError`` with others.
 
     Returns
     -------

@@ -13,8 +13,10 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .krylov import dot
+
 __all__ = ["AMG_COARSE_SOLVER", "AMG_MAX_COARSE", "AMG_SMOOTHER", "AMG_STRENGTH",
-           "ViscousAMG", "amg_cg", "dot", "norm", "rigid_modes", "scaled_block", "unit_scale",
+           "ViscousAMG", "amg_cg", "rigid_modes", "scaled_block", "unit_scale",
            "v_cycle", "viscous_amg"]
 
 # coarsest AMG level size (pyamg's max_coarse): solved directly there
@@ -149,17 +151,6 @@ def amg_cg(ml, A: sp.spmatrix, b: np.ndarray, steps: int) -> np.ndarray:
         rz, rz_old = dot(r, z), rz
         d = z + (rz / rz_old) * d
     return x
-
-
-def dot(a: np.ndarray, b: np.ndarray) -> float:
-    """``a . b`` without BLAS: inside the app a threaded BLAS waited for cores held
-    by numba's threads (docs/stokes.md), ``einsum`` does not."""
-    return float(np.einsum("i,i->", a, b))
-
-
-def norm(a: np.ndarray) -> float:
-    """Euclidean norm without BLAS (see :func:`dot`)."""
-    return float(np.sqrt(dot(a, a)))
 
 
 def v_cycle(ml, b: np.ndarray) -> np.ndarray:

@@ -34,10 +34,12 @@ upper-triangular preconditioner: AMG V-cycles for the viscous block, the
 lumped 1/eta-weighted pressure mass for the Schur complement; no
 factorisation, so its memory and the cost of an iteration grow linearly with
 the unknowns (the iterations grow with the contrast like those of
-``"schur"``; a single solve is faster than ``"schur"``'s from about 100,000
+``"schur"``; a single solve is faster than ``"schur"``'s from about 50,000
 nodes, the sinking plate's steps are not; see ``docs/stokes.md``), and a
 :class:`StokesCache` keeps its AMG hierarchy and last solution between solves
-(Picard iterations, time steps). The iterative solvers fix the mean
+(Picard iterations, time steps). ``"auto"``, the default, is ``"fgmres"`` for a
+single solve from :data:`AUTO_FGMRES_UNKNOWNS` velocity unknowns on and ``"schur"``
+otherwise (:func:`auto_solver`). The iterative solvers fix the mean
 pressure by a rank-one term ``c m m^T`` of the size of 1/eta. ``"petsc"`` is
 ``"fgmres"``'s method on PETSc over MPI (optional petsc4py; the mean pressure as
 PETSc's null space instead of the rank-one term; :mod:`skfem_nem.parallel`, imported
@@ -50,10 +52,10 @@ from typing import Callable, Dict, NamedTuple, Optional
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
-from .stokes_amg import norm, rigid_modes, scaled_block, unit_scale, viscous_amg
+from .krylov import FGMRES_RESTART, fgmres, norm
+from .stokes_amg import rigid_modes, scaled_block, unit_scale, viscous_amg
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "CACHED_SOLVERS",
            "StokesCache", "check_solver", "solve_direct", "solve_schur", "solve_schur_amg",
@@ -70,12 +72,6 @@ INNER_MAXITER = 1000
 MINRES_TOL_FACTOR = 10
 # MINRES restart asks for at most this relative reduction of the residual
 MINRES_MAX_RTOL = 0.5
-# FGMRES restart length: it keeps two vectors of the system's size per iteration
-# up to this many, so memory stays linear in the unknowns (730 MB at 300,000
-# unknowns, against 2.6 GB for the factorisation of "schur"). At 100,000 nodes and
-# a contrast of 1e6 a restart every 50 iterations stalled (no convergence in 760),
-# every 150 converged in 285
-FGMRES_RESTART = 150
 # conjugate-gradient steps (each preconditioned by one AMG V-cycle) per application
 # of the viscous-block preconditioner. Two were the fastest of 1-4 steps and of 1-2
 # stationary cycles at 4,000 and 16,000 nodes (SolCx, contrasts 1 and 1e6; the
@@ -117,6 +113,14 @@ PRECISION_ITERATIONS = FGMRES_RESTART
 # itself (Taylor-Hood, a block 1e4 times stiffer: 1.1e-10 to 1.3e-10 for 500
 # iterations): the solve stops there
 FACTOR_STALL = 0.5
+# "auto" solves a single system (no StokesCache) of at least this many velocity unknowns
+# with "fgmres", everything else with "schur" (auto_solver). SolCx with the interface as
+# segments, one solve to 1e-10, seconds of "schur" / "fgmres": 61,000 velocity unknowns
+# 2.1 / 2.9 (contrast 1) and 3.9 / 3.8 (1e6); 121,000: 5.9 / 5.0 and 17.9 / 8.1; 202,000
+# (1e6): 25.8 / 14.0. With a cache "schur" keeps its factorisation over the Picard
+# iterations: the sinking plate at 88,528 nodes, some 177,000 velocity unknowns, spends
+# 8.4 s a step in its solves against 11.0 s with "fgmres" (docs/stokes.md)
+AUTO_FGMRES_UNKNOWNS = 100_000
 
 
 @dataclass
@@ -656,70 +660,6 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
     return _split(problem, x, its)
 
 
-def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional[np.ndarray],
-           tol: float, maxiter: int, restart: int = FGMRES_RESTART,
-           stall: Optional[float] = None, scale: Optional[float] = None):
-    """Restarted flexible GMRES (Saad 1993), right-preconditioned.
-
-    Flexible because the preconditioned vectors are kept and the update is
-    built from them, so ``precondition`` may change from one application to
-    the next (scipy's ``gmres`` assumes a fixed preconditioner). Classical
-    Gram-Schmidt applied twice (two matrix-vector products with the basis
-    per pass instead of a loop). Products with the basis and norms go
-    through ``einsum``, not BLAS: a threaded BLAS waiting for cores that
-    numba's threads or other jobs hold made the solves of the sinking plate
-    5-7 times slower. Returns the solution, the number of
-    iterations and the true relative residual ``|b - K x| / |b|``, the
-    stopping test (checked at every restart). ``stall``: also stop when a
-    restart cycle leaves the true residual above this fraction of the last.
-    ``scale``: the norm the residual is relative to, in place of ``|b|``.
-    """
-    n = b.size
-    bnorm = (norm(b) if scale is None else scale) or 1.0
-    x = np.zeros(n) if x0 is None else np.array(x0, dtype=float)
-    r = b - matvec(x) if x0 is not None else b.copy()
-    its = 0
-    V = np.empty((restart + 1, n))
-    Z = np.empty((restart, n))
-    last = np.inf
-    while True:
-        beta = norm(r)
-        if beta <= tol * bnorm or its >= maxiter or (stall is not None
-                                                      and beta > stall * last):
-            return x, its, beta / bnorm
-        last = beta
-        H = np.zeros((restart + 1, restart))
-        rot = np.zeros((restart, 2))                 # Givens cosines and sines
-        g = np.zeros(restart + 1)
-        g[0] = beta
-        V[0] = r / beta
-        for j in range(restart):
-            Z[j] = precondition(V[j])
-            w = matvec(Z[j])
-            its += 1
-            for _ in range(2):
-                h = np.einsum("ij,j->i", V[:j + 1], w)
-                w -= np.einsum("i,ij->j", h, V[:j + 1])
-                H[:j + 1, j] += h
-            H[j + 1, j] = norm(w)
-            if H[j + 1, j] > 0:
-                V[j + 1] = w / H[j + 1, j]
-            for i in range(j):
-                ci, si = rot[i]
-                H[i, j], H[i + 1, j] = ci * H[i, j] + si * H[i + 1, j], \
-                    -si * H[i, j] + ci * H[i + 1, j]
-            d = np.hypot(H[j, j], H[j + 1, j])
-            rot[j] = (H[j, j] / d, H[j + 1, j] / d) if d > 0 else (1.0, 0.0)
-            H[j, j], H[j + 1, j] = d, 0.0
-            g[j], g[j + 1] = rot[j, 0] * g[j], -rot[j, 1] * g[j]
-            if abs(g[j + 1]) <= tol * bnorm or its >= maxiter or H[j, j] == 0:
-                break
-        k = j + 1
-        y = sla.solve_triangular(H[:k, :k], g[:k], check_finite=False)
-        x += np.einsum("i,ij->j", y, Z[:k])
-        r = b - matvec(x)
-
-
 def solve_petsc(problem: SaddlePointProblem, tol: float, maxiter: int,
                 info: dict) -> SaddlePointSolution:
     """The preconditioned FGMRES of :func:`solve_fgmres` on PETSc over MPI
@@ -762,13 +702,33 @@ def strip_order(problem: SaddlePointProblem) -> np.ndarray:
     return np.argsort(np.concatenate([xu, xp]), kind="stable")
 
 
+def auto_solver(problem: SaddlePointProblem, cached: bool) -> str:
+    """The solver ``"auto"`` takes for ``problem``: ``"fgmres"`` for a single solve
+    (``cached`` False) of at least :data:`AUTO_FGMRES_UNKNOWNS` velocity unknowns, where
+    it is the faster and needs a fraction of the memory, else ``"schur"``, whose kept
+    factorisation makes a sequence of solves with a :class:`StokesCache` (Picard
+    iterations, time steps) the cheaper."""
+    big = problem.n_velocity >= AUTO_FGMRES_UNKNOWNS
+    return "fgmres" if big and not cached else "schur"
+
+
+def solve_auto(problem: SaddlePointProblem, tol: float, maxiter: int, info: dict,
+               cache: Optional[StokesCache] = None) -> SaddlePointSolution:
+    """Solves with the solver :func:`auto_solver` chooses, named in ``info["solver"]``."""
+    name = auto_solver(problem, cache is not None)
+    info["solver"] = name
+    return SOLVERS[name](problem, tol, maxiter, info,
+                         **({} if cache is None else {"cache": cache}))
+
+
 SOLVERS: Dict[str, Callable[..., SaddlePointSolution]] = {
-    "schur": solve_schur, "schur-amg": solve_schur_amg, "direct": solve_direct,
-    "minres": solve_minres, "fgmres": solve_fgmres, "petsc": solve_petsc}
+    "auto": solve_auto, "schur": solve_schur, "schur-amg": solve_schur_amg,
+    "direct": solve_direct, "minres": solve_minres, "fgmres": solve_fgmres,
+    "petsc": solve_petsc}
 """The solvers of :func:`skfem_nem.models.stokes.solve_stokes` by name, each
 ``(problem, tol, maxiter, info) -> SaddlePointSolution``."""
 
-CACHED_SOLVERS = ("schur", "fgmres")
+CACHED_SOLVERS = ("auto", "schur", "fgmres")
 """The solvers that take a ``cache=`` (:class:`StokesCache`) keyword."""
 
 

@@ -1,0 +1,97 @@
+"""Krylov methods and vector products shared by the Stokes solvers and their
+multigrid: restarted flexible GMRES and BLAS-free dot products.
+
+Kept apart from :mod:`skfem_nem.models.stokes_solvers` because they are linear
+algebra on vectors and callables alone, with no knowledge of the Stokes blocks;
+:mod:`skfem_nem.models.stokes_amg` and the solvers both use them.
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+import numpy as np
+import scipy.linalg as sla
+
+__all__ = ["FGMRES_RESTART", "dot", "fgmres", "norm"]
+
+# FGMRES restart length: it keeps two vectors of the system's size per iteration
+# up to this many, so memory stays linear in the unknowns (730 MB at 300,000
+# unknowns, against 2.6 GB for the factorisation of "schur"). At 100,000 nodes and
+# a contrast of 1e6 a restart every 50 iterations stalled (no convergence in 760),
+# every 150 converged in 285
+FGMRES_RESTART = 150
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a . b`` without BLAS: inside the app a threaded BLAS waited for cores held
+    by numba's threads (docs/stokes.md), ``einsum`` does not."""
+    return float(np.einsum("i,i->", a, b))
+
+
+def norm(a: np.ndarray) -> float:
+    """Euclidean norm without BLAS (see :func:`dot`)."""
+    return float(np.sqrt(dot(a, a)))
+
+
+def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional[np.ndarray],
+           tol: float, maxiter: int, restart: int = FGMRES_RESTART,
+           stall: Optional[float] = None, scale: Optional[float] = None):
+    """Restarted flexible GMRES (Saad 1993), right-preconditioned.
+
+    Flexible because the preconditioned vectors are kept and the update is
+    built from them, so ``precondition`` may change from one application to
+    the next (scipy's ``gmres`` assumes a fixed preconditioner). Classical
+    Gram-Schmidt applied twice (two matrix-vector products with the basis
+    per pass instead of a loop). Products with the basis and norms go
+    through ``einsum``, not BLAS: a threaded BLAS waiting for cores that
+    numba's threads or other jobs hold made the solves of the sinking plate
+    5-7 times slower. Returns the solution, the number of
+    iterations and the true relative residual ``|b - K x| / |b|``, the
+    stopping test (checked at every restart). ``stall``: also stop when a
+    restart cycle leaves the true residual above this fraction of the last.
+    ``scale``: the norm the residual is relative to, in place of ``|b|``.
+    """
+    n = b.size
+    bnorm = (norm(b) if scale is None else scale) or 1.0
+    x = np.zeros(n) if x0 is None else np.array(x0, dtype=float)
+    r = b - matvec(x) if x0 is not None else b.copy()
+    its = 0
+    V = np.empty((restart + 1, n))
+    Z = np.empty((restart, n))
+    last = np.inf
+    while True:
+        beta = norm(r)
+        if beta <= tol * bnorm or its >= maxiter or (stall is not None
+                                                      and beta > stall * last):
+            return x, its, beta / bnorm
+        last = beta
+        H = np.zeros((restart + 1, restart))
+        rot = np.zeros((restart, 2))                 # Givens cosines and sines
+        g = np.zeros(restart + 1)
+        g[0] = beta
+        V[0] = r / beta
+        for j in range(restart):
+            Z[j] = precondition(V[j])
+            w = matvec(Z[j])
+            its += 1
+            for _ in range(2):
+                h = np.einsum("ij,j->i", V[:j + 1], w)
+                w -= np.einsum("i,ij->j", h, V[:j + 1])
+                H[:j + 1, j] += h
+            H[j + 1, j] = norm(w)
+            if H[j + 1, j] > 0:
+                V[j + 1] = w / H[j + 1, j]
+            for i in range(j):
+                ci, si = rot[i]
+                H[i, j], H[i + 1, j] = ci * H[i, j] + si * H[i + 1, j], \
+                    -si * H[i, j] + ci * H[i + 1, j]
+            d = np.hypot(H[j, j], H[j + 1, j])
+            rot[j] = (H[j, j] / d, H[j + 1, j] / d) if d > 0 else (1.0, 0.0)
+            H[j, j], H[j + 1, j] = d, 0.0
+            g[j], g[j + 1] = rot[j, 0] * g[j], -rot[j, 1] * g[j]
+            if abs(g[j + 1]) <= tol * bnorm or its >= maxiter or H[j, j] == 0:
+                break
+        k = j + 1
+        y = sla.solve_triangular(H[:k, :k], g[:k], check_finite=False)
+        x += np.einsum("i,ij->j", y, Z[:k])
+        r = b - matvec(x)

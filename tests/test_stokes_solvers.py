@@ -370,3 +370,14 @@ def test_auto_chooses_by_size_and_cache(square, monkeypatch, threshold, cached, 
     if cached:
         assert cache.factorisations == 1 and cache.builds == 0
     _close(s, solve_stokes(sp_, ex.viscosity, ex.force, solver="direct"), 1e-8)
+
+
+def test_auto_keeps_schur_for_taylor_hood(square, monkeypatch):
+    """Above the size threshold too, ``"auto"`` solves a Taylor-Hood problem with
+    ``"schur"`` (its P2 block factorises cheaply; ``"fgmres"`` is the slower there)."""
+    sp_, _ = square
+    th = stokes_spaces(sp_.mesh, "taylor-hood")
+    ex = SolCx(1.0, 1e6)
+    monkeypatch.setattr(solvers, "AUTO_FGMRES_UNKNOWNS", 10)
+    s = solve_stokes(th, ex.viscosity, ex.force)
+    assert s.info["solver"] == "schur" and "factor_precision" in s.info

@@ -54,6 +54,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..basis import NaturalNeighbourBasis
 from .krylov import FGMRES_RESTART, fgmres, norm
 from .stokes_amg import rigid_modes, scaled_block, unit_scale, viscous_amg
 
@@ -119,7 +120,10 @@ FACTOR_STALL = 0.5
 # 2.1 / 2.9 (contrast 1) and 3.9 / 3.8 (1e6); 121,000: 5.9 / 5.0 and 17.9 / 8.1; 202,000
 # (1e6): 25.8 / 14.0. With a cache "schur" keeps its factorisation over the Picard
 # iterations: the sinking plate at 88,528 nodes, some 177,000 velocity unknowns, spends
-# 8.4 s a step in its solves against 11.0 s with "fgmres" (docs/stokes.md)
+# 8.4 s a step in its solves against 11.0 s with "fgmres". Natural-neighbour velocity
+# only: Taylor-Hood's sparser P2 block factorises cheaply, and "fgmres" there took twice
+# the time of "schur" at 81,000 velocity unknowns and did not converge in 3,000
+# iterations at 242,000 and a contrast of 1e6 (docs/stokes.md)
 AUTO_FGMRES_UNKNOWNS = 100_000
 
 
@@ -704,12 +708,14 @@ def strip_order(problem: SaddlePointProblem) -> np.ndarray:
 
 def auto_solver(problem: SaddlePointProblem, cached: bool) -> str:
     """The solver ``"auto"`` takes for ``problem``: ``"fgmres"`` for a single solve
-    (``cached`` False) of at least :data:`AUTO_FGMRES_UNKNOWNS` velocity unknowns, where
-    it is the faster and needs a fraction of the memory, else ``"schur"``, whose kept
-    factorisation makes a sequence of solves with a :class:`StokesCache` (Picard
-    iterations, time steps) the cheaper."""
+    (``cached`` False) of at least :data:`AUTO_FGMRES_UNKNOWNS` natural-neighbour
+    velocity unknowns, where it is the faster and needs a fraction of the memory, else
+    ``"schur"``, whose kept factorisation makes a sequence of solves with a
+    :class:`StokesCache` (Picard iterations, time steps) the cheaper, and which is the
+    faster for Taylor-Hood's P2 velocity at every size measured."""
     big = problem.n_velocity >= AUTO_FGMRES_UNKNOWNS
-    return "fgmres" if big and not cached else "schur"
+    nem = isinstance(problem.ubasis, NaturalNeighbourBasis)
+    return "fgmres" if big and nem and not cached else "schur"
 
 
 def solve_auto(problem: SaddlePointProblem, tol: float, maxiter: int, info: dict,

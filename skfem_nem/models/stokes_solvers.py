@@ -38,8 +38,8 @@ the unknowns (the iterations grow with the contrast like those of
 nodes, the sinking plate's steps are not; see ``docs/stokes.md``), and a
 :class:`StokesCache` keeps its AMG hierarchy and last solution between solves
 (Picard iterations, time steps). ``"auto"``, the default, is ``"fgmres"`` for a
-single solve from :data:`AUTO_FGMRES_UNKNOWNS` velocity unknowns on and ``"schur"``
-otherwise (:func:`auto_solver`). The iterative solvers fix the mean
+single solve from :data:`AUTO_FGMRES_UNKNOWNS` natural-neighbour velocity unknowns on
+and ``"schur"`` otherwise (:func:`auto_solver`). The iterative solvers fix the mean
 pressure by a rank-one term ``c m m^T`` of the size of 1/eta. ``"petsc"`` is
 ``"fgmres"``'s method on PETSc over MPI (optional petsc4py; the mean pressure as
 PETSc's null space instead of the rank-one term; :mod:`skfem_nem.parallel`, imported
@@ -59,9 +59,9 @@ from .krylov import FGMRES_RESTART, fgmres, norm
 from .stokes_amg import rigid_modes, scaled_block, unit_scale, viscous_amg
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "CACHED_SOLVERS",
-           "StokesCache", "check_solver", "solve_direct", "solve_schur", "solve_schur_amg",
-           "solve_minres", "solve_fgmres", "solve_petsc", "strip_order", "fgmres",
-           "rigid_modes"]
+           "StokesCache", "auto_solver", "check_solver", "solve_auto", "solve_direct",
+           "solve_schur", "solve_schur_amg", "solve_minres", "solve_fgmres", "solve_petsc",
+           "strip_order", "rigid_modes"]
 
 # relative tolerance of the inner AMG-CG solves of the viscous block
 # ("schur-amg"): at most this, and two orders of magnitude below the outer tol
@@ -712,7 +712,8 @@ def auto_solver(problem: SaddlePointProblem, cached: bool) -> str:
     velocity unknowns, where it is the faster and needs a fraction of the memory, else
     ``"schur"``, whose kept factorisation makes a sequence of solves with a
     :class:`StokesCache` (Picard iterations, time steps) the cheaper, and which is the
-    faster for Taylor-Hood's P2 velocity at every size measured."""
+    robust one for Taylor-Hood's P2 velocity (there ``"fgmres"`` did not converge at a
+    viscosity contrast of 1e6)."""
     big = problem.n_velocity >= AUTO_FGMRES_UNKNOWNS
     nem = isinstance(problem.ubasis, NaturalNeighbourBasis)
     return "fgmres" if big and nem and not cached else "schur"

@@ -9,13 +9,15 @@ choices behind the constants are measured in ``docs/stokes.md``.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .krylov import dot
 
-__all__ = ["AMG_COARSE_SOLVER", "AMG_MAX_COARSE", "AMG_SMOOTHER", "AMG_STRENGTH",
+__all__ = ["AMG_COARSE_SOLVER", "AMG_MAX_COARSE", "AMG_SEED", "AMG_SMOOTHER", "AMG_STRENGTH",
            "ViscousAMG", "amg_cg", "rigid_modes", "scaled_block", "unit_scale",
            "v_cycle", "viscous_amg"]
 
@@ -36,6 +38,22 @@ AMG_SMOOTHER = ("chebyshev", {"degree": 2})
 # entries, and keeping them all (pyamg's theta 0) coarsens 200,834 unknowns to 5,346 in
 # one level; 0.02 coarsens to 15,927 and cuts the CG iterations from 38 to 24
 AMG_STRENGTH = ("symmetric", {"theta": 0.02})
+# seed of the start vectors of pyamg's spectral-radius estimates (prolongator smoothing,
+# Chebyshev bounds), which it draws from numpy's global generator: fixed, the same block
+# gets the same hierarchy in every run (a run with "fgmres" repeats bit for bit)
+AMG_SEED = 0
+
+
+@contextmanager
+def seeded_global_random(seed: int = AMG_SEED):
+    """numpy's global (legacy) generator seeded with ``seed`` inside the block, the
+    caller's state restored after it: pyamg draws its random starts from that generator."""
+    state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
 
 
 def viscous_amg(problem) -> "ViscousAMG":
@@ -58,10 +76,11 @@ class ViscousAMG:
         import pyamg
         self.scale = unit_scale(A)
         self.matrix = scaled_block(sp.csr_matrix(A), self.scale)
-        self.ml = pyamg.smoothed_aggregation_solver(
-            self.matrix, B=modes / self.scale[:, None], symmetry="symmetric",
-            strength=AMG_STRENGTH, max_coarse=AMG_MAX_COARSE, presmoother=AMG_SMOOTHER,
-            postsmoother=AMG_SMOOTHER, coarse_solver=AMG_COARSE_SOLVER)
+        with seeded_global_random():
+            self.ml = pyamg.smoothed_aggregation_solver(
+                self.matrix, B=modes / self.scale[:, None], symmetry="symmetric",
+                strength=AMG_STRENGTH, max_coarse=AMG_MAX_COARSE, presmoother=AMG_SMOOTHER,
+                postsmoother=AMG_SMOOTHER, coarse_solver=AMG_COARSE_SOLVER)
 
     @property
     def n_levels(self) -> int:
@@ -89,7 +108,8 @@ class ViscousAMG:
             Ac = fine.R @ fine.A @ fine.P
             coarse.A = Ac.tobsr(blocksize=coarse.A.blocksize) if sp.issparse(coarse.A) and \
                 coarse.A.format == "bsr" else sp.csr_matrix(Ac)
-        change_smoothers(self.ml, AMG_SMOOTHER, AMG_SMOOTHER)
+        with seeded_global_random():
+            change_smoothers(self.ml, AMG_SMOOTHER, AMG_SMOOTHER)
         self.ml.coarse_solver = pyamg.coarse_grid_solver(AMG_COARSE_SOLVER)
 
     def cycle(self, r: np.ndarray) -> np.ndarray:

@@ -11,7 +11,8 @@ import scipy.sparse as sps
 
 import skfem_nem.models.stokes_solvers as solvers
 from skfem_nem.models.krylov import FGMRES_RESTART, fgmres
-from skfem_nem.models.stokes_solvers import SOLVERS, ViscousFactor
+from skfem_nem.models.stokes_factors import ViscousFactor
+from skfem_nem.models.stokes_solvers import SOLVERS
 
 from helpers import plastic_inclusion
 
@@ -381,3 +382,32 @@ def test_auto_keeps_schur_for_taylor_hood(square, monkeypatch):
     monkeypatch.setattr(solvers, "AUTO_FGMRES_UNKNOWNS", 10)
     s = solve_stokes(th, ex.viscosity, ex.force)
     assert s.info["solver"] == "schur" and "factor_precision" in s.info
+
+
+@pytest.mark.parametrize("contrast, factors", [(1.0, "components"), (1e2, "components"),
+                                               (1e6, "whole")])
+def test_schur_with_component_factors_agrees_with_direct(square, monkeypatch, contrast,
+                                                         factors):
+    """From SPLIT_MIN_UNKNOWNS on and up to SINGLE_CONTRAST, "schur" factorises the
+    velocity components' blocks apart (``info["factors"]``), takes more FGMRES
+    iterations than with the whole block's factors, and reaches the direct solution;
+    kept in a cache, the component factors serve the next solve. Above the contrast it
+    keeps the whole block's."""
+    sp_, _ = square
+    ex = SolCx(1.0, contrast)
+    ref = solve_stokes(sp_, ex.viscosity, ex.force, solver="direct")
+    whole = solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", tol=1e-10)
+    monkeypatch.setattr(solvers, "SPLIT_MIN_UNKNOWNS", 0)
+    cache = StokesCache()
+    s = solve_stokes(sp_, ex.viscosity, ex.force, solver="schur", tol=1e-10, maxiter=3000,
+                     cache=cache)
+    assert whole.info["factors"] == "whole" and s.info["factors"] == factors
+    assert (s.iterations > whole.iterations) == (factors == "components")
+    _close(s, ref, 1e-8)
+    if factors == "whole":
+        return
+    again = solve_stokes(sp_, lambda x: 2 * ex.viscosity(x), ex.force, solver="schur",
+                         tol=1e-10, maxiter=3000, cache=cache)
+    assert again.info["factor_reused"] and cache.factorisations == 1
+    _close(again, solve_stokes(sp_, lambda x: 2 * ex.viscosity(x), ex.force,
+                               solver="direct"), 1e-8)

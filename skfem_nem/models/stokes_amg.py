@@ -19,7 +19,7 @@ from .krylov import dot
 
 __all__ = ["AMG_COARSE_SOLVER", "AMG_MAX_COARSE", "AMG_SEED", "AMG_SMOOTHER", "AMG_STRENGTH",
            "ViscousAMG", "amg_cg", "rigid_modes", "scaled_block", "unit_scale",
-           "v_cycle", "viscous_amg"]
+           "v_cycle", "velocity_components", "viscous_amg"]
 
 # coarsest AMG level size (pyamg's max_coarse): solved directly there
 AMG_MAX_COARSE = 500
@@ -192,13 +192,19 @@ def v_cycle(ml, b: np.ndarray) -> np.ndarray:
     return cycle(0, b)
 
 
+def velocity_components(ubasis) -> np.ndarray:
+    """0 or 1, the component (``u^1``, ``u^2``) of each dof of a vector basis."""
+    comp = np.zeros(ubasis.N, dtype=int)
+    for dofs_ in (ubasis.dofs.nodal_dofs, ubasis.dofs.facet_dofs):  # rows: u^1, u^2
+        comp[dofs_[1::2].ravel()] = 1
+    return comp
+
+
 def rigid_modes(ubasis, free: np.ndarray) -> np.ndarray:
     """(len(free), 3) rigid-body modes (two translations, one rotation) of a
     vector velocity basis, restricted to the dofs ``free``."""
     loc = ubasis.doflocs  # (2, nu)
-    comp = np.zeros(ubasis.N, dtype=int)
-    for dofs_ in (ubasis.dofs.nodal_dofs, ubasis.dofs.facet_dofs):  # rows: u^1, u^2
-        comp[dofs_[1::2].ravel()] = 1
+    comp = velocity_components(ubasis)
     Bm = np.zeros((ubasis.N, 3))
     Bm[comp == 0, 0] = 1.0
     Bm[comp == 1, 1] = 1.0

@@ -56,7 +56,8 @@ import scipy.sparse.linalg as spla
 
 from ..basis import NaturalNeighbourBasis
 from .krylov import FGMRES_RESTART, fgmres, norm
-from .stokes_amg import rigid_modes, scaled_block, unit_scale, viscous_amg
+from .stokes_amg import rigid_modes, velocity_components, viscous_amg
+from .stokes_factors import ComponentFactors, ViscousFactor
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "CACHED_SOLVERS",
            "StokesCache", "auto_solver", "check_solver", "solve_auto", "solve_direct",
@@ -114,6 +115,17 @@ PRECISION_ITERATIONS = FGMRES_RESTART
 # itself (Taylor-Hood, a block 1e4 times stiffer: 1.1e-10 to 1.3e-10 for 500
 # iterations): the solve stops there
 FACTOR_STALL = 0.5
+# from this many velocity unknowns on, "schur" preconditions FGMRES with the factors of
+# the two velocity components' diagonal blocks, made and applied in two threads
+# (stokes_factors.ComponentFactors), instead of the whole block's. SolCx with segments
+# at 60,814 nodes: factorised in 0.87 s against 3.58 s, 42 against 24 iterations, 3.4 s
+# against 6.5 s a solve (contrast 10); 1.85 against 6.75 s, 64 against 21, 6.2 against
+# 10.7 s (contrast 1e6). The sinking plate's linear solver at 88,528 nodes: 6.7 s a step
+# against 8.0-8.7 s; at 5,577 and 21,367 nodes the same time as the whole block's (more
+# iterations for a cheaper factorisation), so smaller problems keep the whole block.
+# The double-precision fallback (Schur-complement CG, which needs exact solves)
+# factorises the whole block (docs/stokes.md)
+SPLIT_MIN_UNKNOWNS = 20_000
 # "auto" solves a single system (no StokesCache) of at least this many velocity unknowns
 # with "fgmres", everything else with "schur" (auto_solver). SolCx with the interface as
 # segments, one solve to 1e-10, seconds of "schur" / "fgmres": 61,000 velocity unknowns
@@ -234,7 +246,8 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
     ``tol`` after :data:`PRECISION_ITERATIONS` or stalls (:data:`FACTOR_STALL`), the
     viscous block is factorised in double precision and :func:`schur_pressure_cg`
     goes on from the pressure reached; ``info["factor_precision"]``,
-    ``info["viscosity_contrast"]``.
+    ``info["viscosity_contrast"]``, ``info["factors"]`` (``"components"`` or ``"whole"``:
+    :func:`viscous_factor`).
 
     With a ``cache`` (a :class:`StokesCache`), the solve starts from the last solution
     where the sizes agree and it is a better start than zero (the Picard iterations
@@ -254,7 +267,8 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
     matvec = saddle_matvec(problem)
     x0 = None if cache is None else _warm_start(cache, matvec, problem.rhs)
     info["warm_start"] = x0 is not None
-    lu = ViscousFactor(problem.A, factor_dtype(problem, info))
+    lu = viscous_factor(problem, info)
+    info["factors"] = "components" if isinstance(lu, ComponentFactors) else "whole"
     x, its, res = _factor_fgmres(problem, lu, matvec, x0, tol,
                                  min(maxiter, PRECISION_ITERATIONS))
     if res <= tol:
@@ -266,6 +280,7 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
     else:                              # on in double precision from where it stands
         del lu                         # (freed before the next one is made)
         lu = ViscousFactor(problem.A, np.float64)
+        info["factors"] = "whole"
         n1 = problem.n_velocity
         sol = schur_pressure_cg(problem, lu, tol, max(1, maxiter - its), x[n1:],
                                 counted=its)
@@ -276,6 +291,20 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
         if REUSE_FACTOR:
             cache.keep_factor(lu, problem.A, sol.iterations)
     return sol
+
+
+def viscous_factor(problem: SaddlePointProblem, info: dict):
+    """The factors preconditioning the first FGMRES of ``"schur"``, in the precision of
+    :func:`factor_dtype`: per velocity component from :data:`SPLIT_MIN_UNKNOWNS`
+    velocity unknowns on up to a viscosity contrast of :data:`SINGLE_CONTRAST`, else of
+    the whole viscous block (at higher contrasts the split needs more than twice the
+    iterations: 172 against 65 at 1e6 on 500 nodes)."""
+    dtype = factor_dtype(problem, info)
+    if (problem.n_velocity >= SPLIT_MIN_UNKNOWNS
+            and info["viscosity_contrast"] <= SINGLE_CONTRAST):
+        comp = velocity_components(problem.ubasis)[problem.free]
+        return ComponentFactors(problem.A, comp, dtype)
+    return ViscousFactor(problem.A, dtype)
 
 
 def viscosity_contrast(problem: SaddlePointProblem) -> float:
@@ -296,36 +325,7 @@ def factor_dtype(problem: SaddlePointProblem, info: Optional[dict] = None):
     return FACTOR_DTYPE if contrast <= SINGLE_CONTRAST else np.float64
 
 
-class ViscousFactor:
-    """Sparse LU of the viscous block ``A`` scaled by its diagonal, ``D^-1/2 A D^-1/2``,
-    in the precision ``dtype`` (symmetric minimum-degree ordering); :meth:`solve`
-    applies the resulting approximation of ``A^-1`` to double-precision vectors. The
-    scaling takes the viscosity contrast out of the factors' rounding: an unscaled
-    single-precision factorisation needed as many iterations at a contrast of 1e6 but
-    took twice as long to make (SolCx, 16,430 nodes)."""
-
-    def __init__(self, A: sp.spmatrix, dtype=np.float64):
-        # a CSR block is factorised as its transpose, whose CSC arrays are its own
-        # (no conversion of the block; solves then use the transposed factors)
-        self.trans = "T" if A.format == "csr" else "N"
-        M = A.T if self.trans == "T" else sp.csc_matrix(A)
-        self.scale = unit_scale(M)
-        scaled = scaled_block(M, self.scale, dtype)
-        self.dtype = np.dtype(dtype)
-        try:
-            self.lu = spla.splu(scaled, permc_spec="MMD_AT_PLUS_A",
-                                options=dict(SymmetricMode=True))
-        except RuntimeError as err:
-            raise RuntimeError(f"the viscous block is singular ({err}): check the wall "
-                               f"conditions (a rigid-body motion left free?)") from None
-
-    def solve(self, r: np.ndarray) -> np.ndarray:
-        """``A^-1 r`` (to the rounding of the factors' precision)."""
-        s = self.scale
-        return s * self.lu.solve((s * r).astype(self.dtype), trans=self.trans).astype(float)
-
-
-def _factor_fgmres(problem: SaddlePointProblem, lu: ViscousFactor, matvec: Callable,
+def _factor_fgmres(problem: SaddlePointProblem, lu, matvec: Callable,
                    x0: Optional[np.ndarray], tol: float, maxiter: int, schur: bool = True):
     """:func:`fgmres` on the whole system from ``x0`` with the block upper-triangular
     preconditioner, ``lu`` for the viscous block: solution, iterations, residual.
@@ -348,7 +348,7 @@ def _factor_fgmres(problem: SaddlePointProblem, lu: ViscousFactor, matvec: Calla
                   scale=scale)
 
 
-def _reuse_factor(problem: SaddlePointProblem, lu: ViscousFactor, tol: float, maxiter: int,
+def _reuse_factor(problem: SaddlePointProblem, lu, tol: float, maxiter: int,
                   info: dict, cache: StokesCache) -> Optional[SaddlePointSolution]:
     """The solve of :func:`solve_schur` with a kept factorisation ``lu`` of an earlier
     viscous block of the same pattern, from the cached start: exact where the

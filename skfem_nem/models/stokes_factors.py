@@ -54,9 +54,10 @@ class ComponentFactors:
     """Sparse LU of the two diagonal blocks of the viscous block ``A``, one per velocity
     component (``components``: 0 or 1 for each row), each as :class:`ViscousFactor`;
     :meth:`solve` applies the block-diagonal approximation of ``A^-1``. The coupling of
-    the components through the symmetric gradient is left to the Krylov method (the
-    two blocks bound ``A`` by Korn's inequality). Each block has half the unknowns
-    and half the entries a row of ``A``, so its factors fill a quarter as much, and the
+    the components through the symmetric gradient is left to the Krylov method (with
+    walls that hold the rigid motions, Korn's inequality makes the block-diagonal part
+    spectrally equivalent to ``A``). Each block has half the unknowns and half the
+    entries a row of ``A``, so the two fill half as much as ``A``'s factors, and the
     two are made and applied in two threads: at 120,642 unknowns (SolCx, 60,814 nodes,
     contrast 10) 0.87 s to factorise against 3.58 s for the whole block, 42 FGMRES
     iterations against 24, 3.4 s to solve against 6.5 s (docs/stokes.md)."""

@@ -17,7 +17,9 @@ The problem, with ``m`` the integrals of the pressure basis functions::
 Solvers
 -------
 ``"schur"`` factorises the viscous block (sparse LU in a symmetric
-ordering, in single precision after a diagonal scaling) and runs flexible
+ordering, in single precision after a diagonal scaling; per velocity component,
+in two threads, for large problems at moderate contrasts:
+:mod:`skfem_nem.models.stokes_factors`) and runs flexible
 GMRES on the whole system preconditioned by the block upper-triangular
 ``[[A, B^T], [0, -S_hat]]^-1`` with those factors for ``A`` and the lumped
 1/eta-weighted pressure mass for ``S_hat``: with exact factors, the

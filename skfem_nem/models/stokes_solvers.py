@@ -134,7 +134,8 @@ SPLIT_MIN_UNKNOWNS = 20_000
 # 2.1 / 2.9 (contrast 1) and 3.9 / 3.8 (1e6); 121,000: 5.9 / 5.0 and 17.9 / 8.1; 202,000
 # (1e6): 25.8 / 14.0. With a cache "schur" keeps its factorisation over the Picard
 # iterations: the sinking plate at 88,528 nodes, some 177,000 velocity unknowns, spends
-# 8.4 s a step in its solves against 11.0 s with "fgmres". Natural-neighbour velocity
+# 8.4 s a step in its solves (6.4 s with the factors per component) against 11.0 s with
+# "fgmres". Natural-neighbour velocity
 # only: Taylor-Hood's sparser P2 block factorises cheaply, and "fgmres" there took twice
 # the time of "schur" at 81,000 velocity unknowns and did not converge in 3,000
 # iterations at 242,000 and a contrast of 1e6 (docs/stokes.md)

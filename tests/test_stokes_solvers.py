@@ -353,15 +353,18 @@ def test_mean_free_shifts_the_pressures_not_the_multipliers(square):
     assert problem.pressure_mean and np.abs(q[:-1]).max() < 1e-13 and q[-1] == 7.0
 
 
-@pytest.mark.parametrize("threshold, cached, chosen", [
-    (10, False, "fgmres"), (10, True, "schur"), (10 ** 9, False, "schur")])
-def test_auto_chooses_by_size_and_cache(square, monkeypatch, threshold, cached, chosen):
+@pytest.mark.parametrize("threshold, cached, contrast, chosen", [
+    (10, False, 1e6, "fgmres"), (10, True, 1e6, "schur"), (10 ** 9, False, 1e6, "schur"),
+    (10, False, 1e2, "schur")])
+def test_auto_chooses_by_size_contrast_and_cache(square, monkeypatch, threshold, cached,
+                                                 contrast, chosen):
     """The default solver ``"auto"`` takes ``"fgmres"`` for a single solve from
-    ``AUTO_FGMRES_UNKNOWNS`` velocity unknowns on and ``"schur"`` below that or with a
-    cache, names its choice, and solves with it (the chosen solver's own records, the
-    direct solve's velocity and pressure)."""
+    ``AUTO_FGMRES_UNKNOWNS`` velocity unknowns on above a viscosity contrast of
+    ``SINGLE_CONTRAST``, and ``"schur"`` below either or with a cache, names its choice,
+    and solves with it (the chosen solver's own records, the direct solve's velocity
+    and pressure)."""
     sp_, _ = square
-    ex = SolCx(1.0, 1e6)
+    ex = SolCx(1.0, contrast)
     monkeypatch.setattr(solvers, "AUTO_FGMRES_UNKNOWNS", threshold)
     cache = StokesCache() if cached else None
     s = solve_stokes(sp_, ex.viscosity, ex.force, tol=1e-12, maxiter=3000, cache=cache)

@@ -68,9 +68,9 @@ pressure is fixed by its mean (zero) through a Lagrange multiplier.
 
 Solvers
 -------
-``solver="auto"`` (default: ``"fgmres"`` for a single large solve, ``"schur"``
-otherwise), ``"schur"``, ``"schur-amg"``, ``"direct"``, ``"minres"``,
-``"fgmres"`` and ``"petsc"`` (MPI, ``docs/parallel.md``): see
+``solver="auto"`` (default: ``"fgmres"`` for a single large solve at a high
+viscosity contrast, ``"schur"`` otherwise), ``"schur"``, ``"schur-amg"``, ``"direct"``,
+``"minres"``, ``"fgmres"`` and ``"petsc"`` (MPI, ``docs/parallel.md``): see
 :mod:`skfem_nem.models.stokes_solvers`. Iteration
 counts are reported in :class:`StokesSolution`; a :class:`StokesCache`
 carries the factorisation or AMG hierarchy and the last solution from one
@@ -362,8 +362,8 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     free_slip, no_slip
         Walls (see :func:`wall_dofs`); default free slip everywhere.
     solver
-        ``"auto"`` (default: ``"fgmres"`` for a large single solve, else ``"schur"``,
-        named in ``info["solver"]``), ``"schur"`` (LU of the viscous block), ``"fgmres"``
+        ``"auto"`` (default: ``"fgmres"`` for a large single solve at a contrast above
+        1e3, else ``"schur"``; ``info["solver"]``), ``"schur"`` (LU), ``"fgmres"``
         (AMG, linear memory), ``"schur-amg"``, ``"direct"``, ``"minres"`` or ``"petsc"``
         (MPI): see :mod:`skfem_nem.models.stokes_solvers`.
     tol, maxiter

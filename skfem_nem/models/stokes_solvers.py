@@ -36,12 +36,13 @@ upper-triangular preconditioner: AMG V-cycles for the viscous block, the
 lumped 1/eta-weighted pressure mass for the Schur complement; no
 factorisation, so its memory and the cost of an iteration grow linearly with
 the unknowns (the iterations grow with the contrast like those of
-``"schur"``; a single solve is faster than ``"schur"``'s from about 50,000
-nodes, the sinking plate's steps are not; see ``docs/stokes.md``), and a
+``"schur"``; a single solve at a contrast above 1e3 is faster than ``"schur"``'s from
+about 50,000 nodes, the sinking plate's steps are not; see ``docs/stokes.md``), and a
 :class:`StokesCache` keeps its AMG hierarchy and last solution between solves
 (Picard iterations, time steps). ``"auto"``, the default, is ``"fgmres"`` for a
 single solve from :data:`AUTO_FGMRES_UNKNOWNS` natural-neighbour velocity unknowns on
-and ``"schur"`` otherwise (:func:`auto_solver`). The iterative solvers fix the mean
+at a viscosity contrast above :data:`SINGLE_CONTRAST`, and ``"schur"`` otherwise
+(:func:`auto_solver`). The iterative solvers fix the mean
 pressure by a rank-one term ``c m m^T`` of the size of 1/eta. ``"petsc"`` is
 ``"fgmres"``'s method on PETSc over MPI (optional petsc4py; the mean pressure as
 PETSc's null space instead of the rank-one term; :mod:`skfem_nem.parallel`, imported
@@ -121,21 +122,23 @@ FACTOR_STALL = 0.5
 # the two velocity components' diagonal blocks, made and applied in two threads
 # (stokes_factors.ComponentFactors), instead of the whole block's. SolCx with segments
 # at 60,814 nodes: factorised in 0.87 s against 3.58 s, 42 against 24 iterations, 3.4 s
-# against 6.5 s a solve (contrast 10); 1.85 against 6.75 s, 64 against 21, 6.2 against
-# 10.7 s (contrast 1e6). The sinking plate's linear solver at 88,528 nodes: 6.7 s a step
-# against 8.0-8.7 s; at 5,577 and 21,367 nodes the same time as the whole block's (more
-# iterations for a cheaper factorisation), so smaller problems keep the whole block.
-# The double-precision fallback (Schur-complement CG, which needs exact solves)
-# factorises the whole block (docs/stokes.md)
+# against 6.5 s a solve (contrast 10). The sinking plate's linear solver at 88,528 nodes:
+# 6.1-6.4 s a step against 8.0-8.7 s; at 5,577 and 21,367 nodes the same time as the
+# whole block's (more iterations for a cheaper factorisation), so smaller problems keep
+# the whole block. Above SINGLE_CONTRAST the whole block too (viscous_factor), and the
+# double-precision fallback (Schur-complement CG, which needs exact solves) factorises
+# the whole block (docs/stokes.md)
 SPLIT_MIN_UNKNOWNS = 20_000
 # "auto" solves a single system (no StokesCache) of at least this many velocity unknowns
-# with "fgmres", everything else with "schur" (auto_solver). SolCx with the interface as
-# segments, one solve to 1e-10, seconds of "schur" / "fgmres": 61,000 velocity unknowns
-# 2.1 / 2.9 (contrast 1) and 3.9 / 3.8 (1e6); 121,000: 5.9 / 5.0 and 17.9 / 8.1; 202,000
-# (1e6): 25.8 / 14.0. With a cache "schur" keeps its factorisation over the Picard
-# iterations: the sinking plate at 88,528 nodes, some 177,000 velocity unknowns, spends
-# 8.4 s a step in its solves (6.4 s with the factors per component) against 11.0 s with
-# "fgmres". Natural-neighbour velocity
+# and a viscosity contrast above SINGLE_CONTRAST with "fgmres", everything else with
+# "schur" (auto_solver). SolCx with the interface as segments, one solve to 1e-10,
+# seconds of "schur" / "fgmres" at a contrast of 1e6 (whole-block double-precision
+# factors): 61,000 velocity unknowns 3.9 / 3.8, 121,000: 17.9 / 8.1, 202,000: 25.8 /
+# 14.0. At contrasts up to SINGLE_CONTRAST "schur" factorises per velocity component
+# from SPLIT_MIN_UNKNOWNS on and wins: 121,000 unknowns 3.8 / 7.5 (contrast 1) and
+# 7.3 / 9.5 (1e2), 202,000: 9.3 / 12.8 and 12.2 / 18.6. With a cache "schur" keeps its
+# factorisation over the Picard iterations: the sinking plate at 88,528 nodes spends
+# 6.1-6.4 s a step in its solves against 11.0 s with "fgmres". Natural-neighbour velocity
 # only: Taylor-Hood's sparser P2 block factorises cheaply, and "fgmres" there took twice
 # the time of "schur" at 81,000 velocity unknowns and did not converge in 3,000
 # iterations at 242,000 and a contrast of 1e6 (docs/stokes.md)
@@ -712,14 +715,17 @@ def strip_order(problem: SaddlePointProblem) -> np.ndarray:
 def auto_solver(problem: SaddlePointProblem, cached: bool) -> str:
     """The solver ``"auto"`` takes for ``problem``: ``"fgmres"`` for a single solve
     (``cached`` False) of at least :data:`AUTO_FGMRES_UNKNOWNS` natural-neighbour
-    velocity unknowns, where it is the faster and needs a fraction of the memory, else
-    ``"schur"``, whose kept factorisation makes a sequence of solves with a
-    :class:`StokesCache` (Picard iterations, time steps) the cheaper, and which is the
-    robust one for Taylor-Hood's P2 velocity (there ``"fgmres"`` did not converge at a
-    viscosity contrast of 1e6)."""
+    velocity unknowns at a viscosity contrast above :data:`SINGLE_CONTRAST`, where it is
+    the faster and needs a fraction of the memory, else ``"schur"``: its factors per
+    velocity component win at lower contrasts, its kept factorisation makes a sequence
+    of solves with a :class:`StokesCache` (Picard iterations, time steps) the cheaper,
+    and it is the robust one for Taylor-Hood's P2 velocity (there ``"fgmres"`` did not
+    converge at a contrast of 1e6)."""
     big = problem.n_velocity >= AUTO_FGMRES_UNKNOWNS
     nem = isinstance(problem.ubasis, NaturalNeighbourBasis)
-    return "fgmres" if big and nem and not cached else "schur"
+    if not big or not nem or cached:
+        return "schur"
+    return "fgmres" if viscosity_contrast(problem) > SINGLE_CONTRAST else "schur"
 
 
 def solve_auto(problem: SaddlePointProblem, tol: float, maxiter: int, info: dict,

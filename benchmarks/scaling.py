@@ -24,7 +24,8 @@ peak memory of the run's process. ``--plate-solvers schur schur:refactor schur:s
 measures the default solver against itself factorising every solve (``REUSE_FACTOR``
 off), against itself solving the Picard iterations' Stokes systems to the final
 solves' ``LINEAR_TOL`` (``PICARD_LINEAR_FACTOR`` 0); ``schur:double`` against its
-factors in double precision (``FACTOR_DTYPE``).
+factors in double precision (``FACTOR_DTYPE``); ``schur:whole`` against the whole
+viscous block's factors at every size (``SPLIT_MIN_UNKNOWNS`` out of reach).
 
 Prints markdown tables. Quick run::
 
@@ -60,13 +61,16 @@ DIRECT_MAX_NODES = 5000
 # Picard iterations (stokes_solvers.REUSE_FACTOR); solving every Picard iteration to the
 # final solves' LINEAR_TOL, as before those stopped near the Picard tolerance
 # (rheology.PICARD_LINEAR_FACTOR); factorising the viscous block in double precision, as
-# before the single-precision factors (stokes_solvers.FACTOR_DTYPE)
+# before the single-precision factors (stokes_solvers.FACTOR_DTYPE); factorising the whole
+# block, as before the factors per velocity component (stokes_solvers.SPLIT_MIN_UNKNOWNS)
 VARIANTS = {"schur:refactor": "import skfem_nem.models.stokes_solvers as s; "
                               "s.REUSE_FACTOR = False; ",
             "schur:strict": "import skfem_nem.models.rheology as r; "
                             "r.PICARD_LINEAR_FACTOR = 0.0; ",
             "schur:double": "import numpy; import skfem_nem.models.stokes_solvers as s; "
-                            "s.FACTOR_DTYPE = numpy.float64; "}
+                            "s.FACTOR_DTYPE = numpy.float64; ",
+            "schur:whole": "import skfem_nem.models.stokes_solvers as s; "
+                           "s.SPLIT_MIN_UNKNOWNS = 10 ** 12; "}
 
 
 def _rss_kb() -> float:
@@ -217,7 +221,7 @@ def main(argv=None):
     ap.add_argument("--solvers", nargs="+", default=list(SOLVER_ORDER),
                     help="first the reference (direct, else schur)")
     ap.add_argument("--plate-nodes", type=int, nargs="*", default=[1500, 6000, 24000])
-    ap.add_argument("--plate-solvers", nargs="+", default=["schur", "fgmres"])
+    ap.add_argument("--plate-solvers", nargs="+", default=["auto", "fgmres"])
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--max-seconds", type=float, default=600.0)
     ap.add_argument("--maxiter", type=int, default=3000)

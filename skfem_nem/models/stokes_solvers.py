@@ -274,7 +274,6 @@ def solve_schur(problem: SaddlePointProblem, tol: float, maxiter: int,
     x0 = None if cache is None else _warm_start(cache, matvec, problem.rhs)
     info["warm_start"] = x0 is not None
     lu = viscous_factor(problem, info)
-    info["factors"] = "components" if isinstance(lu, ComponentFactors) else "whole"
     x, its, res = _factor_fgmres(problem, lu, matvec, x0, tol,
                                  min(maxiter, PRECISION_ITERATIONS))
     if res <= tol:
@@ -304,10 +303,12 @@ def viscous_factor(problem: SaddlePointProblem, info: dict):
     :func:`factor_dtype`: per velocity component from :data:`SPLIT_MIN_UNKNOWNS`
     velocity unknowns on up to a viscosity contrast of :data:`SINGLE_CONTRAST`, else of
     the whole viscous block (at higher contrasts the split needs more than twice the
-    iterations: 172 against 65 at 1e6 on 500 nodes)."""
+    iterations: 172 against 65 at 1e6 on 500 nodes). Records ``info["factors"]``."""
     dtype = factor_dtype(problem, info)
-    if (problem.n_velocity >= SPLIT_MIN_UNKNOWNS
-            and info["viscosity_contrast"] <= SINGLE_CONTRAST):
+    split = (problem.n_velocity >= SPLIT_MIN_UNKNOWNS
+             and info["viscosity_contrast"] <= SINGLE_CONTRAST)
+    info["factors"] = "components" if split else "whole"
+    if split:
         comp = velocity_components(problem.ubasis)[problem.free]
         return ComponentFactors(problem.A, comp, dtype)
     return ViscousFactor(problem.A, dtype)

@@ -9,18 +9,22 @@ neighbours") for three discretisations on the same nodes:
 - ``C-NEM``: the same pair with the interface nodes joined as segments
   (``delaunay_mesh(points, segments=...)``): constrained natural neighbours, whose
   functions may kink across the interface;
+- ``C-NEM2``: the quadratic natural-neighbour velocity (``ElementNaturalNeighbour2``,
+  the constrained coordinates in quadratic Bernstein form, dofs at the nodes and edge
+  midpoints as P2's) and P1 pressure on the constrained triangles (``method="nem2"``);
 - ``Taylor-Hood``: scikit-fem's P2-P1 on the constrained triangles.
 
 Studies:
 
 1. SolCx (viscosity 1 / 1e6 at x = 0.5, free slip; ``examples/ex07_solcx.py``'s
-   nodes): velocity and pressure L2 errors and rates, and the largest nodal
-   pressure error within 2 h of the interface and elsewhere (the exact pressure
+   nodes): velocity and pressure L2 errors (one 7-point rule for all) and rates, and
+   the largest nodal pressure error within 2 h of the interface and elsewhere (the exact pressure
    jumps at x = 0.5: interface nodes are compared with the nearer one-sided limit);
-   then the velocity error of NEM and C-NEM against Taylor-Hood's at the same
-   number of velocity unknowns (Taylor-Hood solved on a quarter of the nodes as
+   then the velocity error of NEM, C-NEM and C-NEM2 against Taylor-Hood's at the
+   same number of velocity unknowns (Taylor-Hood solved on a quarter of the nodes as
    well, its error interpolated log-log in the unknowns; about four velocity
-   unknowns of Taylor-Hood per node and component against one).
+   unknowns of Taylor-Hood per node and component against one; C-NEM2 has Taylor-Hood's
+   unknowns on the same triangles).
 2. The sinking block (``examples/ex08_sinking_block.py``, the block outline as
    segments): the scaled sinking speed at the block centre against a Taylor-Hood
    reference on four times as many nodes, for viscosity ratios 1e-4 ... 1e4.
@@ -33,17 +37,23 @@ Studies:
 import argparse
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
+from skfem import Basis, ElementTriP1
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 import ex07_solcx  # noqa: E402
 import ex08_sinking_block  # noqa: E402
 
+from skfem_nem import NaturalNeighbourBasis  # noqa: E402
+from skfem_nem.basis import gauss_rule  # noqa: E402
 from skfem_nem.models.analytic import SolCx  # noqa: E402
 from skfem_nem.models.stokes import solve_stokes, stokes_spaces  # noqa: E402
 
-METHODS = ("NEM", "C-NEM", "Taylor-Hood")
+METHODS = ("NEM", "C-NEM", "C-NEM2", "Taylor-Hood")
+#: the Stokes method of each discretisation (all but NEM on the constrained mesh)
+KINDS = {"NEM": "nem", "C-NEM": "nem", "C-NEM2": "nem2", "Taylor-Hood": "taylor-hood"}
 SOLCX_SIZES = (250, 1000, 4000, 16000)
 BLOCK_RATIOS = (1e-4, 1e-2, 1.0, 1e2, 1e4)
 QUICK = dict(solcx_sizes=SOLCX_SIZES[:2], block_nodes=800, block_ratios=(1e-4, 1.0, 1e4))
@@ -52,7 +62,7 @@ QUICK = dict(solcx_sizes=SOLCX_SIZES[:2], block_nodes=800, block_ratios=(1e-4, 1
 def spaces_for(method, meshes):
     """(spaces, mesh) of a method: meshes = (plain, constrained)."""
     mesh = meshes[0] if method == "NEM" else meshes[1]
-    return stokes_spaces(mesh, "taylor-hood" if method == "Taylor-Hood" else "nem"), mesh
+    return stokes_spaces(mesh, KINDS[method]), mesh
 
 
 def nodal_pressure_errors(exact, s, mesh, band):
@@ -66,10 +76,23 @@ def nodal_pressure_errors(exact, s, mesh, band):
     return float(e[near].max()), float(e[~near].max())
 
 
+def error_spaces(spaces):
+    """The same velocity and pressure functions with the 7-point rule (degree 5) on every
+    triangle: one error quadrature for all methods (natural-neighbour values are exact
+    at any point; their smoothed gradients do not enter the L2 errors)."""
+    rule = gauss_rule(7)
+    ub = spaces.ubasis
+    if isinstance(ub, NaturalNeighbourBasis):
+        ub = NaturalNeighbourBasis(spaces.mesh, ub.elem, quadrature=rule)
+    else:
+        ub = Basis(spaces.mesh, ub.elem, quadrature=rule)
+    return SimpleNamespace(ubasis=ub, pbasis=Basis(spaces.mesh, ElementTriP1(), quadrature=rule))
+
+
 def solcx_row(exact, n, method, meshes):
     spaces, mesh = spaces_for(method, meshes)
     s = solve_stokes(spaces, exact.viscosity, exact.force, maxiter=5000)
-    eu, ep = ex07_solcx.errors(spaces, s, exact)
+    eu, ep = ex07_solcx.errors(error_spaces(spaces), s, exact)
     nodes = mesh.p.shape[1]
     near, far = nodal_pressure_errors(exact, s, mesh, 2 / np.sqrt(nodes))
     return dict(n=n, nodes=nodes, method=method, udofs=spaces.n_velocity, u_l2=eu, p_l2=ep,
@@ -137,21 +160,23 @@ def solcx_table(rows, sizes):
 
 
 def equal_dofs(rows, sizes):
-    """Rows of (nodes, velocity unknowns, NEM / TH, C-NEM / TH) error ratios."""
+    """Rows of (nodes, velocity unknowns, NEM / TH, C-NEM / TH, C-NEM2 / TH) error
+    ratios (C-NEM2 against Taylor-Hood on its own triangles: the same unknowns)."""
     out = []
-    for nem, cnem in zip(of(rows, "NEM", sizes), of(rows, "C-NEM", sizes)):
+    for nem, cnem, q in zip(*(of(rows, m, sizes) for m in ("NEM", "C-NEM", "C-NEM2"))):
         th = taylor_hood_at(rows, cnem["udofs"])
         out.append(dict(nodes=cnem["nodes"], udofs=cnem["udofs"], th=th,
-                        nem=nem["u_l2"] / th, cnem=cnem["u_l2"] / th))
+                        nem=nem["u_l2"] / th, cnem=cnem["u_l2"] / th,
+                        udofs2=q["udofs"], cnem2=q["u_l2"] / taylor_hood_at(rows, q["udofs"])))
     return out
 
 
 def equal_dofs_table(rows, sizes):
     out = ["| nodes | velocity unknowns | Taylor-Hood u L2 (interpolated) | NEM / TH | "
-           "C-NEM / TH |", "|---|---|---|---|---|"]
+           "C-NEM / TH | C-NEM2 unknowns | C-NEM2 / TH |", "|---|---|---|---|---|---|---|"]
     for r in equal_dofs(rows, sizes):
         out.append(f"| {r['nodes']} | {r['udofs']} | {r['th']:.3e} | {r['nem']:.1f} | "
-                   f"{r['cnem']:.2f} |")
+                   f"{r['cnem']:.2f} | {r['udofs2']} | {r['cnem2']:.2f} |")
     return "\n".join(out)
 
 
@@ -164,9 +189,9 @@ def block_study(n=3000, ratios=BLOCK_RATIOS, verbose=False):
     scale = ex08_sinking_block.G * ex08_sinking_block.L ** 2
     rows = []
     for ratio in ratios:
-        w = {m: ex08_sinking_block.centre_velocity(msh, kind, ratio)[0] for m, msh, kind in (
-            ("NEM", plain, "nem"), ("C-NEM", mesh, "nem"), ("Taylor-Hood", mesh, "taylor-hood"),
-            ("reference", fine, "taylor-hood"))}
+        w = {m: ex08_sinking_block.centre_velocity(plain if m == "NEM" else mesh,
+                                                    KINDS[m], ratio)[0] for m in METHODS}
+        w["reference"] = ex08_sinking_block.centre_velocity(fine, "taylor-hood", ratio)[0]
         rows.append(dict(ratio=ratio, nodes=mesh.p.shape[1], ref_nodes=fine.p.shape[1],
                          **{m: abs(v) * scale for m, v in w.items()}))
         if verbose:
@@ -175,12 +200,13 @@ def block_study(n=3000, ratios=BLOCK_RATIOS, verbose=False):
 
 
 def block_table(rows):
-    out = [f"| eta1/eta2 | NEM | C-NEM | Taylor-Hood | reference ({rows[0]['ref_nodes']} "
-           f"nodes) | NEM error | C-NEM error | TH error |", "|---|---|---|---|---|---|---|---|"]
+    out = ["| eta1/eta2 | " + " | ".join(METHODS) + f" | reference ({rows[0]['ref_nodes']} "
+           "nodes) | " + " | ".join(f"{m} error" for m in METHODS) + " |",
+           "|---" * (2 * len(METHODS) + 2) + "|"]
     for x in rows:
         err = [f"{x[m] / x['reference'] - 1:+.2%}" for m in METHODS]
-        out.append(f"| {x['ratio']:.0e} | {x['NEM']:.4e} | {x['C-NEM']:.4e} | "
-                   f"{x['Taylor-Hood']:.4e} | {x['reference']:.4e} | " + " | ".join(err) + " |")
+        out.append(f"| {x['ratio']:.0e} | " + " | ".join(f"{x[m]:.4e}" for m in METHODS)
+                   + f" | {x['reference']:.4e} | " + " | ".join(err) + " |")
     return "\n".join(out)
 
 

@@ -13,8 +13,9 @@ Layers as sub-packages, bottom to top; a lower layer never imports a higher one:
 
 This module only re-exports the public names.
 """
-from .basis import (ElementNaturalNeighbour, ElementTetNaturalNeighbour, NaturalNeighbourBasis,
-                    NaturalNeighbourFacetBasis, restore_scikit_fem_assembly)
+from .basis import (ElementNaturalNeighbour, ElementNaturalNeighbour2, ElementTetNaturalNeighbour,
+                    NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
+                    restore_scikit_fem_assembly)
 from .coordinates import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
 from .evolution import LagrangianMesh, LagrangianMesh3D
 from .geometry import Triangulation, delaunay_mesh
@@ -24,6 +25,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Triangulation",
     "ElementNaturalNeighbour",
+    "ElementNaturalNeighbour2",
     "ElementTetNaturalNeighbour",
     "NaturalNeighbourBasis",
     "NaturalNeighbourFacetBasis",

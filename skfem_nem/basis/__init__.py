@@ -4,8 +4,10 @@ The elements and bases, the gradient-smoothing cells of the consistent default i
 the assembly hook that lets scikit-fem's forms assemble natural-neighbour stencils.
 """
 from .assembly import restore_scikit_fem_assembly
-from .elements import ElementNaturalNeighbour, ElementTetNaturalNeighbour, gauss_rule
+from .elements import (ElementNaturalNeighbour, ElementNaturalNeighbour2,
+                       ElementTetNaturalNeighbour, gauss_rule)
 from .natural_neighbour import NaturalNeighbourBasis, NaturalNeighbourFacetBasis
 
-__all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "NaturalNeighbourBasis",
-           "NaturalNeighbourFacetBasis", "gauss_rule", "restore_scikit_fem_assembly"]
+__all__ = ["ElementNaturalNeighbour", "ElementNaturalNeighbour2", "ElementTetNaturalNeighbour",
+           "NaturalNeighbourBasis", "NaturalNeighbourFacetBasis", "gauss_rule",
+           "restore_scikit_fem_assembly"]

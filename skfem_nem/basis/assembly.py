@@ -571,7 +571,7 @@ def _whole_linear(form, v, kwargs):
     np.cumsum(Dv * np.diff(ptr), out=off[1:])
     rows = np.empty(off[-1], dtype=index_dtype(v.N, 0))
     data = np.empty(off[-1])
-    ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
+    ndv = np.ascontiguousarray(v.function_dofs[:Dv], dtype=np.int64)
     kernel = _contract_linear if _parallel(v) else _contract_linear_serial
     try:
         for e0, e1, C, active in _coefficients(form, v, kwargs, Dv, None, pb, None):

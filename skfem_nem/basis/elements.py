@@ -13,8 +13,9 @@ from skfem.element import Element, ElementVector
 from skfem.quadrature import get_quadrature
 from skfem.refdom import RefTet, RefTri
 
-__all__ = ["ElementNaturalNeighbour", "ElementTetNaturalNeighbour", "gauss_rule", "element_for",
-           "integration_scheme", "QUADRATURE_POINTS", "INTEGRATIONS"]
+__all__ = ["ElementNaturalNeighbour", "ElementNaturalNeighbour2", "ElementTetNaturalNeighbour",
+           "gauss_rule", "element_for", "element_order", "integration_scheme",
+           "QUADRATURE_POINTS", "INTEGRATIONS"]
 
 
 #: number of quadrature points -> scikit-fem integration order on triangles
@@ -61,6 +62,31 @@ class ElementTetNaturalNeighbour(ElementNaturalNeighbour):
     refdom = RefTet
 
 
+class ElementNaturalNeighbour2(ElementNaturalNeighbour):
+    """Degrees of freedom of quadratic natural-neighbour functions: P2's, one per node
+    and one per edge (the field's value at the edge's midpoint on the boundary and on
+    segments; elsewhere the midpoint parameter of its polar form).
+
+    The functions are the coordinates in quadratic Bernstein form
+    (:mod:`skfem_nem.basis.quadratic`): they reproduce quadratic fields, and with the
+    quadratically consistent smoothing (:mod:`skfem_nem.basis.smoothing_quadratic`) they
+    converge at P2's rates. Triangles only; wrap it in ``ElementVector`` for vector
+    fields (dofs numbered as scikit-fem numbers ``ElementVector(ElementTriP2())``'s).
+    """
+
+    facet_dofs = 1
+    maxdeg = 2
+    dofnames = ["u", "u"]
+    doflocs = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.5, 0.0], [0.5, 0.5],
+                        [0.0, 0.5]])
+
+
+def element_order(elem) -> int:
+    """1 for the natural-neighbour coordinates, 2 for their quadratic Bernstein form."""
+    base = elem.elem if isinstance(elem, ElementVector) else elem
+    return 2 if isinstance(base, ElementNaturalNeighbour2) else 1
+
+
 def element_for(mesh, elem, who):
     """``elem`` (natural-neighbour, scalar or vector) on the reference cell of
     ``mesh``: the triangle and tetrahedron variants are the same numbering."""
@@ -69,11 +95,16 @@ def element_for(mesh, elem, who):
     base = elem.elem if vec else elem
     if not isinstance(base, ElementNaturalNeighbour):
         name = type(base).__name__ + ("" if base is elem else " in ElementVector")
-        raise TypeError(f"{who} needs ElementNaturalNeighbour() or "
-                        f"ElementVector(ElementNaturalNeighbour()), got {name}: for "
+        raise TypeError(f"{who} needs ElementNaturalNeighbour(), ElementNaturalNeighbour2() "
+                        f"or their ElementVector, got {name}: for "
                         f"{type(base).__name__} functions use scikit-fem's Basis(mesh, "
                         f"element), or nn_basis.with_element(element) for a companion on "
                         f"the same quadrature points")
+    if isinstance(base, ElementNaturalNeighbour2):
+        if isinstance(mesh, MeshTet):
+            raise ValueError(f"{who}: ElementNaturalNeighbour2 (quadratic) works on "
+                             f"triangles only; on tetrahedra use ElementNaturalNeighbour()")
+        return elem
     want = ElementTetNaturalNeighbour if isinstance(mesh, MeshTet) else ElementNaturalNeighbour
     if type(base) is not want:
         base = want()

@@ -41,13 +41,13 @@ class GroupBasis(AbstractBasis, assembly.StencilGroup):
         S = stencils.shape[0]
         if isinstance(self.elem, ElementVector):
             dim = self.elem.dim
-            nd = self.dofs.nodal_dofs
+            nd = parent.function_dofs
             self._element_dofs = np.empty((dim * S, self.nelems), dtype=np.int64)
             for j in range(S):
                 for c in range(dim):
                     self._element_dofs[dim * j + c] = nd[c, stencils[j]]
         else:
-            self._element_dofs = self.dofs.nodal_dofs[0][stencils]
+            self._element_dofs = parent.function_dofs[0][stencils]
         self.Nbfun = self._element_dofs.shape[0]
         self.stencil_values = (V, G)  # (V, G) arrays for the stacked assembly
         self._basis = None

@@ -39,7 +39,7 @@ from . import assembly, nonlinear, plotting
 from ..coordinates import natural_neighbour_coordinates
 from ..geometry.meshes import adopt, own_triangulation
 from .domain import check_used_nodes, into_domain
-from .elements import element_for, gauss_rule, integration_scheme
+from .elements import element_for, element_order, gauss_rule, integration_scheme
 from .companions import companion_basis, is_natural_neighbour, refuse_keywords
 from .plotting import DEFAULT_NREFS, refined_values, visuals_call
 from .projection import (field_values, l2_project, normalize_elements, normalize_facets,
@@ -48,6 +48,8 @@ from .groups import GroupBasis, restrict_field
 from .stencils import fill_group, stencil_union
 from . import updates
 from .smoothing import cells_2d, cells_2d_alone, cells_3d, combine, value_rule
+from . import quadratic
+from .smoothing_quadratic import smoothed_quadratic
 
 __all__ = ["NaturalNeighbourBasis", "NaturalNeighbourFacetBasis"]
 
@@ -87,6 +89,8 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         Phi, D = self._coordinates(pts, gradient=True, hint=np.repeat(hint, nq))
         if Phi.nnz and not all(np.isfinite(Dk.data).all() for Dk in D):
             Phi, D = self._fix_undefined(pts, Phi, D, dx, hint)
+        if self.order == 2:
+            return quadratic.lift(self.mesh, Phi, D)
         # gradients as one (dim, nnz) array on Phi's pattern
         return Phi, np.stack([Dk.data for Dk in D]) if len(D) else np.empty((0, Phi.nnz))
 
@@ -112,6 +116,18 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         Phi = sp.csr_matrix((val, idx.astype(Phi.indices.dtype), ptr),
                             shape=(ne * nq, Phi.shape[1]))
         return Phi, grad
+
+    @property
+    def order(self) -> int:
+        """1: the natural-neighbour coordinates; 2: their quadratic Bernstein form."""
+        return element_order(self.elem)
+
+    @property
+    def function_dofs(self) -> ndarray:
+        """(components, functions) the dof of each component of each function (a column
+        of ``values_matrix``): nodes, then (quadratic) the mesh's edges."""
+        d = self.dofs
+        return d.nodal_dofs if self.order == 1 else np.hstack([d.nodal_dofs, d.facet_dofs])
 
     def _set_functions(self, Phi, G, ne, nq):
         """Values (CSR, one row per quadrature point) and gradients (dim, nnz)
@@ -241,11 +257,11 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
             return ((self.values_matrix @ u).reshape(sh),
                     np.stack([(Dk @ u).reshape(sh) for Dk in self._D]))
 
+        nd = self.function_dofs
         if isinstance(self.elem, ElementVector):
-            nd = self.dofs.nodal_dofs
             vals, grads = zip(*[field(w[nd[c]]) for c in range(self.elem.dim)])
             return DiscreteField(np.stack(vals), np.stack(grads))
-        return DiscreteField(*field(w[self.dofs.nodal_dofs[0]]))
+        return DiscreteField(*field(w[nd[0]]))
 
     def zeros(self, dtype=None):
         return np.zeros(self.N, dtype=dtype)
@@ -397,6 +413,8 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
             x = self.mapping.F(self.X, tind=elems)
         if self.integration == "gauss":
             return self._build(x, elems, self.dx[pos])
+        if self.order == 2:
+            return smoothed_quadratic(self.mesh, self._coordinates, x, self.dx[pos], elems)
         nq = self.X.shape[1]
         # 2D: point q of a triangle lies in the cell of its vertex q;
         # 3D: one cell per tetrahedron
@@ -534,19 +552,13 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
                 raise ValueError(f"point {out[0]} at {x[:, out[0]].tolist()} is outside the "
                                  f"domain of the mesh ({out.size} such point(s))")
         Phi = self._coordinates(x.T, undefined="raise")
-        if isinstance(self.elem, ElementVector):
-            import scipy.sparse as sp
-            nd = self.dofs.nodal_dofs
-            blocks = []
-            for c in range(self.elem.dim):
-                S = sp.csr_matrix((np.ones(nd.shape[1]), (np.arange(nd.shape[1]), nd[c])),
-                                  shape=(nd.shape[1], self.N))
-                blocks.append(Phi @ S)
-            return sp.vstack(blocks, format="csr")
+        if self.order == 2:
+            Phi, _ = quadratic.lift(self.mesh, Phi)
         import scipy.sparse as sp
-        S = sp.csr_matrix((np.ones(self.N), (np.arange(self.N), self.dofs.nodal_dofs[0])),
-                          shape=(self.N, self.N))
-        return Phi @ S
+        nd = self.function_dofs
+        blocks = [Phi @ sp.csr_matrix((np.ones(nd.shape[1]), (np.arange(nd.shape[1]), nd[c])),
+                                      shape=(nd.shape[1], self.N)) for c in range(nd.shape[0])]
+        return sp.vstack(blocks, format="csr") if len(blocks) > 1 else blocks[0]
 
     def interpolator(self, y: ndarray):
         """A function x (dim, ...) -> values of the dof vector y at x."""
@@ -639,6 +651,8 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
                  disable_doflocs: bool = False):
         refuse_keywords("NaturalNeighbourFacetBasis", mapping=mapping, dofs=dofs)
         elem = element_for(mesh, elem, "NaturalNeighbourFacetBasis")
+        if element_order(elem) != 1:
+            raise NotImplementedError("no NaturalNeighbourFacetBasis for the quadratic element")
         check_used_nodes(mesh, "NaturalNeighbourFacetBasis")
         self.method = _check_method(mesh, coordinates, method)
         # (the facet rule serves both schemes: values and smoothed gradients)

@@ -93,7 +93,7 @@ def stencil_dofs(basis, positions) -> np.ndarray:
         nodes = np.unique(sten[take])
     else:
         nodes = np.zeros(0, np.int64)
-    return np.sort(basis.dofs.nodal_dofs[:, nodes].ravel())
+    return np.sort(basis.function_dofs[:, nodes].ravel())
 
 
 def value_dofs(basis, positions) -> np.ndarray:
@@ -105,7 +105,7 @@ def value_dofs(basis, positions) -> np.ndarray:
     rows = (np.asarray(positions, dtype=np.int64)[:, None] * nq + np.arange(nq)).ravel()
     sub = Phi[rows]
     nodes = np.unique(sub.indices[sub.data != 0.0])
-    return np.sort(basis.dofs.nodal_dofs[:, nodes].ravel())
+    return np.sort(basis.function_dofs[:, nodes].ravel())
 
 
 def projection_dofs(basis, positions) -> np.ndarray:

@@ -149,7 +149,7 @@ def node_pattern(basis, parallel: bool = False) -> tuple:
     :func:`_node_pattern`)."""
     pat = basis.__dict__.get("_node_pattern")
     if pat is None:
-        n = basis.mesh.p.shape[1]
+        n = basis.function_dofs.shape[1]
         ptr, sten = basis.stencil_ptr, basis.stencil_nodes
         inc = _incidence(ptr, sten, n)
         kernel = _node_pattern if parallel else _node_pattern_serial
@@ -185,8 +185,8 @@ def _summed(u, v, Du, Dv, off, K, parallel, idt):
     nnz = Du * Dv * int(cptr[-1])
     ind = np.empty((2, nnz), dtype=idt)
     data = np.empty(nnz)
-    ndu = np.ascontiguousarray(u.dofs.nodal_dofs[:Du], dtype=np.int64)
-    ndv = np.ascontiguousarray(v.dofs.nodal_dofs[:Dv], dtype=np.int64)
+    ndu = np.ascontiguousarray(u.function_dofs[:Du], dtype=np.int64)
+    ndv = np.ascontiguousarray(v.function_dofs[:Dv], dtype=np.int64)
     kernel = _sum_rows if parallel else _sum_rows_serial
     kernel(u.stencil_ptr, u.stencil_nodes, off, K, inc_ptr, inc_e, inc_l, cptr, cols,
            Du, Dv, ndu, ndv, blocks(n), ind[0], ind[1], data)

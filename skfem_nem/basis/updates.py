@@ -90,6 +90,10 @@ def obstacle(basis, mesh):
                 "method; build a new basis")
     if not isinstance(mesh, MeshTri):
         return f"updated() needs a MeshTri, got {type(mesh).__name__}"
+    if basis.order != 1:
+        return ("updated() keeps the functions of unchanged triangles, but the quadratic "
+                "functions' dofs are numbered by the mesh's edges, which change: build a "
+                "new basis")
     for what, m in (("this basis' mesh", basis.mesh), ("the new mesh", mesh)):
         if not own_triangulation(m, adopt(m, basis.method)):
             return (f"{what} is not its own (constrained) Delaunay triangulation (a "

@@ -279,7 +279,8 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
     if "m" in cache:
         return cache
     ub, pb, bb = spaces.ubasis, spaces.pbasis, spaces.bbasis
-    bform = divergence if spaces.method == "taylor-hood" else weak_divergence
+    # (the quadratic smoothed gradients integrate q div u by parts exactly themselves)
+    bform = divergence if spaces.method in ("taylor-hood", "nem2") else weak_divergence
     if bform is weak_divergence:
         cache["flux"] = boundary_flux(spaces)
     if bb is None:
@@ -569,7 +570,8 @@ def inf_sup_constant(spaces: StokesSpaces, stabilised: Optional[bool] = None,
     D = wall_dofs(spaces, free_slip=None, no_slip="all")
     free = np.setdiff1d(np.arange(ub.N), D)
     A = h1.assemble(ub)[free][:, free]
-    bform = divergence if spaces.method == "taylor-hood" else weak_divergence
+    # (the quadratic smoothed gradients integrate q div u by parts exactly themselves)
+    bform = divergence if spaces.method in ("taylor-hood", "nem2") else weak_divergence
     B = bform.assemble(ub, pb)[:, free]
     if spaces.bbasis is not None:  # bubbles vanish on the walls: all free
         bb = spaces.bbasis

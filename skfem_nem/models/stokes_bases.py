@@ -16,7 +16,8 @@ from skfem import Basis, MeshTri
 from skfem.element import ElementH1, ElementTriP0, ElementTriP1, ElementTriP2, ElementVector
 from skfem.refdom import RefTri
 
-from ..basis import ElementNaturalNeighbour, NaturalNeighbourBasis, gauss_rule
+from ..basis import (ElementNaturalNeighbour, ElementNaturalNeighbour2, NaturalNeighbourBasis,
+                     gauss_rule)
 
 __all__ = ["ElementTriBubble", "StokesSpaces", "stokes_spaces"]
 
@@ -133,6 +134,11 @@ def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: Optional[int] = N
         quad = ub.quadrature
         if method == "nem":
             bb = Basis(mesh, ElementVector(ElementTriBubble()), quadrature=quad)
+    elif method == "nem2":
+        ub = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour2()),
+                                   npoints=npoints, coordinates=coordinates,
+                                   integration=integration)
+        quad = ub.quadrature
     elif method in ("taylor-hood", "th"):
         method = "taylor-hood"
         if integration not in (None, "gauss"):
@@ -141,8 +147,8 @@ def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: Optional[int] = N
         quad = gauss_rule(6 if npoints is None else npoints)
         ub = Basis(mesh, ElementVector(ElementTriP2()), quadrature=quad)
     else:
-        raise ValueError(f"method must be 'nem', 'nem-projection' or 'taylor-hood', "
-                         f"got {method!r}")
+        raise ValueError(f"method must be 'nem', 'nem-projection', 'nem2' or "
+                         f"'taylor-hood', got {method!r}")
     pb = Basis(mesh, ElementTriP1(), quadrature=quad)
     p0 = Basis(mesh, ElementTriP0(), quadrature=quad)
     return StokesSpaces(mesh, method, ub, pb, p0, bb)

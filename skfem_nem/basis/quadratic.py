@@ -1,0 +1,222 @@
+"""Quadratic natural-neighbour functions: the coordinates in Bernstein form.
+
+Why
+---
+Natural-neighbour coordinates reproduce linear fields and no more, so a NEM field
+converges at rate 2 in L2 and 1 in H1, an order below P2 (Taylor-Hood's velocity) at
+about the same number of unknowns. Using the coordinates ``lambda_i`` as the
+barycentric variables of a quadratic Bernstein polynomial raises the order by one:
+
+    u(x) = sum_i sum_j lambda_i(x) lambda_j(x) c_ij,
+
+with ``c_ij`` the *polar form* (blossom) ``b(x_i, x_j)`` of the field at the two nodes
+(the Bezier form over natural-neighbour coordinates goes back to Farin, CAGD 7, 1990,
+who built a C1 cubic one). For a quadratic ``q`` the polar form is symmetric and affine
+in each argument, and the coordinates sum to one with ``sum_i lambda_i x_i = x``, so
+the sum is ``b(x, x) = q(x)``: quadratics are reproduced exactly, on any node set and
+with constrained (visibility-restricted) coordinates alike.
+
+Degrees of freedom
+------------------
+P2's: the value ``u_i`` at each node and the value ``m_e`` at the midpoint of each
+edge of the mesh (the constrained Delaunay triangulation). They give the polar form
+where the pair shares an edge, exactly for quadratics:
+
+* ``c_ii = u_i``;
+* ``c_ij = 2 m_e - (u_i + u_j) / 2`` for the edge e = (i, j).
+
+Two nodes can be natural neighbours of one point without sharing an edge (the far
+vertices of two triangles whose circumcircles overlap there). Their polar form comes
+from multi-affinity through a triangle T = (i, a, b) at i: with ``x_j = alpha x_i +
+beta x_a + gamma x_b``, ``c_ij = alpha u_i + beta c_ia + gamma c_ib``, averaged with the
+same from j's side. T is the triangle whose angle at i contains the direction to j (its
+weights are then bounded; any triangle at i would reproduce quadratics).
+
+Along a hull edge or a segment the coordinates are the edge's linear 1D weights, so
+there the function is the P2 interpolant of the edge's two nodal values and its midpoint
+value: Dirichlet data are imposed on those dofs exactly as for P2.
+
+The functions are numbered nodes first, then edges (``mesh.facets``), which is the
+order of scikit-fem's nodal and facet dofs.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from numba import njit
+
+__all__ = ["lift", "pair_matrix", "n_functions"]
+
+#: a direction on the boundary of a triangle's angle at i (round-off) still counts as
+#: inside it: barycentric weights above -SECTOR_TOL select the triangle
+SECTOR_TOL = 1e-12
+
+
+def n_functions(mesh) -> int:
+    """Number of quadratic functions on ``mesh``: one per node and one per edge."""
+    return mesh.p.shape[1] + mesh.facets.shape[1]
+
+
+def lift(mesh, Phi, D=None):
+    """The quadratic functions at the points where ``Phi`` holds the coordinates.
+
+    ``Phi`` (m, nodes) CSR of natural-neighbour coordinates, ``D`` their gradients
+    (list of dim CSR on Phi's pattern) or None. Returns ``(Q, G)``: the (m, nodes +
+    edges) CSR of the quadratic functions and their gradients as a (dim, nnz) array on
+    Q's pattern (``(dim, 0)``-shaped entries for ``D=None``: none).
+    """
+    Phi = sp.csr_matrix(Phi)
+    nv = mesh.p.shape[1]
+    rows, first, second = _pair_entries(Phi.indptr.astype(np.int64))
+    i, j = Phi.indices[first], Phi.indices[second]
+    keys, pair = np.unique(np.minimum(i, j).astype(np.int64) * nv + np.maximum(i, j),
+                           return_inverse=True)
+    C = pair_matrix(mesh, keys)
+    dim = 0 if D is None else len(D)
+    grads = (np.zeros((0, Phi.nnz)) if D is None
+             else np.stack([np.asarray(Dk.data, dtype=float) for Dk in D]))
+    term_ptr = np.searchsorted(rows, np.arange(Phi.shape[0] + 1)).astype(np.int64)
+    args = (term_ptr, first, second, pair.astype(np.int64), Phi.data.astype(float), grads,
+            C.indptr.astype(np.int64), C.indices.astype(np.int64), C.data, n_functions(mesh))
+    count = np.zeros(Phi.shape[0], np.int64)
+    _lift_rows(*args, count, np.empty(0, np.int64), np.empty(0), np.empty((dim, 0)), False)
+    ptr = np.zeros(Phi.shape[0] + 1, np.int64)
+    np.cumsum(count, out=ptr[1:])
+    idx, val, grad = np.empty(ptr[-1], np.int64), np.empty(ptr[-1]), np.empty((dim, ptr[-1]))
+    _lift_rows(*args, ptr, idx, val, grad, True)
+    Q = sp.csr_matrix((val, idx, ptr), shape=(Phi.shape[0], n_functions(mesh)))
+    return Q, grad
+
+
+def _pair_entries(indptr):
+    """Every pair of entries (first <= second) of each row: (row, first, second)."""
+    nnz = int(indptr[-1])
+    row = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    count = indptr[row + 1] - np.arange(nnz)            # entries from this one to the row's end
+    first = np.repeat(np.arange(nnz), count)
+    start = np.repeat(np.cumsum(count) - count, count)
+    second = first + (np.arange(first.size) - start)
+    return row[first], first, second
+
+
+@njit(cache=True)
+def _lift_rows(term_ptr, first, second, pair, lam, grads, c_ptr, c_idx, c_val, nfun,
+               ptr, idx, val, grad, fill):
+    """Row by row (Gustavson's sparse product): each pair term lambda_a lambda_b
+    (twice for a != b) spread over the functions of its pair's polar value. First
+    pass (``fill`` False) counts each row's functions into ``ptr``; the second writes
+    them at ``ptr[r]``."""
+    dim = grads.shape[0]
+    slot = np.full(nfun, -1, np.int64)
+    for r in range(term_ptr.shape[0] - 1):
+        n = 0
+        base = ptr[r] if fill else 0
+        for t in range(term_ptr[r], term_ptr[r + 1]):
+            a, b, p = first[t], second[t], pair[t]
+            w = 1.0 if a == b else 2.0
+            for k in range(c_ptr[p], c_ptr[p + 1]):
+                f = c_idx[k]
+                if slot[f] < 0:
+                    slot[f] = base + n
+                    if fill:
+                        idx[base + n] = f
+                        val[base + n] = 0.0
+                        for d in range(dim):
+                            grad[d, base + n] = 0.0
+                    n += 1
+                if fill:
+                    s = slot[f]
+                    c = w * c_val[k]
+                    val[s] += c * lam[a] * lam[b]
+                    for d in range(dim):
+                        grad[d, s] += c * (lam[a] * grads[d, b] + lam[b] * grads[d, a])
+        if not fill:
+            ptr[r] = n
+        # reset the slots of this row's functions
+        for t in range(term_ptr[r], term_ptr[r + 1]):
+            p = pair[t]
+            for k in range(c_ptr[p], c_ptr[p + 1]):
+                slot[c_idx[k]] = -1
+
+
+def pair_matrix(mesh, keys) -> sp.csr_matrix:
+    """(pairs, functions) CSR: row k is the polar value of the node pair ``keys[k] =
+    lo * nodes + hi`` (lo <= hi) as a combination of nodal and midpoint values."""
+    nv = mesh.p.shape[1]
+    lo, hi = keys // nv, keys % nv
+    k = np.arange(keys.size)
+    diag = lo == hi
+    edge = np.where(diag, -1, edge_index(mesh, lo, hi))
+    on = ~diag & (edge >= 0)
+    rows = [k[diag], k[on], k[on], k[on]]
+    cols = [lo[diag], nv + edge[on], lo[on], hi[on]]
+    vals = [np.ones(diag.sum()), np.full(on.sum(), 2.0), np.full(on.sum(), -0.5),
+            np.full(on.sum(), -0.5)]
+    far = np.flatnonzero(~diag & (edge < 0))
+    if far.size:
+        for s, d in ((lo[far], hi[far]), (hi[far], lo[far])):
+            r, c, v = _through_triangle(mesh, s, d)
+            rows.append(far[r])
+            cols.append(c)
+            vals.append(0.5 * v)
+    C = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(keys.size, n_functions(mesh)))
+    C.sum_duplicates()
+    return C
+
+
+def edge_index(mesh, lo, hi) -> np.ndarray:
+    """The mesh edge (facet) joining nodes lo[k] < hi[k], or -1."""
+    nv = mesh.p.shape[1]
+    f = np.sort(mesh.facets, axis=0).astype(np.int64)
+    fk = f[0] * nv + f[1]
+    order = np.argsort(fk)
+    fk = fk[order]
+    key = np.asarray(lo, np.int64) * nv + np.asarray(hi, np.int64)
+    pos = np.minimum(np.searchsorted(fk, key), fk.size - 1)
+    return np.where(fk[pos] == key, order[pos], -1)
+
+
+def _node_triangles(mesh):
+    """CSR (ptr, triangles) of the triangles at each node."""
+    t = mesh.t
+    node = t.T.ravel()
+    order = np.argsort(node, kind="stable")
+    ptr = np.zeros(mesh.p.shape[1] + 1, np.int64)
+    np.cumsum(np.bincount(node, minlength=mesh.p.shape[1]), out=ptr[1:])
+    return ptr, np.repeat(np.arange(t.shape[1]), 3)[order]
+
+
+def _through_triangle(mesh, i, j):
+    """Polar value of the pairs (i[k], j[k]) by multi-affinity through the triangle at
+    i whose angle contains the direction to j (else the one with the smallest
+    weights): (pair k, function, coefficient) triplets."""
+    ptr, tris = _node_triangles(mesh)
+    count = ptr[i + 1] - ptr[i]
+    pid = np.repeat(np.arange(i.size), count)
+    T = tris[ptr[i][pid] + np.arange(pid.size) - np.repeat(np.cumsum(count) - count, count)]
+    tv = mesh.t[:, T]
+    at = np.argmax(tv == i[pid], axis=0)
+    cand = np.arange(T.size)
+    a, b = tv[(at + 1) % 3, cand], tv[(at + 2) % 3, cand]
+    beta, gamma = _weights(mesh.p, i[pid], a, b, j[pid])
+    size = np.maximum(np.abs(beta), np.abs(gamma))
+    inside = (beta >= -SECTOR_TOL) & (gamma >= -SECTOR_TOL)
+    order = np.lexsort((size, ~inside, pid))
+    best = order[np.r_[True, pid[order][1:] != pid[order][:-1]]]
+    be, ga, a, b = beta[best], gamma[best], a[best], b[best]
+    nv = mesh.p.shape[1]
+    e_a = edge_index(mesh, np.minimum(i, a), np.maximum(i, a))
+    e_b = edge_index(mesh, np.minimum(i, b), np.maximum(i, b))
+    k = np.arange(i.size)
+    # alpha u_i + beta (2 m_ia - (u_i + u_a) / 2) + gamma (2 m_ib - (u_i + u_b) / 2)
+    alpha = 1.0 - be - ga
+    return (np.concatenate([k] * 5), np.concatenate([i, a, b, nv + e_a, nv + e_b]),
+            np.concatenate([alpha - 0.5 * (be + ga), -0.5 * be, -0.5 * ga, 2 * be, 2 * ga]))
+
+
+def _weights(p, i, a, b, j):
+    """Barycentric weights (of a and b) of x_j in the triangle (x_i, x_a, x_b)."""
+    ea, eb, r = p[:, a] - p[:, i], p[:, b] - p[:, i], p[:, j] - p[:, i]
+    det = ea[0] * eb[1] - ea[1] * eb[0]
+    return (r[0] * eb[1] - r[1] * eb[0]) / det, (ea[0] * r[1] - ea[1] * r[0]) / det

@@ -3,8 +3,9 @@
 Prints the tables of docs/verification.md (sections 1-3 and 6) for the
 default natural-neighbour basis (gradients smoothed over three cells per
 Delaunay triangle, :mod:`skfem_nem.basis.smoothing`) next to Gauss quadrature of
-the gradients with 3, 6 and 13 points per triangle and scikit-fem's P1 and P2
-on the same triangles:
+the gradients with 3, 6 and 13 points per triangle, the quadratic natural-neighbour
+functions (``NEM2``: ``ElementNaturalNeighbour2``, linear smoothed gradients) and
+scikit-fem's P1 and P2 on the same triangles:
 
 1. Poisson, u = sin(pi x) sin(pi y), the uniform and graded node sets of
    ``examples/ex04_nem_vs_fem.py``, 250 -> 64,000 nodes: L2 and H1 errors,
@@ -45,13 +46,29 @@ from helpers import cube_nodes  # noqa: E402
 from test_consistency import (_stokes_l2p as _l2p, _stokes_l2u as _l2u,  # noqa: E402
                               elasticity_patch_error, graded, laplace_patch_error, thin)
 
-from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis,  # noqa: E402
-                       delaunay_mesh)
+from skfem_nem import (ElementNaturalNeighbour, ElementNaturalNeighbour2,  # noqa: E402
+                       NaturalNeighbourBasis, delaunay_mesh)
 from skfem_nem.models.analytic import DoneaHuerta  # noqa: E402
 from skfem_nem.geometry.nodesets import box_nodes  # noqa: E402
 from skfem_nem.models.stokes import inf_sup_constant, solve_stokes, stokes_spaces  # noqa: E402
 
-POISSON_METHODS = ("NEM", "NEM-3", "NEM-6", "NEM-13", "P1", "P2")
+POISSON_METHODS = ("NEM", "NEM-3", "NEM-6", "NEM-13", "NEM2", "P1", "P2")
+
+
+def poisson_basis(mesh, method):
+    """The basis of a Poisson method: ``"NEM2"`` the quadratic natural-neighbour
+    functions (smoothed), the others those of ``examples/ex04_nem_vs_fem.py``."""
+    if method == "NEM2":
+        return NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2())
+    return make_basis(mesh, method)
+
+
+def poisson_error_basis(mesh, method, nem7):
+    """The 7-point (natural-neighbour) or intorder-6 (P1, P2) basis of the errors;
+    ``nem7`` the linear natural-neighbour one, shared by its rules."""
+    if method == "NEM2":
+        return NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2(), npoints=7)
+    return nem7 if method.startswith("NEM") else error_basis(mesh, method)
 
 
 def rate(n0, n1, e0, e1):
@@ -80,11 +97,11 @@ def poisson(sizes, repeat):
             nem7 = error_basis(mesh, "NEM")
             for m in POISSON_METHODS:
                 def run():
-                    b = make_basis(mesh, m)
+                    b = poisson_basis(mesh, m)
                     return solve(*condense(laplace.assemble(b), load.assemble(b),
                                            D=b.get_dofs())), b
                 sec, (u, b) = best_time(run, repeat)
-                e0, e1 = errors(nem7 if m.startswith("NEM") else error_basis(mesh, m), u)
+                e0, e1 = errors(poisson_error_basis(mesh, m, nem7), u)
                 rows.append(dict(kind=kind, method=m, nodes=len(p), dofs=b.N, l2=e0, h1=e1,
                                  seconds=sec))
                 print(f"# poisson {kind} {len(p)} {m}: {e0:.3e} {e1:.3e} {sec:.3f}s",
@@ -202,14 +219,16 @@ def stokes(sizes, repeat):
     for n in sizes:
         mesh = delaunay_mesh(box_nodes(n, seed=1))
         vb = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()), npoints=7)
+        vb2 = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour2()), npoints=7)
         pe = Basis(mesh, ElementTriP1(), intorder=4)
         for label, kw in (("NEM (smoothed)", {}), ("NEM Gauss-6", {"npoints": 6}),
+                          ("NEM2 (smoothed)", {"method": "nem2"}),
                           ("Taylor-Hood", {"method": "taylor-hood"})):
             def run():
                 return solve_stokes(stokes_spaces(mesh, **kw), 1.0, DoneaHuerta.force,
                                     free_slip=None, no_slip="all", tol=1e-12)
             sec, s = best_time(run, repeat)
-            ub = (vb if label.startswith("NEM")
+            ub = (vb2 if label.startswith("NEM2") else vb if label.startswith("NEM")
                   else Basis(mesh, s.spaces.ubasis.elem, intorder=6))
             eu = np.sqrt(_l2u.assemble(ub, u=ub.interpolate(s.u)))
             ep = np.sqrt(_l2p.assemble(pe, p=pe.interpolate(s.p)))
@@ -238,17 +257,18 @@ def stokes_table(rows):
 
 
 def stokes_extras():
-    lines = ["| nodes | inf-sup NEM (smoothed) | inf-sup NEM Gauss-6 | inf-sup Taylor-Hood |",
-             "|---|---|---|---|"]
+    lines = ["| nodes | inf-sup NEM (smoothed) | inf-sup NEM Gauss-6 | inf-sup NEM2 | "
+             "inf-sup Taylor-Hood |", "|---|---|---|---|---|"]
     for n in (100, 200, 400, 900):
         mesh = delaunay_mesh(box_nodes(n, seed=3))
         vals = [inf_sup_constant(stokes_spaces(mesh, **kw))
-                for kw in ({}, {"npoints": 6}, {"method": "taylor-hood"})]
+                for kw in ({}, {"npoints": 6}, {"method": "nem2"}, {"method": "taylor-hood"})]
         lines.append(f"| {mesh.nvertices} | " + " | ".join(f"{v:.3f}" for v in vals) + " |")
     mesh = delaunay_mesh(box_nodes(800, seed=3))
     lines += ["", "| uniform prestress, 800 nodes, no slip | largest velocity |", "|---|---|"]
     for label, kw in (("NEM (smoothed)", {}), ("NEM Gauss-3", {"npoints": 3}),
-                      ("NEM Gauss-6", {"npoints": 6}), ("NEM Gauss-13", {"npoints": 13})):
+                      ("NEM Gauss-6", {"npoints": 6}), ("NEM Gauss-13", {"npoints": 13}),
+                      ("NEM2 (smoothed)", {"method": "nem2"})):
         S = stokes_spaces(mesh, **kw)
         tau0 = np.array([[0.3, 0.2], [0.2, -0.1]])[:, :, None, None] + np.zeros(
             (2, 2) + S.ubasis.dx.shape)
@@ -267,8 +287,8 @@ def main(argv=None):
     a = ap.parse_args(argv)
     # numba compilation outside the timings
     warm = delaunay_mesh(box_nodes(60, seed=0))
-    for m in POISSON_METHODS[:4]:
-        laplace.assemble(make_basis(warm, m))
+    for m in POISSON_METHODS[:5]:
+        laplace.assemble(poisson_basis(warm, m))
     solve_stokes(stokes_spaces(warm), 1.0, DoneaHuerta.force, free_slip=None, no_slip="all")
     if "poisson" in a.only:
         rows = poisson(a.sizes, a.repeat)

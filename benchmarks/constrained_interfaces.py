@@ -37,17 +37,13 @@ Studies:
 import argparse
 import sys
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
-from skfem import Basis, ElementTriP1
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 import ex07_solcx  # noqa: E402
 import ex08_sinking_block  # noqa: E402
 
-from skfem_nem import NaturalNeighbourBasis  # noqa: E402
-from skfem_nem.basis import gauss_rule  # noqa: E402
 from skfem_nem.models.analytic import SolCx  # noqa: E402
 from skfem_nem.models.stokes import solve_stokes, stokes_spaces  # noqa: E402
 
@@ -76,23 +72,10 @@ def nodal_pressure_errors(exact, s, mesh, band):
     return float(e[near].max()), float(e[~near].max())
 
 
-def error_spaces(spaces):
-    """The same velocity and pressure functions with the 7-point rule (degree 5) on every
-    triangle: one error quadrature for all methods (natural-neighbour values are exact
-    at any point; their smoothed gradients do not enter the L2 errors)."""
-    rule = gauss_rule(7)
-    ub = spaces.ubasis
-    if isinstance(ub, NaturalNeighbourBasis):
-        ub = NaturalNeighbourBasis(spaces.mesh, ub.elem, quadrature=rule)
-    else:
-        ub = Basis(spaces.mesh, ub.elem, quadrature=rule)
-    return SimpleNamespace(ubasis=ub, pbasis=Basis(spaces.mesh, ElementTriP1(), quadrature=rule))
-
-
 def solcx_row(exact, n, method, meshes):
     spaces, mesh = spaces_for(method, meshes)
     s = solve_stokes(spaces, exact.viscosity, exact.force, maxiter=5000)
-    eu, ep = ex07_solcx.errors(error_spaces(spaces), s, exact)
+    eu, ep = ex07_solcx.errors(ex07_solcx.error_spaces(spaces), s, exact)
     nodes = mesh.p.shape[1]
     near, far = nodal_pressure_errors(exact, s, mesh, 2 / np.sqrt(nodes))
     return dict(n=n, nodes=nodes, method=method, udofs=spaces.n_velocity, u_l2=eu, p_l2=ep,

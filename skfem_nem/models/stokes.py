@@ -269,6 +269,15 @@ class StokesSystem:
     bubble: Optional[tuple] = None  # (A_bb^-1, A_bb^-1 A_bn, B_b, f_b) of the bubbles
 
 
+def divergence_form(spaces: StokesSpaces):
+    """The form of the divergence block: ``-(div u, q)`` for the quadratic velocities
+    (Taylor-Hood's, and the quadratic natural-neighbour one, whose linear smoothed
+    gradients integrate it by parts exactly themselves), its integration by parts
+    ``(u, grad q)`` for the linear natural-neighbour velocity (with the exact boundary
+    term of :func:`~skfem_nem.models.stokes_walls.boundary_flux` added)."""
+    return divergence if spaces.method in ("taylor-hood", "nem2") else weak_divergence
+
+
 def _blocks_once(spaces: StokesSpaces) -> dict:
     """The blocks independent of the coefficients, once per spaces: the divergence
     ``"B"`` (without bubbles; with them it is assembled with their condensation), the
@@ -279,8 +288,7 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
     if "m" in cache:
         return cache
     ub, pb, bb = spaces.ubasis, spaces.pbasis, spaces.bbasis
-    # (the quadratic smoothed gradients integrate q div u by parts exactly themselves)
-    bform = divergence if spaces.method in ("taylor-hood", "nem2") else weak_divergence
+    bform = divergence_form(spaces)
     if bform is weak_divergence:
         cache["flux"] = boundary_flux(spaces)
     if bb is None:
@@ -570,8 +578,7 @@ def inf_sup_constant(spaces: StokesSpaces, stabilised: Optional[bool] = None,
     D = wall_dofs(spaces, free_slip=None, no_slip="all")
     free = np.setdiff1d(np.arange(ub.N), D)
     A = h1.assemble(ub)[free][:, free]
-    # (the quadratic smoothed gradients integrate q div u by parts exactly themselves)
-    bform = divergence if spaces.method in ("taylor-hood", "nem2") else weak_divergence
+    bform = divergence_form(spaces)
     B = bform.assemble(ub, pb)[:, free]
     if spaces.bbasis is not None:  # bubbles vanish on the walls: all free
         bb = spaces.bbasis

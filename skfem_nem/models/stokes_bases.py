@@ -3,8 +3,9 @@
 Kept apart from :mod:`skfem_nem.models.stokes` (forms, assembly, the solve) and from
 :mod:`skfem_nem.models.stokes_walls` (conditions on the velocity dofs), which both build
 on these spaces: which bases a method pairs (natural-neighbour velocity with bubbles and
-P1 pressure, or Taylor-Hood), with one quadrature, and the same spaces restricted to a
-subset of the triangles for a distributed assembly (:meth:`StokesSpaces.restricted`).
+P1 pressure, the quadratic natural-neighbour velocity and P1 pressure, or Taylor-Hood),
+with one quadrature, and the same spaces restricted to a subset of the triangles for a
+distributed assembly (:meth:`StokesSpaces.restricted`).
 """
 from __future__ import annotations
 
@@ -110,14 +111,18 @@ def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: Optional[int] = N
     mesh
         A Delaunay ``MeshTri`` (build it with :func:`skfem_nem.delaunay_mesh`).
     method
-        ``"nem"`` (natural-neighbour velocity, P1 pressure, stabilised) or
-        ``"taylor-hood"`` (P2 velocity, P1 pressure).
+        ``"nem"`` (natural-neighbour velocity with bubbles, P1 pressure), ``"nem2"``
+        (quadratic natural-neighbour velocity, ``ElementNaturalNeighbour2``: P2's
+        unknowns and rates, P1 pressure, inf-sup stable without bubbles; fixed meshes:
+        its functions are not updated locally) or ``"taylor-hood"`` (P2 velocity, P1
+        pressure).
     npoints
         Gauss points per triangle (1, 3, 4, 6, 7, 12, 13). Natural-neighbour
         velocities: ``None`` (default) integrates them consistently by
         gradient smoothing (:mod:`skfem_nem.basis.smoothing`; 3 points per
-        triangle, one per smoothing cell); a number asks for Gauss quadrature
-        of their gradients with that rule. Taylor-Hood: default 6, which
+        triangle, one per smoothing cell; quadratic: linear smoothed gradients per
+        triangle, :mod:`skfem_nem.basis.smoothing_quadratic`); a number asks for Gauss
+        quadrature of their gradients with that rule. Taylor-Hood: default 6, which
         integrates its forms exactly.
     coordinates
         ``"sibson"`` or ``"laplace"`` (NEM only).

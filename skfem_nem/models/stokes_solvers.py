@@ -720,10 +720,11 @@ def auto_solver(problem: SaddlePointProblem, cached: bool) -> str:
     the faster and needs a fraction of the memory, else ``"schur"``: its factors per
     velocity component win at lower contrasts, its kept factorisation makes a sequence
     of solves with a :class:`StokesCache` (Picard iterations, time steps) the cheaper,
-    and it is the robust one for Taylor-Hood's P2 velocity (there ``"fgmres"`` did not
-    converge at a contrast of 1e6)."""
+    and it is the robust one for the quadratic velocities, Taylor-Hood's P2 (there
+    ``"fgmres"`` did not converge at a contrast of 1e6) and the quadratic natural-neighbour
+    one (SolCx at 1e6, 33,242 unknowns: 202 iterations and 32 s against 44 and 18 s)."""
     big = problem.n_velocity >= AUTO_FGMRES_UNKNOWNS
-    nem = isinstance(problem.ubasis, NaturalNeighbourBasis)
+    nem = isinstance(problem.ubasis, NaturalNeighbourBasis) and problem.ubasis.order == 1
     if not big or not nem or cached:
         return "schur"
     return "fgmres" if viscosity_contrast(problem) > SINGLE_CONTRAST else "schur"

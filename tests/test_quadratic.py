@@ -164,3 +164,19 @@ def test_quadratic_element_refusals():
         basis.boundary()
     with pytest.raises(ValueError, match="triangles only"):
         NaturalNeighbourBasis(MeshTet(), ElementNaturalNeighbour2())
+
+
+def test_projection_and_plot_values_reproduce_a_quadratic():
+    rng = np.random.default_rng(5)
+    mesh = delaunay_mesh(np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], rng.random((60, 2))])
+    f, _ = quadratic(rng.normal(size=6))
+    basis = NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2())
+    u = basis.project(lambda x: f(*x))
+    assert np.abs(u - dof_values(basis, f)).max() < 1e-9
+    refined, values = basis.refinterp(u, nrefs=2)
+    assert np.abs(values - f(*refined.p)).max() < 1e-10
+    vec = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour2()))
+    w = vec.project(lambda x: np.stack([f(*x), 2 * f(*x)]))
+    field = vec.interpolate(w)
+    x = vec.global_coordinates()
+    assert np.abs(np.asarray(field) - np.stack([f(*x), 2 * f(*x)])).max() < 1e-9

@@ -180,3 +180,16 @@ def test_projection_and_plot_values_reproduce_a_quadratic():
     field = vec.interpolate(w)
     x = vec.global_coordinates()
     assert np.abs(np.asarray(field) - np.stack([f(*x), 2 * f(*x)])).max() < 1e-9
+
+
+def test_subdomain_bases_add_up_to_the_whole():
+    rng = np.random.default_rng(7)
+    mesh = delaunay_mesh(np.r_[[[0, 0], [1, 0], [1, 1], [0, 1]], rng.random((50, 2))])
+    basis = NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2())
+    left = np.flatnonzero(mesh.p[0, mesh.t].mean(axis=0) < 0.5)
+    right = np.setdiff1d(np.arange(mesh.nelements), left)
+    k = np.ones(basis.dx.shape)
+    whole = diffusion.assemble(basis, k=k)
+    parts = sum(diffusion.assemble(basis.with_elements(e), k=np.ones((e.size, 3)))
+                for e in (left, right))
+    assert abs(whole - parts).max() < 1e-12 * abs(whole).max()

@@ -53,6 +53,10 @@ from skfem_nem.geometry.nodesets import box_nodes  # noqa: E402
 from skfem_nem.models.stokes import inf_sup_constant, solve_stokes, stokes_spaces  # noqa: E402
 
 POISSON_METHODS = ("NEM", "NEM-3", "NEM-6", "NEM-13", "NEM2", "P1", "P2")
+#: the quadratic natural-neighbour functions up to this many nodes: their direct solves
+#: grow steeply (a stiffness row holds about 100 entries in 2D Poisson, P2's 19; the Stokes
+#: viscous block of 130,414 unknowns passed 15 GB)
+QUADRATIC_MAX_NODES = {"poisson": 16000, "stokes": 8000}
 
 
 def poisson_basis(mesh, method):
@@ -96,6 +100,9 @@ def poisson(sizes, repeat):
             mesh = delaunay_mesh(p)
             nem7 = error_basis(mesh, "NEM")
             for m in POISSON_METHODS:
+                if m == "NEM2" and n > QUADRATIC_MAX_NODES["poisson"]:
+                    continue
+
                 def run():
                     b = poisson_basis(mesh, m)
                     return solve(*condense(laplace.assemble(b), load.assemble(b),
@@ -224,6 +231,9 @@ def stokes(sizes, repeat):
         for label, kw in (("NEM (smoothed)", {}), ("NEM Gauss-6", {"npoints": 6}),
                           ("NEM2 (smoothed)", {"method": "nem2"}),
                           ("Taylor-Hood", {"method": "taylor-hood"})):
+            if label.startswith("NEM2") and n > QUADRATIC_MAX_NODES["stokes"]:
+                continue
+
             def run():
                 return solve_stokes(stokes_spaces(mesh, **kw), 1.0, DoneaHuerta.force,
                                     free_slip=None, no_slip="all", tol=1e-12)

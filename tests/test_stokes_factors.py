@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sps
 
-from skfem_nem.models.stokes_factors import ComponentFactors, ViscousFactor, in_two_threads
+from skfem_nem.models.stokes_factors import (DENSE_ROW_ENTRIES, ComponentFactors,
+                                             ViscousFactor, in_two_threads, ordering)
 
 
 def _coupled_block(n, rng):
@@ -52,3 +53,22 @@ def test_in_two_threads_returns_both_and_raises_either():
     for tasks in ([lambda: 1 / 0, lambda: 2], [lambda: 1, lambda: 1 / 0]):
         with pytest.raises(ZeroDivisionError):
             in_two_threads(tasks)
+
+
+def test_dense_blocks_are_ordered_by_colamd_and_solved():
+    """A block with more than DENSE_ROW_ENTRIES entries a row (the quadratic
+    natural-neighbour velocity's) is ordered by COLAMD, a sparse one (Taylor-Hood's,
+    the linear natural-neighbour one's) by minimum degree; both factors solve it."""
+    rng = np.random.default_rng(1)
+    n = 300
+    sparse = _coupled_block(n // 2, rng)
+    B = sps.random(n, n, density=1.5 * DENSE_ROW_ENTRIES / n, random_state=2)
+    dense = sps.csr_matrix(B @ B.T + n * sps.eye(n))
+    assert ordering(sparse) == "MMD_AT_PLUS_A" and ordering(dense) == "COLAMD"
+    assert not dense.has_sorted_indices          # a product's columns: sorted on a copy
+    indices = dense.indices.copy()
+    for A in (sparse, dense):
+        r = rng.standard_normal(n)
+        x = ViscousFactor(A).solve(r)
+        assert np.linalg.norm(A @ x - r) < 1e-12 * np.linalg.norm(r)
+    assert np.array_equal(dense.indices, indices)

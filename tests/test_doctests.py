@@ -11,7 +11,7 @@ import pytest
 import skfem_nem
 
 DOCUMENTED = ["delaunay_mesh", "NaturalNeighbourBasis", "sibson_coordinates", "Triangulation",
-              "LagrangianMesh"]
+              "LagrangianMesh", "ElementNaturalNeighbour2"]
 
 
 def _own_tests(name):

@@ -72,6 +72,19 @@ class ElementNaturalNeighbour2(ElementNaturalNeighbour):
     quadratically consistent smoothing (:mod:`skfem_nem.basis.smoothing_quadratic`) they
     converge at P2's rates. Triangles only; wrap it in ``ElementVector`` for vector
     fields (dofs numbered as scikit-fem numbers ``ElementVector(ElementTriP2())``'s).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skfem_nem import ElementNaturalNeighbour2, NaturalNeighbourBasis, delaunay_mesh
+    >>> mesh = delaunay_mesh(np.array([[0., 0.], [1., 0.], [1., 1.], [0., 1.], [.4, .6]]))
+    >>> basis = NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2())
+    >>> int(basis.N) == mesh.p.shape[1] + mesh.facets.shape[1]    # nodes and edges
+    True
+    >>> u = basis.doflocs[0] ** 2 - basis.doflocs[1]     # at the nodes and edge midpoints
+    >>> x = np.array([[0.3, 0.7, 0.55], [0.2, 0.5, 0.9]])
+    >>> bool(np.allclose(basis.probes(x) @ u, x[0] ** 2 - x[1]))   # reproduced
+    True
     """
 
     facet_dofs = 1

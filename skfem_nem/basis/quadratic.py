@@ -45,7 +45,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
-__all__ = ["lift", "pair_matrix", "n_functions"]
+__all__ = ["lift", "pair_matrix", "edge_index", "n_functions"]
 
 #: a direction on the boundary of a triangle's angle at i (round-off) still counts as
 #: inside it: barycentric weights above -SECTOR_TOL select the triangle

@@ -51,11 +51,6 @@ METHODS = ("NEM", "C-NEM", "C-NEM2", "Taylor-Hood")
 #: the Stokes method of each discretisation (all but NEM on the constrained mesh)
 KINDS = {"NEM": "nem", "C-NEM": "nem", "C-NEM2": "nem2", "Taylor-Hood": "taylor-hood"}
 SOLCX_SIZES = (250, 1000, 4000, 16000)
-#: C-NEM2 up to this many drawn nodes (4,220 nodes, 33,242 velocity unknowns: 16 s,
-#: 1.4 GB). At 16,000 (130,414 unknowns) the direct factorisation of its viscous block
-#: (200 entries a row, Taylor-Hood's 22) passed 15 GB and 30 minutes, and FGMRES with
-#: the AMG V-cycle had not converged after 2,000 iterations
-QUADRATIC_MAX_NODES = 4000
 BLOCK_RATIOS = (1e-4, 1e-2, 1.0, 1e2, 1e4)
 QUICK = dict(solcx_sizes=SOLCX_SIZES[:2], block_nodes=800, block_ratios=(1e-4, 1.0, 1e4))
 
@@ -96,8 +91,6 @@ def solcx_study(sizes=SOLCX_SIZES, contrast=1e6, verbose=False):
     for n in sorted(set(sizes) | set(th_sizes)):
         meshes = (ex07_solcx.make_mesh(n, constrained=False), ex07_solcx.make_mesh(n))
         for method in METHODS:
-            if method == "C-NEM2" and n > QUADRATIC_MAX_NODES:
-                continue
             if (method == "Taylor-Hood" and n in th_sizes) or n in sizes:
                 rows.append(solcx_row(exact, n, method, meshes))
                 if verbose:

@@ -3,9 +3,9 @@
 Prints the tables of docs/verification.md (sections 1-3 and 6) for the
 default natural-neighbour basis (gradients smoothed over three cells per
 Delaunay triangle, :mod:`skfem_nem.basis.smoothing`) next to Gauss quadrature of
-the gradients with 3, 6 and 13 points per triangle, the quadratic natural-neighbour
-functions (``NEM2``: ``ElementNaturalNeighbour2``, linear smoothed gradients) and
-scikit-fem's P1 and P2 on the same triangles:
+the gradients with 3, 6 and 13 points per triangle and scikit-fem's P1 and P2
+on the same triangles (section 4 also the quadratic natural-neighbour velocity,
+``ElementNaturalNeighbour2``, up to 8,000 nodes):
 
 1. Poisson, u = sin(pi x) sin(pi y), the uniform and graded node sets of
    ``examples/ex04_nem_vs_fem.py``, 250 -> 64,000 nodes: L2 and H1 errors,
@@ -52,27 +52,12 @@ from skfem_nem.models.analytic import DoneaHuerta  # noqa: E402
 from skfem_nem.geometry.nodesets import box_nodes  # noqa: E402
 from skfem_nem.models.stokes import inf_sup_constant, solve_stokes, stokes_spaces  # noqa: E402
 
-POISSON_METHODS = ("NEM", "NEM-3", "NEM-6", "NEM-13", "NEM2", "P1", "P2")
-#: the quadratic natural-neighbour functions up to this many nodes: their direct solves
-#: grow steeply (a Stokes viscous row holds 200 entries, Taylor-Hood's 22: 62 s at 8,283
-#: nodes here, 313 s and 7.2 GB for SolCx at 16,430 nodes)
-QUADRATIC_MAX_NODES = {"poisson": 16000, "stokes": 8000}
-
-
-def poisson_basis(mesh, method):
-    """The basis of a Poisson method: ``"NEM2"`` the quadratic natural-neighbour
-    functions (smoothed), the others those of ``examples/ex04_nem_vs_fem.py``."""
-    if method == "NEM2":
-        return NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2())
-    return make_basis(mesh, method)
-
-
-def poisson_error_basis(mesh, method, nem7):
-    """The 7-point (natural-neighbour) or intorder-6 (P1, P2) basis of the errors;
-    ``nem7`` the linear natural-neighbour one, shared by its rules."""
-    if method == "NEM2":
-        return NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2(), npoints=7)
-    return nem7 if method.startswith("NEM") else error_basis(mesh, method)
+POISSON_METHODS = ("NEM", "NEM-3", "NEM-6", "NEM-13", "P1", "P2")
+#: the quadratic natural-neighbour velocity up to this many nodes: its direct solves grow
+#: steeply (a viscous row holds 200 entries, Taylor-Hood's 22: 62 s at 8,283 nodes here,
+#: 313 s and 7.2 GB for SolCx at 16,430 nodes). Its Poisson study is
+#: examples/ex21_quadratic.py
+QUADRATIC_MAX_NODES = 8000
 
 
 def rate(n0, n1, e0, e1):
@@ -100,15 +85,12 @@ def poisson(sizes, repeat):
             mesh = delaunay_mesh(p)
             nem7 = error_basis(mesh, "NEM")
             for m in POISSON_METHODS:
-                if m == "NEM2" and n > QUADRATIC_MAX_NODES["poisson"]:
-                    continue
-
                 def run():
-                    b = poisson_basis(mesh, m)
+                    b = make_basis(mesh, m)
                     return solve(*condense(laplace.assemble(b), load.assemble(b),
                                            D=b.get_dofs())), b
                 sec, (u, b) = best_time(run, repeat)
-                e0, e1 = errors(poisson_error_basis(mesh, m, nem7), u)
+                e0, e1 = errors(nem7 if m.startswith("NEM") else error_basis(mesh, m), u)
                 rows.append(dict(kind=kind, method=m, nodes=len(p), dofs=b.N, l2=e0, h1=e1,
                                  seconds=sec))
                 print(f"# poisson {kind} {len(p)} {m}: {e0:.3e} {e1:.3e} {sec:.3f}s",
@@ -231,7 +213,7 @@ def stokes(sizes, repeat):
         for label, kw in (("NEM (smoothed)", {}), ("NEM Gauss-6", {"npoints": 6}),
                           ("NEM2 (smoothed)", {"method": "nem2"}),
                           ("Taylor-Hood", {"method": "taylor-hood"})):
-            if label.startswith("NEM2") and n > QUADRATIC_MAX_NODES["stokes"]:
+            if label.startswith("NEM2") and n > QUADRATIC_MAX_NODES:
                 continue
 
             def run():
@@ -297,8 +279,8 @@ def main(argv=None):
     a = ap.parse_args(argv)
     # numba compilation outside the timings
     warm = delaunay_mesh(box_nodes(60, seed=0))
-    for m in POISSON_METHODS[:5]:
-        laplace.assemble(poisson_basis(warm, m))
+    for m in POISSON_METHODS[:4]:
+        laplace.assemble(make_basis(warm, m))
     solve_stokes(stokes_spaces(warm), 1.0, DoneaHuerta.force, free_slip=None, no_slip="all")
     if "poisson" in a.only:
         rows = poisson(a.sizes, a.repeat)

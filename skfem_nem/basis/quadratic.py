@@ -146,7 +146,8 @@ def pair_matrix(mesh, keys) -> sp.csr_matrix:
     lo, hi = keys // nv, keys % nv
     k = np.arange(keys.size)
     diag = lo == hi
-    edge = np.where(diag, -1, edge_index(mesh, lo, hi))
+    table = _edge_table(mesh)
+    edge = np.where(diag, -1, edge_index(mesh, lo, hi, table))
     on = ~diag & (edge >= 0)
     rows = [k[diag], k[on], k[on], k[on]]
     cols = [lo[diag], nv + edge[on], lo[on], hi[on]]
@@ -155,7 +156,7 @@ def pair_matrix(mesh, keys) -> sp.csr_matrix:
     far = np.flatnonzero(~diag & (edge < 0))
     if far.size:
         for s, d in ((lo[far], hi[far]), (hi[far], lo[far])):
-            r, c, v = _through_triangle(mesh, s, d)
+            r, c, v = _through_triangle(mesh, s, d, table)
             rows.append(far[r])
             cols.append(c)
             vals.append(0.5 * v)
@@ -165,14 +166,19 @@ def pair_matrix(mesh, keys) -> sp.csr_matrix:
     return C
 
 
-def edge_index(mesh, lo, hi) -> np.ndarray:
-    """The mesh edge (facet) joining nodes lo[k] < hi[k], or -1."""
-    nv = mesh.p.shape[1]
+def _edge_table(mesh):
+    """The mesh edges' keys ``lo * nodes + hi``, sorted, and the edge of each."""
     f = np.sort(mesh.facets, axis=0).astype(np.int64)
-    fk = f[0] * nv + f[1]
+    fk = f[0] * mesh.p.shape[1] + f[1]
     order = np.argsort(fk)
-    fk = fk[order]
-    key = np.asarray(lo, np.int64) * nv + np.asarray(hi, np.int64)
+    return fk[order], order
+
+
+def edge_index(mesh, lo, hi, table=None) -> np.ndarray:
+    """The mesh edge (facet) joining nodes lo[k] < hi[k], or -1 (``table``: the
+    mesh's :func:`_edge_table`, made here if not given)."""
+    fk, order = _edge_table(mesh) if table is None else table
+    key = np.asarray(lo, np.int64) * mesh.p.shape[1] + np.asarray(hi, np.int64)
     pos = np.minimum(np.searchsorted(fk, key), fk.size - 1)
     return np.where(fk[pos] == key, order[pos], -1)
 
@@ -187,7 +193,7 @@ def _node_triangles(mesh):
     return ptr, np.repeat(np.arange(t.shape[1]), 3)[order]
 
 
-def _through_triangle(mesh, i, j):
+def _through_triangle(mesh, i, j, table):
     """Polar value of the pairs (i[k], j[k]) by multi-affinity through the triangle at
     i whose angle contains the direction to j (else the one with the smallest
     weights): (pair k, function, coefficient) triplets."""
@@ -206,8 +212,8 @@ def _through_triangle(mesh, i, j):
     best = order[np.r_[True, pid[order][1:] != pid[order][:-1]]]
     be, ga, a, b = beta[best], gamma[best], a[best], b[best]
     nv = mesh.p.shape[1]
-    e_a = edge_index(mesh, np.minimum(i, a), np.maximum(i, a))
-    e_b = edge_index(mesh, np.minimum(i, b), np.maximum(i, b))
+    e_a = edge_index(mesh, np.minimum(i, a), np.maximum(i, a), table)
+    e_b = edge_index(mesh, np.minimum(i, b), np.maximum(i, b), table)
     k = np.arange(i.size)
     # alpha u_i + beta (2 m_ia - (u_i + u_a) / 2) + gamma (2 m_ib - (u_i + u_b) / 2)
     alpha = 1.0 - be - ga

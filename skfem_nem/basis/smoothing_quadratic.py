@@ -80,7 +80,7 @@ def quadratic_cells(mesh, x, w, elems):
     sources = np.empty((ne, 3 + 3 * EDGE_POINTS), np.int64)
     sources[:, :3] = 3 * np.arange(ne)[:, None] + np.arange(3)
     for le in range(3):
-        f = edges[local[le]]
+        f = t2f[le]
         ea, eb = p[:, facets[0, f]], p[:, facets[1, f]]
         normal = np.stack([eb[1] - ea[1], ea[0] - eb[0]])   # times the edge's length
         normal *= np.where(np.einsum("ij,ij->j", normal, 0.5 * (ea + eb) - centre) < 0,

@@ -42,33 +42,68 @@ from pathlib import Path
 
 import numpy as np
 
-COLUMNS = ["nodes", "seed", "plate_density", "yield_stress", "eta_lower", "completed",
-           "t_reached", "steps", "max_area_deviation", "outline_crossings", "min_angle",
-           "final_nodes", "injected", "removed", "merged", "retries", "inverted",
-           "non_delaunay", "pieces", "seconds", "stop"]
+COLUMNS = ["nodes", "seed", "plate_density", "yield_stress", "eta_lower", "scenario",
+           "completed", "t_reached", "steps", "max_area_deviation", "outline_crossings",
+           "min_angle", "final_nodes", "min_node_ratio", "max_edge_ratio", "unconverged",
+           "injected", "removed", "merged", "retries", "inverted", "non_delaunay", "pieces",
+           "seconds", "stop"]
+#: the varied parameters (the first five columns); "scenario" names a set of overrides
+VARIED = COLUMNS[:5]
 GRID = {"nodes": [300, 1000, 3000], "seeds": [0, 1, 2, 3, 4], "plate_density": [1.5, 3.0],
-        "yield_stress": [0.05, 0.3], "eta_lower": [1.0, 100.0]}
+        "yield_stress": [0.05, 0.3], "eta_lower": [1.0, 100.0], "scenario": ["default"]}
+#: the resolution grid (``--grid resolution``): a weak lower layer, plates near a wall,
+#: thin long plates and narrow boxes, where the flow stretches the mesh the most
+RESOLUTION_GRID = {"nodes": [300, 1500, 3000], "seeds": [0, 1], "plate_density": [1.5],
+                   "yield_stress": [0.12], "eta_lower": [0.1, 0.3, 1.0, 10.0],
+                   "scenario": ["default", "wall-left", "wall-right", "thin-long", "narrow"]}
+#: the configurations a scenario changes (all else default)
+SCENARIOS = {"default": {}, "wall-left": {"plate_x": 1.2}, "wall-right": {"plate_x": 8.8},
+             "thin-long": {"plate_thickness": 0.05, "plate_length": 2.5},
+             "narrow": {"width": 3.0, "plate_x": 1.5}}
 
 
 def settings(args):
     """The grid of runs: dicts of the varied parameters."""
-    for n, s, d, y, e in itertools.product(args.nodes, args.seeds, args.plate_density,
-                                           args.yield_stress, args.eta_lower):
+    for n, s, d, y, e, sc in itertools.product(args.nodes, args.seeds, args.plate_density,
+                                               args.yield_stress, args.eta_lower,
+                                               args.scenario):
         yield {"nodes": int(n), "seed": int(s), "plate_density": float(d),
-               "yield_stress": float(y), "eta_lower": float(e)}
+               "yield_stress": float(y), "eta_lower": float(e), "scenario": sc}
 
 
 def name_of(setting) -> str:
-    return "n{nodes}-s{seed}-d{plate_density:g}-y{yield_stress:g}-e{eta_lower:g}".format(
+    name = "n{nodes}-s{seed}-d{plate_density:g}-y{yield_stress:g}-e{eta_lower:g}".format(
         **setting)
+    scenario = setting.get("scenario") or "default"
+    return name if scenario == "default" else f"{name}-{scenario}"
+
+
+def config_of(setting, **more):
+    """The run's configuration: the varied parameters and the scenario's overrides."""
+    from skfem_nem.apps.sinking_plate import PlateConfig
+    varied = {k: setting[k] for k in VARIED}
+    return PlateConfig(**varied, **SCENARIOS[setting.get("scenario") or "default"], **more)
+
+
+def initial_measures(cfg):
+    """The node count and the longest edge of the run's initial mesh (what the node
+    counts and edges over the run are compared with)."""
+    from skfem_nem.apps.sinking_plate import initial_nodes
+    from skfem_nem.evolution import LagrangianMesh
+    nodes, outline, interface = initial_nodes(cfg)
+    segs = None
+    if cfg.segments:
+        segs = np.r_[np.c_[outline, np.roll(outline, -1)],
+                     np.c_[interface[:-1], interface[1:]]]
+    lm = LagrangianMesh(nodes, segments=segs)
+    return lm.nodes.shape[0], lm.longest_edge()
 
 
 def run_one(setting, end_time: float, out: str) -> dict:
     """One run; returns its row (a stopped run is a row too)."""
-    from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate
+    from skfem_nem.apps.sinking_plate import SinkingPlate
 
-    cfg = PlateConfig(end_time=end_time, output_interval=end_time, checkpoint_every=50,
-                      **setting)
+    cfg = config_of(setting, end_time=end_time, output_interval=end_time, checkpoint_every=50)
     t0 = time.perf_counter()
     sim = SinkingPlate(cfg, Path(out) / name_of(setting))
     return _finish(sim, setting, sim.plate_area_centroid()[0], t0)
@@ -103,7 +138,12 @@ def _finish(sim, setting, area0: float, t0: float) -> dict:
         sim.checkpoint()
     seconds = time.perf_counter() - t0
     d = read_csv_columns(sim.out / "diagnostics.csv")
+    n0, L0 = initial_measures(sim.cfg)
     row = dict(setting)
+    if "longest_edge" in d:
+        row.update(min_node_ratio=round(float(d["nodes"].min() / n0), 4),
+                   max_edge_ratio=round(float(d["longest_edge"].max() / L0), 3),
+                   unconverged=int(np.count_nonzero(d["predictor_converged"] == 0)))
     row.update(completed=not stop, t_reached=float(sim.lm.time), steps=len(d["time"]),
                max_area_deviation=float(np.abs(d["plate_area"] / area0 - 1).max()),
                outline_crossings=int(d["outline_crossings"].max()),
@@ -164,7 +204,8 @@ def setting_of(row: dict) -> dict:
     """The varied parameters of a study row."""
     return {"nodes": int(row["nodes"]), "seed": int(row["seed"]),
             "plate_density": float(row["plate_density"]),
-            "yield_stress": float(row["yield_stress"]), "eta_lower": float(row["eta_lower"])}
+            "yield_stress": float(row["yield_stress"]), "eta_lower": float(row["eta_lower"]),
+            "scenario": row.get("scenario") or "default"}
 
 
 def stopped(done: dict, out: Path, grid) -> list:
@@ -186,9 +227,10 @@ def _rewrite(log: Path, rows) -> None:
 
 def table(rows) -> str:
     """The markdown table of the rows."""
-    head = ["nodes", "seed", "density", "yield", "eta_lower", "completed", "t", "steps",
-            "area dev.", "crossings", "min angle", "nodes at end", "injected", "removed",
-            "merged", "retries", "pieces", "s", "stop"]
+    head = ["nodes", "seed", "density", "yield", "eta_lower", "scenario", "completed", "t",
+            "steps", "area dev.", "crossings", "min angle", "nodes at end", "fewest nodes",
+            "longest edge", "unconverged", "injected", "removed", "merged", "retries",
+            "pieces", "s", "stop"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         def f(k, fmt="{}"):
@@ -199,9 +241,12 @@ def table(rows) -> str:
                 return str(v)
         lines.append("| " + " | ".join([
             f("nodes"), f("seed"), f("plate_density", "{:g}"), f("yield_stress", "{:g}"),
-            f("eta_lower", "{:g}"), f("completed"), f("t_reached", "{:.5g}"), f("steps"),
+            f("eta_lower", "{:g}"), r.get("scenario") or "default", f("completed"),
+            f("t_reached", "{:.5g}"), f("steps"),
             f("max_area_deviation", "{:.1e}"), f("outline_crossings"),
-            f("min_angle", "{:.2g}"), f("final_nodes"), f("injected"), f("removed"),
+            f("min_angle", "{:.2g}"), f("final_nodes"), f("min_node_ratio", "{:.3f}") or "-",
+            f("max_edge_ratio", "{:.2f}") or "-", f("unconverged") or "-",
+            f("injected"), f("removed"),
             f("merged"), f("retries"), f("pieces") or "1", f("seconds", "{:.0f}"),
             f("stop") or "-"]) + " |")
     return "\n".join(lines)
@@ -223,7 +268,12 @@ def merged(paths) -> list:
         for name, row in read_done(Path(path)).items():
             if name not in rows:
                 rows[name] = _with_mesh_checks(row, Path(path).parent / name)
-    return sorted(rows.values(), key=lambda r: tuple(float(r[k]) for k in COLUMNS[:5]))
+    return sorted(rows.values(), key=sort_key)
+
+
+def sort_key(row):
+    """Rows by scenario, then by the varied parameters."""
+    return (row.get("scenario") or "default",) + tuple(float(row[k]) for k in VARIED)
 
 
 def _with_mesh_checks(row: dict, folder: Path) -> dict:
@@ -263,6 +313,32 @@ def grid_summary(rows) -> str:
     return "\n".join(lines)
 
 
+def resolution_summary(rows) -> str:
+    """Markdown table: per scenario and lower-layer viscosity, the runs, how many
+    completed, the smallest node count over a run relative to its first, the longest edge
+    over a run relative to the first mesh's, the smallest angle, accepted steps with an
+    unconverged predictor-corrector, the largest plate-area deviation and retried steps
+    (runs measured before these columns existed are left out)."""
+    groups = {}
+    for r in rows:
+        if str(r.get("min_node_ratio", "")) != "":
+            groups.setdefault((r.get("scenario") or "default", float(r["eta_lower"])),
+                              []).append(r)
+    lines = ["| scenario | eta_lower | runs | completed | fewest nodes / first | longest "
+             "edge / first | smallest angle (deg) | unconverged steps | largest area "
+             "deviation | retried steps |", "|" + "---|" * 10]
+    for (sc, e), rs in sorted(groups.items()):
+        lines.append(
+            f"| {sc} | {e:g} | {len(rs)} | {sum(str(r['completed']) == 'True' for r in rs)} "
+            f"| {min(float(r['min_node_ratio']) for r in rs):.3f} "
+            f"| {max(float(r['max_edge_ratio']) for r in rs):.2f} "
+            f"| {min(float(r['min_angle']) for r in rs):.2g} "
+            f"| {sum(int(r['unconverged']) for r in rs)} "
+            f"| {max(float(r['max_area_deviation']) for r in rs):.1e} "
+            f"| {sum(int(r['retries']) for r in rs)} |")
+    return "\n".join(lines)
+
+
 def _checked(rows) -> str:
     """Most inverted triangles and non-Delaunay edges over the rows, and how many rows
     are unchecked (their run's diagnostics missing)."""
@@ -277,6 +353,8 @@ def report(paths) -> list:
     rows = merged(paths)
     print(grid_summary(rows))
     print()
+    print(resolution_summary(rows))
+    print()
     print(table(rows))
     print()
     print(summary(rows))
@@ -285,11 +363,16 @@ def report(paths) -> list:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--nodes", type=int, nargs="+", default=GRID["nodes"])
-    ap.add_argument("--seeds", type=int, nargs="+", default=GRID["seeds"])
-    ap.add_argument("--plate-density", type=float, nargs="+", default=GRID["plate_density"])
-    ap.add_argument("--yield-stress", type=float, nargs="+", default=GRID["yield_stress"])
-    ap.add_argument("--eta-lower", type=float, nargs="+", default=GRID["eta_lower"])
+    ap.add_argument("--grid", choices=("old", "resolution"), default="old",
+                    help="the defaults of the lists below: the old grid of 120 runs, or "
+                         "the resolution grid (weak lower layers, plates near walls, thin "
+                         "long plates, narrow boxes: 120 runs)")
+    ap.add_argument("--nodes", type=int, nargs="+")
+    ap.add_argument("--seeds", type=int, nargs="+")
+    ap.add_argument("--plate-density", type=float, nargs="+")
+    ap.add_argument("--yield-stress", type=float, nargs="+")
+    ap.add_argument("--eta-lower", type=float, nargs="+")
+    ap.add_argument("--scenario", nargs="+", choices=sorted(SCENARIOS))
     ap.add_argument("--end-time", type=float, default=1000.0)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default="out/robustness")
@@ -299,6 +382,12 @@ def main(argv=None):
     ap.add_argument("--report", nargs="+", metavar="CSV",
                     help="merge these study CSVs and print their tables (runs nothing)")
     args = ap.parse_args(argv)
+    grid = RESOLUTION_GRID if args.grid == "resolution" else GRID
+    for key, name in (("nodes", "nodes"), ("seeds", "seeds"), ("plate_density", "plate_density"),
+                      ("yield_stress", "yield_stress"), ("eta_lower", "eta_lower"),
+                      ("scenario", "scenario")):
+        if getattr(args, name) is None:
+            setattr(args, name, grid[key])
     if args.report:
         return report(args.report)
     out = Path(args.out)
@@ -322,7 +411,9 @@ def main(argv=None):
             print(f"[{k}/{len(todo)}] {name_of(row)}: completed {row['completed']}, "
                   f"t = {row.get('t_reached', '')}", flush=True)
     rows = [done[name_of(s)] for s in settings(args) if name_of(s) in done]
-    rows.sort(key=lambda r: tuple(float(r[k]) for k in COLUMNS[:5]))
+    rows.sort(key=sort_key)
+    print()
+    print(resolution_summary(rows))
     print()
     print(table(rows))
     print()

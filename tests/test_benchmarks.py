@@ -333,7 +333,7 @@ def test_robustness_study_rows_table_and_resume(tmp_path, capsys):
         assert r["min_angle"] > 0 and r["final_nodes"] > 300 and r["pieces"] == 1
         assert r["inverted"] == 0 and r["non_delaunay"] == 0
     out = capsys.readouterr().out
-    assert "| 300 | 0 | 3 | 0.3 | 1 | True | 6 |" in out
+    assert "| 300 | 0 | 3 | 0.3 | 1 | default | True | 6 |" in out
     assert "2 of 2 runs completed" in out
     again = bench.main(args)
     assert "[1/" not in capsys.readouterr().out            # nothing was run again
@@ -352,6 +352,31 @@ def test_robustness_study_rows_table_and_resume(tmp_path, capsys):
     stopped = bench._safe_run({"nodes": 300, "seed": 0, "plate_density": 1.5,
                                "yield_stress": 0.3, "eta_lower": -1.0}, 6.0, str(tmp_path))
     assert stopped["completed"] is False and "eta_lower" in stopped["stop"]
+
+
+def test_robustness_resolution_grid_rows(tmp_path, capsys):
+    """``--grid resolution``: a scenario's overrides reach the run (a narrow box), and its
+    row has what the resolution table reports: the fewest nodes and the longest edge over
+    the run against the initial mesh's, and no unconverged step."""
+    bench = load_benchmark("robustness")
+    [row] = bench.main(["--grid", "resolution", "--nodes", "300", "--seeds", "0",
+                        "--eta-lower", "0.1", "--scenario", "narrow", "--end-time", "4",
+                        "--jobs", "1", "--out", str(tmp_path)])
+    assert row["scenario"] == "narrow" and row["completed"] is True
+    assert row["nodes"] == 300 and row["plate_density"] == 1.5
+    assert row["yield_stress"] == 0.12 and row["eta_lower"] == 0.1
+    cfg = bench.config_of(row)
+    assert (cfg.width, cfg.plate_x) == (3.0, 1.5)
+    from skfem_nem.apps.output import read_csv_columns
+    d = read_csv_columns(tmp_path / bench.name_of(row) / "diagnostics.csv")
+    assert d["plate_x"].max() < 3.0                         # the plate is in the narrow box
+    n0, L0 = bench.initial_measures(cfg)
+    assert row["min_node_ratio"] == pytest.approx(d["nodes"].min() / n0, abs=1e-4)
+    assert row["max_edge_ratio"] == pytest.approx(d["longest_edge"].max() / L0, abs=1e-3)
+    assert 0.9 <= row["min_node_ratio"] and row["max_edge_ratio"] <= 2.0
+    assert row["unconverged"] == 0
+    out = capsys.readouterr().out
+    assert "| narrow | 0.1 | 1 | 1 |" in out
 
 
 def test_robustness_continues_stopped_runs(tmp_path, capsys, monkeypatch):

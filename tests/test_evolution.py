@@ -1,10 +1,13 @@
 """The Lagrangian evolving mesh: moves, flips, remaps, injection, checkpoints."""
+import warnings
+
 import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
 from helpers import edge_set, square_nodes, vortex
 from skfem_nem import LagrangianMesh
+from skfem_nem.evolution import MoveNotConverged, StepTooLong
 
 A3 = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
@@ -187,12 +190,18 @@ def test_max_dt_and_basis():
                                ip_points(lm), atol=1e-14)
 
 
-def test_predictor_corrector_warns_when_not_converged():
+def test_a_step_is_never_accepted_with_an_unconverged_predictor_corrector():
     p = jittered_square(200)
-    lm = LagrangianMesh(p)
-    with pytest.warns(RuntimeWarning, match="did not converge"):
-        r = lm.advance(vortex, 0.02, maxiter=1, tol=1e-16)
-    assert not r["converged"]
+    lm = LagrangianMesh(p, node_fields={"x0": p[:, 0]})
+    before = lm.nodes.copy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")          # and no warning either
+        with pytest.raises(MoveNotConverged, match="did not converge in 1 iterations"):
+            lm.advance(vortex, 0.02, maxiter=1, tol=1e-16)
+    # nothing moved, the clock and history as before: the caller retries
+    np.testing.assert_array_equal(lm.nodes, before)
+    assert (lm.time, lm.step, lm.history) == (0.0, 0, [])
+    assert issubclass(MoveNotConverged, StepTooLong)
     r = lm.advance(vortex, 0.02)
     assert r["converged"] and r["iterations"] < 10
 

@@ -1,5 +1,6 @@
 """The sinking-plate application: a short coarse run, outputs, restart, bad configuration."""
 import json
+import warnings
 from pathlib import Path
 
 import meshio
@@ -8,8 +9,9 @@ import pytest
 
 from skfem_nem.apps.cli import main
 from skfem_nem.apps.output import read_csv_columns
-from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate, initial_nodes, load_config
-from skfem_nem.evolution import StepTooLong
+from skfem_nem.apps.sinking_plate import (PlateConfig, SinkingPlate, StepStalled, initial_nodes,
+                                         load_config)
+from skfem_nem.evolution import LagrangianMesh, StepTooLong
 
 SMALL = dict(nodes=500, end_time=24.0, max_dt=4.0, output_interval=8.0, checkpoint_every=2,
              segments=True)
@@ -319,7 +321,8 @@ def test_step_retried_with_half_dt_and_fields_restored(tmp_path):
         return real(velocity, dt, **kw)
 
     sim.lm.advance = flaky
-    with pytest.warns(RuntimeWarning, match="retrying with dt = 1"):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")             # counted in the row, no warning
         row = sim.step(2.0)
     assert calls == [2.0, 1.0] and row["retries"] == 1 and row["dt"] == 1.0
     assert sim.lm.time == pytest.approx(3.0)
@@ -539,7 +542,8 @@ def test_step_retried_when_the_plastic_iterations_stall(tmp_path, monkeypatch):
         return real(*args, **kw)
 
     monkeypatch.setattr(sp, "vep_step", stalling)
-    with pytest.warns(RuntimeWarning, match="Picard .* retrying with dt = 1"):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         row = sim.step(2.0)
     assert calls == [2.0, 1.0] and row["retries"] == 1 and sim.lm.time == pytest.approx(1.0)
     assert sim.dt_next <= 2.0                            # grows back from the retried step
@@ -550,6 +554,88 @@ def test_step_retried_when_the_plastic_iterations_stall(tmp_path, monkeypatch):
     monkeypatch.setattr(sp, "vep_step", singular)
     with pytest.raises(RuntimeError, match="singular"):
         sim.step(1.0)
+
+
+def test_an_unconverged_move_is_retried_down_to_min_dt_then_the_run_stops(tmp_path, capsys,
+                                                                           monkeypatch):
+    """A predictor-corrector that does not converge is never accepted: the step is retried
+    with half the time step (no warning), the next step grows back from it; one that
+    fails at every time step down to ``min_dt`` stops the run with one line naming the
+    step, the time step reached and what failed, the mesh and fields as before the step,
+    a checkpoint written (status 1 from the command line)."""
+    from skfem_nem.apps import cli
+    from skfem_nem.evolution import MoveNotConverged
+    cfg = PlateConfig(**{**SMALL, "min_dt": 0.2})
+    sim = SinkingPlate(cfg, tmp_path)
+    sim.step(2.0)
+    real = sim.lm.advance
+    calls = []
+
+    def slow(velocity, dt, **kw):
+        calls.append(dt)
+        if len(calls) <= 2:
+            raise MoveNotConverged("step 2: the predictor-corrector did not converge in 20 "
+                                   "iterations: reduce dt")
+        return real(velocity, dt, **kw)
+
+    sim.lm.advance = slow
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        row = sim.step(2.0)
+    assert calls == [2.0, 1.0, 0.5] and row["retries"] == 2 and row["dt"] == 0.5
+    assert row["predictor_converged"] == 1 and sim.dt_next <= 1.0
+    # never converging: halved to 0.25, then below min_dt = 0.2 the run stops
+    state = (sim.lm.nodes.copy(), {k: v.copy() for k, v in sim.lm.ip_fields.items()},
+             sim.lm.time)
+    calls.clear()
+
+    def never(velocity, dt, **kw):
+        calls.append(dt)
+        raise MoveNotConverged("step 3: the predictor-corrector did not converge in 20 "
+                               "iterations: reduce dt")
+
+    sim.lm.advance = never
+    with pytest.raises(StepStalled, match=r"step 3 at t = 2.5 fails at dt = 0.25 \(min_dt "
+                                          r"0.2\): step 3: the predictor-corrector did not"):
+        sim.step(2.0)
+    assert calls == [2.0, 1.0, 0.5, 0.25]
+    np.testing.assert_array_equal(sim.lm.nodes, state[0])
+    for k, v in state[1].items():
+        np.testing.assert_array_equal(sim.lm.ip_fields[k], v)
+    assert sim.lm.time == state[2]
+    # from the command line: one line, status 1, the checkpoint kept
+    out = tmp_path / "cli"
+    real_advance = LagrangianMesh.advance
+
+    def never_after_two(self, velocity, dt, **kw):
+        if self.step >= 2:
+            raise MoveNotConverged("the predictor-corrector did not converge in 20 "
+                                   "iterations: reduce dt")
+        return real_advance(self, velocity, dt, **kw)
+
+    monkeypatch.setattr(LagrangianMesh, "advance", never_after_two)
+    code = cli.main(["sinking-plate", "-o", str(out), "--quiet", "--nodes", "300",
+                     "--min-dt", "0.5", "--end-time", "20"])
+    err = capsys.readouterr().err
+    assert code == cli.STOPPED
+    lines = [x for x in err.splitlines() if x.strip()]
+    assert len(lines) == 1 and "stopped at t = " in lines[0] and "(min_dt 0.5)" in lines[0]
+    assert (out / "checkpoint.npz").exists()
+    # a run with one retried step completes and says so once, at the end
+    failed = []
+
+    def once(self, velocity, dt, **kw):
+        if self.step == 2 and not failed:
+            failed.append(dt)
+            raise MoveNotConverged("the predictor-corrector did not converge: reduce dt")
+        return real_advance(self, velocity, dt, **kw)
+
+    monkeypatch.setattr(LagrangianMesh, "advance", once)
+    code = cli.main(["sinking-plate", "-o", str(tmp_path / "once"), "--quiet", "--nodes",
+                     "300", "--end-time", "8"])
+    captured = capsys.readouterr()
+    assert code == 0 and failed and captured.err == ""
+    assert "1 step(s) were retried with a shorter time step" in captured.out
 
 
 def test_csv_log_keeps_rows_on_restart_and_widens_for_new_columns(tmp_path):

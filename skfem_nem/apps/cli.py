@@ -21,7 +21,8 @@ import numpy as np
 USER_ERROR = 2
 #: parameters a restarted run may change: when it ends, how often it writes,
 #: and how large its time steps may be (the physics and the node set stay)
-RESTART_CHANGEABLE = ("end_time", "output_interval", "checkpoint_every", "max_dt", "cfl")
+RESTART_CHANGEABLE = ("end_time", "output_interval", "checkpoint_every", "max_dt", "min_dt",
+                      "cfl")
 #: exit status of a run that stopped (its outputs and a checkpoint are kept)
 STOPPED = 1
 
@@ -163,7 +164,18 @@ def _run_plate(sim, cfg, args) -> int:
     for p in sim.figures():
         print("wrote", p)
     print("wrote", sim.out / "plate.pvd", "and", sim.out / "diagnostics.csv")
+    retried = _retried_steps(sim.out / "diagnostics.csv") if sim.root else 0
+    if retried:
+        print(f"{retried} step(s) were retried with a shorter time step (column 'retries' "
+              f"of diagnostics.csv)")
     return 0
+
+
+def _retried_steps(path) -> int:
+    """How many steps of the run's log were retried with a shorter time step."""
+    from .output import read_csv_columns
+    d = read_csv_columns(path)
+    return int(np.count_nonzero(d.get("retries", np.zeros(0)) > 0))
 
 
 #: modules whose numba kernels every run compiles first (their on-disk cache

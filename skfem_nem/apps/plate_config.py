@@ -63,11 +63,16 @@ class PlateConfig:
     end_time: float = 1000.0
     #: largest time step
     max_dt: float = 5.0
+    #: smallest time step: a step that fails (a move the mesh cannot follow, an unconverged
+    #: iteration) is retried with half the time step down to this one, then the run stops
+    min_dt: float = 1e-4
     #: largest node displacement per step, as a fraction of its local spacing
     cfl: float = 1.0
     #: time between VTU outputs
     output_interval: float = 100.0
-    #: inject nodes where a node's Voronoi area grew past this factor (0: never)
+    #: inject nodes where a node's Voronoi area grew past this factor of its target (the
+    #: initial node set's spacing, carried by the material; 0: never), and split edges
+    #: longer than the quality bound (evolution.spacing.EDGE_FACTOR target spacings)
     inject: float = 2.0
     #: remap of the stress on flips: "conservative" or "average"
     remap: str = "conservative"
@@ -96,7 +101,7 @@ class PlateConfig:
         """Raise ``ValueError`` naming the first bad parameter."""
         pos = ["height", "width", "eta_upper", "eta_lower", "plate_length", "plate_thickness",
                "plate_density", "gravity", "plate_viscosity", "shear_modulus", "yield_stress",
-               "density_length", "outline_spacing", "end_time", "max_dt", "cfl",
+               "density_length", "outline_spacing", "end_time", "max_dt", "min_dt", "cfl",
                "output_interval", "picard_tol"]
         for k in pos:
             v = getattr(self, k)
@@ -126,6 +131,9 @@ class PlateConfig:
         if not 0 < self.interface_z < self.height:
             raise ValueError(f"interface_z must lie inside the box (0, {self.height}), got "
                              f"{self.interface_z!r}")
+        if self.min_dt > self.max_dt:
+            raise ValueError(f"min_dt must not exceed max_dt ({self.max_dt!r}), got "
+                             f"{self.min_dt!r}")
         if self.cfl > 1:
             raise ValueError(f"cfl must not exceed 1, got {self.cfl!r}")
         x0, x1 = self.plate_x - self.plate_length / 2, self.plate_x + self.plate_length / 2
@@ -163,9 +171,12 @@ HELP = {
     'outline_spacing': 'spacing of the nodes on the plate outline (relative to plate_thickness)',
     'end_time': 'end time',
     'max_dt': 'largest time step',
+    'min_dt': 'smallest time step: a failing step is retried with half the time step down '
+              'to this one, then the run stops',
     'cfl': 'largest node displacement per step, as a fraction of its local spacing',
     'output_interval': 'time between VTU outputs',
-    'inject': "inject nodes where a node's Voronoi area grew past this factor (0: never)",
+    'inject': "inject nodes where a node's Voronoi area grew past this factor of its target "
+              "(the initial node set's spacing, carried with the material; 0: never)",
     'remap': 'remap of the stress on flips: "conservative" or "average"',
     'integration': 'integration of the velocity gradients: "smoothed" (consistent) or "gauss" '
                    '(3-point rule)',

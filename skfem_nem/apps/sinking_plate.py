@@ -62,7 +62,13 @@ from ..models.stokes_solvers import CACHED_SOLVERS, StokesCache
 from ..parallel.petsc import ranks_differing, world
 
 # (PlateConfig, load_config and stored_config are re-exported from plate_config)
-__all__ = ["SinkingPlate", "run"]
+__all__ = ["SinkingPlate", "StepStalled", "run"]
+
+
+class StepStalled(RuntimeError):
+    """A step that fails (a move the mesh cannot follow, an unconverged iteration) even
+    when shortened below the configuration's ``min_dt``: the run stops there, its outputs
+    and checkpoint kept."""
 
 
 # ---------------------------------------------------------------------------
@@ -217,10 +223,12 @@ class SinkingPlate:
         return Material(viscosity=eta, shear_modulus=mu, yield_stress=Y), force, plate
 
     def step(self, dt: float, retries: int = 4, cuts: int = 3) -> dict:
-        """One time step of length dt (halved up to ``retries`` times if the mesh cannot
-        follow the move; where the last try fails because two material lines would
-        cross, the plate is cut there or the interface released, and the step tried
-        again, at most ``cuts`` times); returns the diagnostics row."""
+        """One time step of length dt, halved until the step passes (counted in the row's
+        ``retries``; never accepted with an unconverged predictor-corrector or plastic
+        iteration); a step that still fails below ``min_dt`` stops the run
+        (:class:`StepStalled`). Where a step fails ``retries`` times because two material
+        lines would cross, the plate is cut there or the interface released, and the
+        step tried again, at most ``cuts`` times. Returns the diagnostics row."""
         self._check_films()
         try:
             row = self._tries(dt, retries)
@@ -253,9 +261,12 @@ class SinkingPlate:
         return why is None
 
     def _tries(self, dt: float, retries: int) -> dict:
-        """:meth:`step` without cuts: dt halved up to ``retries`` times."""
+        """:meth:`step` without cuts: dt halved until the step passes; a crossing of
+        material lines goes back to :meth:`step` after ``retries`` halvings, anything
+        else stops the run below ``min_dt`` (:class:`StepStalled`)."""
         saved = {k: v.copy() for k, v in self.lm.ip_fields.items()}
-        for attempt in range(retries + 1):
+        attempt = 0
+        while True:
             try:
                 row = self._step(dt)
                 row["retries"] = attempt
@@ -267,16 +278,18 @@ class SinkingPlate:
             except (StepTooLong, PicardNotConverged) as err:
                 # the evolving mesh leaves itself unchanged on errors; restore the
                 # integration-point fields that the solve had updated. The plastic
-                # iterations can stall where the yielded region jumps between iterates:
-                # a shorter step changes less, as it moves the mesh less
+                # iterations can stall where the yielded region jumps between iterates,
+                # the predictor-corrector where the velocity varies fast: a shorter step
+                # changes less
                 self.lm.replace_ip_fields(saved)
-                if attempt == retries:
+                if getattr(err, "crossing", None) is not None and attempt >= retries:
                     raise
-                import warnings
-                warnings.warn(f"step {self.lm.step + 1} at t = {self.lm.time:.6g}: {err}; "
-                              f"retrying with dt = {dt / 2:.4g}", RuntimeWarning, stacklevel=2)
+                if dt / 2 < self.cfg.min_dt:
+                    raise StepStalled(
+                        f"step {self.lm.step + 1} at t = {self.lm.time:.6g} fails at dt = "
+                        f"{dt:.3g} (min_dt {self.cfg.min_dt:g}): {err}") from err
                 dt = dt / 2
-        raise AssertionError("unreachable")
+                attempt += 1
 
     def _step(self, dt: float) -> dict:
         c = self.cfg
@@ -341,6 +354,9 @@ class SinkingPlate:
                "segments_released": released,
                "removed": rep["removed"], "merged": rep["merged"],
                "nodes": lm.nodes.shape[0], "min_angle": rep["min_angle"],
+               "longest_edge": rep["longest_edge"], "edges_split": rep["edges_split"],
+               "predictor_iterations": rep["iterations"],
+               "predictor_converged": int(rep["converged"]),
                "picard_iterations": r.iterations, "solver_iterations": r.solution.iterations,
                "factorisations": 0 if cache is None else cache.factorisations,
                "basis_seconds": t_basis, "assembly_seconds": r.seconds["assembly"],

@@ -12,7 +12,12 @@ tensors: the paper's "tensorial memory"). Each :meth:`~LagrangianMesh.advance`
    fields of the two triangles of every flip onto the two new ones;
 3. if the move would invert a triangle (flips cannot repair that), splits the
    step into substeps until none inverts;
-4. optionally injects nodes where the mesh has thinned out.
+4. optionally holds the nodes to a target spacing fixed for the whole run
+   (:mod:`~skfem_nem.evolution.spacing`): nodes injected where the mesh has thinned
+   out, long edges split (inside, on walls, on segments), crowded nodes removed.
+
+A step whose predictor-corrector does not converge is not accepted: it raises
+:class:`~skfem_nem.evolution.stepping.StepTooLong` and leaves the mesh as it was.
 
 Remap rules for the 3-point rule (points near the vertices), per flip of the
 quadrilateral (a, b, d, c) from diagonal b-c to a-d:
@@ -43,6 +48,8 @@ from .injection import NodeInjection
 from .merging import NodeRemoval
 from .quality import cross, inverted, min_angles
 from .remap import remap_average, remap_conservative
+from .spacing import (angle_fractions, check_spacing, reference_areas, smoothed_spacing,
+                      spacing_from_areas)
 from .stepping import LagrangianStep, StepTooLong, check_node_fields
 
 __all__ = ["LagrangianMesh"]
@@ -91,13 +98,21 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         ``"box"`` (default): nodes on the bounding box of the initial nodes
         keep their wall coordinate exactly (free slip: only the tangential
         velocity moves them); ``None``: no constraint.
+    spacing
+        The target node spacing that injection and removal hold the nodes to for the
+        whole run (:mod:`~skfem_nem.evolution.spacing`). ``None`` (default): the
+        initial node set's own spacing (the edge of the equilateral lattice with each
+        node's Voronoi area), carried by the material: an injected node gets the
+        natural-neighbour interpolant of its material's targets. A callable
+        ``spacing(x)`` -> (n,) positive: a target fixed in space, evaluated at the
+        nodes' positions at every step.
 
     Attributes
     ----------
     triangulation, time, step, node_fields, ip_fields, history (a list of
     per-step dicts: step, time, dt, iterations (predictor-corrector),
-    substeps, flips, relocated, injected, min_angle (degrees),
-    triangles_changed, stencils_affected).
+    substeps, flips, relocated, injected (edges_split of them by the quality bound),
+    min_angle (degrees), longest_edge, triangles_changed, stencils_affected).
 
     Examples
     --------
@@ -121,7 +136,11 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
 
     def __init__(self, nodes, node_fields: Optional[Dict[str, np.ndarray]] = None,
                  ip_fields: Optional[Dict[str, np.ndarray]] = None,
-                 remap: str = "conservative", walls: Optional[str] = "box", segments=None):
+                 remap: str = "conservative", walls: Optional[str] = "box", segments=None,
+                 spacing: Optional[Callable[[np.ndarray], np.ndarray]] = None):
+        if spacing is not None and not callable(spacing):
+            raise TypeError(f"spacing must be None or a callable x (n, 2) -> (n,), got "
+                            f"{type(spacing).__name__}")
         self.triangulation = Triangulation(nodes, segments=segments)
         n, nt = self.triangulation.npoints, self.triangulation.ntriangles
         if remap not in ("conservative", "average"):
@@ -146,7 +165,8 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         self._on_wall = np.zeros((n, 2), dtype=bool)
         if walls == "box":
             self._on_wall = (P == lo) | (P == hi)
-        self._ref_area = self.node_areas()
+        self._spacing_fn = spacing
+        self._target = self._initial_spacing() if spacing is None else self._spacing_at_nodes()
         self._segment_ref = self._segment_lengths(np.asarray(segments).reshape(-1, 2).shape[0]
                                                   if segments is not None else 0)
         self.time = 0.0
@@ -237,6 +257,56 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             np.add.at(out, j, cot * e2 / 8.0)
         return out
 
+    # -- the target spacing (spacing.py) -----------------------------------------
+    @property
+    def target_spacing(self) -> np.ndarray:
+        """(n,) read-only: the target spacing of each node (the ``spacing`` given, or the
+        initial node set's, carried by the material)."""
+        out = self._target.copy()
+        out.flags.writeable = False
+        return out
+
+    def reference_areas(self) -> np.ndarray:
+        """(n,) the node areas (:meth:`node_areas`) that the target spacing means: the
+        equilateral lattice's cell area, the part of it inside the hull on the hull."""
+        return reference_areas(self._target, self._fractions())
+
+    def _initial_spacing(self):
+        """The default target: each node's own spacing, or its neighbourhood's where that
+        is larger (a small random cell does not make a fine target: its node would get
+        nodes injected wherever the flow hands it a typical cell; a drawn node set is
+        within its own target, nothing is injected before the flow moves it)."""
+        own = spacing_from_areas(self.node_areas(), self._fractions())
+        return np.maximum(own, smoothed_spacing(own, self.triangulation.edges))
+
+    def _fractions(self):
+        return angle_fractions(self.nodes, self.triangles)
+
+    def _spacing_at_nodes(self):
+        return check_spacing(self._spacing_fn(self.nodes.copy()), self.triangulation.npoints,
+                             "spacing(x)")
+
+    def _refresh_target(self):
+        """A callable target evaluated at the nodes where they are now (a carried one
+        stays)."""
+        if self._spacing_fn is not None:
+            self._target = self._spacing_at_nodes()
+
+    def _targets_at(self, x, Phi=None):
+        """Target spacings for new nodes at x (k, 2): the callable's values, or the
+        natural-neighbour interpolant ``Phi`` (k, n) of the carried ones."""
+        if self._spacing_fn is not None:
+            return check_spacing(self._spacing_fn(np.array(x)), x.shape[0], "spacing(x)")
+        if Phi is None:
+            from ..coordinates import sibson_coordinates
+            Phi = sibson_coordinates(self.triangulation, x)
+        return Phi @ self._target
+
+    def longest_edge(self) -> float:
+        """The longest edge of the triangulation."""
+        E = self.triangulation.edges
+        return float(np.hypot(*(self.nodes[E[:, 0]] - self.nodes[E[:, 1]]).T).max())
+
     def min_angle(self) -> float:
         """The smallest triangle angle, degrees."""
         out = np.empty(self.triangles.shape[0])
@@ -299,8 +369,12 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             substeps, and nodes still passing through each other in a substep
             are taken out and re-inserted (reported as ``relocated``).
         inject
-            If given, inject nodes where a node's area has grown past
-            ``inject`` times its initial area (see :meth:`inject_nodes`).
+            If given, hold the nodes to the target spacing: inject nodes where a
+            node's area has grown past ``inject`` times its target area
+            (:meth:`inject_nodes`), split segments and wall edges stretched past
+            ``sqrt(inject)`` times their reference (:meth:`split_segments`,
+            :meth:`split_walls`) and every edge longer than the quality bound
+            (:meth:`split_long_edges`).
         merge
             If True, then remove crowded nodes and merge folded segments
             (:meth:`merge_nodes`; ``removed`` and ``merged`` in the report, the
@@ -325,11 +399,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         report = {"substeps": substeps, "flips": flips, "relocated": relocated}
         self.time += dt
         self.step += 1
-        report["injected"] = self.inject_nodes(inject) if inject else 0
-        split = self.split_segments(inject) if inject else 0
-        walls = self.split_walls(inject) if inject else 0
-        report["injected"] += split + walls
-        report["segments_split"], report["walls_split"] = split, walls
+        report.update(self._refine(inject))
         n = self.triangulation.npoints
         merged = self.merge_nodes() if merge else {"removed": 0, "merged": 0,
                                                    "node_map": np.arange(n)}
@@ -337,6 +407,7 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         if self.triangulation.segment_keys.size:
             self._check_segments()
         report["min_angle"] = self.min_angle()
+        report["longest_edge"] = self.longest_edge()
         # locality: triangles changed by flips / injection / relocation, and those with
         # their edge neighbours (a basis update tests the stencils and recomputes more:
         # NaturalNeighbourBasis.updated)
@@ -349,19 +420,33 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         self.node_map = merged["node_map"]
         return report
 
+    def _refine(self, inject):
+        """Injection where nodes thinned out, segments and wall edges split where the
+        flow stretched them, then every edge longer than the quality bound split
+        (:meth:`split_long_edges`); the counts of the report."""
+        if not inject:
+            return {"injected": 0, "segments_split": 0, "walls_split": 0, "edges_split": 0}
+        self._refresh_target()
+        inside = self.inject_nodes(inject)
+        split = self.split_segments(inject)
+        walls = self.split_walls(inject)
+        edges = self.split_long_edges()
+        return {"injected": inside + split + walls + edges, "segments_split": split,
+                "walls_split": walls, "edges_split": edges}
+
     def _state(self):
         """Everything a step may change, copied."""
         return {"tri": self.triangulation.snapshot(),
                 "ip_fields": {k: v.copy() for k, v in self.ip_fields.items()},
                 "node_fields": {k: v.copy() for k, v in self.node_fields.items()},
-                "on_wall": self._on_wall.copy(), "ref_area": self._ref_area.copy(),
+                "on_wall": self._on_wall.copy(), "target": self._target.copy(),
                 "time": self.time, "step": self.step, "history": len(self.history)}
 
     def _restore(self, state):
         self.triangulation.restore(state["tri"])
         self.ip_fields = {k: v.copy() for k, v in state["ip_fields"].items()}
         self.node_fields = {k: v.copy() for k, v in state["node_fields"].items()}
-        self._on_wall, self._ref_area = state["on_wall"].copy(), state["ref_area"].copy()
+        self._on_wall, self._target = state["on_wall"].copy(), state["target"].copy()
         self.time, self.step = state["time"], state["step"]
         del self.history[state["history"]:]
         self._invalidate()
@@ -600,9 +685,10 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         path = os.fspath(path)
         meta = {"time": self.time, "step": self.step, "remap": self.remap, "walls": self.walls,
                 "node_fields": list(self.node_fields), "ip_fields": list(self.ip_fields),
-                "history": self.history, "format": 1}
+                "history": self.history, "format": 1,
+                "spacing": "carried" if self._spacing_fn is None else "callable"}
         arrays = {"nodes": self.nodes, "triangles": self.triangles,
-                  "neighbours": self.triangulation.neighbours, "ref_area": self._ref_area,
+                  "neighbours": self.triangulation.neighbours, "target_spacing": self._target,
                   "on_wall": self._on_wall, "box_lo": self._box[0], "box_hi": self._box[1],
                   "segments": self.triangulation.segments,
                   "segment_source": self.triangulation.segment_source,
@@ -623,9 +709,15 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             raise
 
     @classmethod
-    def load(cls, path) -> "LagrangianMesh":
+    def load(cls, path, spacing: Optional[Callable[[np.ndarray], np.ndarray]] = None
+             ) -> "LagrangianMesh":
         """Restore a mesh written by :meth:`save`; continuing from it gives
-        bit-identical results to a run that never stopped."""
+        bit-identical results to a run that never stopped. A mesh made with a callable
+        ``spacing`` needs it again (a function is not stored); ``ValueError`` if it is
+        missing."""
+        if spacing is not None and not callable(spacing):
+            raise TypeError(f"spacing must be None or a callable x (n, 2) -> (n,), got "
+                            f"{type(spacing).__name__}")
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
             self = cls.__new__(cls)
@@ -639,7 +731,16 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             self.walls = meta["walls"]
             self.node_fields = {k: z[f"node__{k}"].copy() for k in meta["node_fields"]}
             self.ip_fields = {k: z[f"ip__{k}"].copy() for k in meta["ip_fields"]}
-            self._ref_area = z["ref_area"].copy()
+            self._spacing_fn = spacing
+            if meta.get("spacing") == "callable" and spacing is None:
+                raise ValueError(f"{os.fspath(path)!r} was written with a callable target "
+                                 f"spacing: pass it again, load(path, spacing=...)")
+            if spacing is not None:
+                self._target = self._spacing_at_nodes()
+            elif "target_spacing" in z.files:
+                self._target = z["target_spacing"].copy()
+            else:  # (checkpoints before the target spacing: the reference areas)
+                self._target = spacing_from_areas(z["ref_area"], self._fractions())
             self._on_wall = z["on_wall"].copy()
             self._box = (z["box_lo"].copy(), z["box_hi"].copy())
             self.time = meta["time"]

@@ -31,9 +31,10 @@ __all__ = ["NodeRemoval", "conservative_fill", "CLUSTER_FRACTION", "FOLD_ANGLE",
            "WALL_GAP_FRACTION"]
 
 #: a node whose spacing (square root of its share of the triangle areas) fell below this
-#: fraction of its reference spacing (the square root of the largest reference area, the
-#: one injection compares with, of the node and its neighbours) is removed. Injection adds
-#: a node where an area doubled (spacing x 1.4); nodes are removed only where the flow has
+#: fraction of its reference spacing (the square root of the largest target area, the
+#: one injection compares with, of the node and its neighbours: evolution.spacing) is
+#: removed. Injection adds a node where an area doubled past its target (spacing x 1.4);
+#: nodes are removed only where the flow has
 #: squeezed them 5-fold in length (25-fold in area), far from the injection threshold, so
 #: the two rules never undo each other's work, while the clusters that set the time step
 #: (spacing a hundredth of the reference) go. A wall node whose neighbour on the wall came
@@ -361,7 +362,7 @@ class NodeRemoval:
                      "segment_source": tri.segment_source.copy()})
         self.node_fields = {k: f[used].copy() for k, f in self.node_fields.items()}
         self._on_wall = self._on_wall[used].copy()
-        self._ref_area = self._ref_area[used].copy()
+        self._target = self._target[used].copy()
         return new
 
     def walk_segments(self, a: int, b: int, listed=()):
@@ -506,7 +507,9 @@ class NodeRemoval:
 
     def spacing_ratios(self) -> np.ndarray:
         """(n,) each node's spacing (square root of its share of the triangle areas) over
-        its reference spacing, what :meth:`merge_nodes` compares with ``fraction``; for a
+        its reference spacing (the square root of the largest target area,
+        :meth:`reference_areas`, of the node and its neighbours), what
+        :meth:`merge_nodes` compares with ``fraction``; for a
         wall node the smaller of that and its nearest neighbour on the wall over its
         reference spacing, for a node off the walls the smaller of its ratio and its
         distance to the nearest wall over :data:`WALL_GAP_FRACTION` of its reference
@@ -520,14 +523,15 @@ class NodeRemoval:
         # a node on one wall (not a corner) compares with its own reference: its
         # neighbours off the wall have whole areas where it has half of one
         wall = self._on_wall.sum(axis=1) == 1
-        # the reference: the largest reference area of the node and its neighbours (a
-        # node injected into a crowded place got a small one: a cluster of them is
-        # compared with the density the place had)
-        ref = self._ref_area.copy()
+        # the reference: the largest target area of the node and its neighbours (a
+        # node with a fine target among coarse ones is compared with the density the
+        # place had)
+        own = self.reference_areas()
+        ref = own.copy()
         E = tri.edges
-        np.maximum.at(ref, E[:, 0], self._ref_area[E[:, 1]])
-        np.maximum.at(ref, E[:, 1], self._ref_area[E[:, 0]])
-        ref[wall] = self._ref_area[wall]
+        np.maximum.at(ref, E[:, 0], own[E[:, 1]])
+        np.maximum.at(ref, E[:, 1], own[E[:, 0]])
+        ref[wall] = own[wall]
         # a wall node also by its nearest neighbour on the wall: two wall nodes can
         # converge while their shares stay large (a strained flow keeps areas), and unlike
         # interior nodes they cannot be relocated past each other

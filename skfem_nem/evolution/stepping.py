@@ -11,9 +11,9 @@ from typing import Dict
 
 import numpy as np
 
-__all__ = ["StepTooLong", "LagrangianStep", "check_node_fields", "evaluate_velocity",
-           "check_step_arguments", "predictor_corrector", "keep_in_box", "WALL_REACH",
-           "LEAVE_TOLERANCE"]
+__all__ = ["StepTooLong", "MoveNotConverged", "LagrangianStep", "check_node_fields",
+           "evaluate_velocity", "check_step_arguments", "predictor_corrector", "keep_in_box",
+           "WALL_REACH", "LEAVE_TOLERANCE"]
 
 
 class StepTooLong(ValueError):
@@ -26,6 +26,12 @@ class StepTooLong(ValueError):
     def __init__(self, message, crossing=None):
         super().__init__(message)
         self.crossing = crossing
+
+
+class MoveNotConverged(StepTooLong):
+    """The predictor-corrector of a step did not converge: the nodes' end positions are
+    not known to its tolerance, and a step is never accepted with them. A shorter step
+    converges (the iteration contracts by about dt times the velocity's gradient)."""
 
 
 def check_node_fields(node_fields, n) -> Dict[str, np.ndarray]:
@@ -80,8 +86,8 @@ def check_step_arguments(velocity, dt, tol, maxiter, max_substeps, inject):
 def predictor_corrector(velocity, x0, dt, tol, maxiter, step):
     """Trapezoidal update x = x0 + dt/2 (v(x0) + v(x)), iterated from the Euler
     predictor until the largest change is below ``tol`` times the size of the
-    node set (at most ``maxiter`` corrections; a RuntimeWarning if not).
-    Returns ``(x, iterations, converged)``."""
+    node set (at most ``maxiter`` corrections). Returns ``(x, iterations, converged)``;
+    :class:`MoveNotConverged` from :meth:`LagrangianStep.step_transaction` if not."""
     if not np.isfinite(dt) or dt <= 0:
         raise ValueError(f"dt must be positive and finite, got {dt}")
     size = float(np.ptp(x0, axis=0).max())
@@ -97,10 +103,9 @@ def predictor_corrector(velocity, x0, dt, tol, maxiter, step):
             converged = True
             break
     if not converged:
-        import warnings
-        warnings.warn(f"step {step}: the predictor-corrector did not converge in "
-                      f"{maxiter} iterations (last change {change:.3e}, tolerance "
-                      f"{tol * size:.3e}); reduce dt", RuntimeWarning, stacklevel=3)
+        raise MoveNotConverged(f"step {step}: the predictor-corrector did not converge in "
+                               f"{maxiter} iterations (last change {change:.3e}, tolerance "
+                               f"{tol * size:.3e}): reduce dt")
     return x, it, converged
 
 

@@ -620,6 +620,8 @@ def test_an_unconverged_move_is_retried_down_to_min_dt_then_the_run_stops(tmp_pa
     assert code == cli.STOPPED
     lines = [x for x in err.splitlines() if x.strip()]
     assert len(lines) == 1 and "stopped at t = " in lines[0] and "(min_dt 0.5)" in lines[0]
+    assert lines[0].endswith("try --restart with a smaller --min-dt or --cfl, or a new run "
+                             "with more --nodes")
     assert (out / "checkpoint.npz").exists()
     # a run with one retried step completes and says so once, at the end
     failed = []

@@ -156,10 +156,13 @@ def _run_plate(sim, cfg, args) -> int:
         sim.checkpoint()
         sim.figures()
         reason = (str(err).splitlines() or [type(err).__name__])[0]
+        from .sinking_plate import StepStalled
+        hint = ("--restart with a smaller --min-dt or --cfl, or a new run with more --nodes"
+                if isinstance(err, StepStalled) else
+                "a new run with more --nodes, or --restart with a smaller --max-dt or --cfl")
         print(f"skfem-nem: sinking-plate stopped at t = {sim.lm.time:g} (step {sim.lm.step}): "
               f"{reason}. Outputs and a checkpoint up to there are in {args.output}; try "
-              f"a new run with more --nodes, or --restart with a smaller --max-dt or --cfl",
-              file=sys.stderr)
+              f"{hint}", file=sys.stderr)
         return STOPPED
     for p in sim.figures():
         print("wrote", p)

@@ -424,9 +424,9 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         """Injection where nodes thinned out, segments and wall edges split where the
         flow stretched them, then every edge longer than the quality bound split
         (:meth:`split_long_edges`); the counts of the report."""
+        self._refresh_target()     # (merging compares with it too)
         if not inject:
             return {"injected": 0, "segments_split": 0, "walls_split": 0, "edges_split": 0}
-        self._refresh_target()
         inside = self.inject_nodes(inject)
         split = self.split_segments(inject)
         walls = self.split_walls(inject)

@@ -640,6 +640,36 @@ def test_an_unconverged_move_is_retried_down_to_min_dt_then_the_run_stops(tmp_pa
     assert "1 step(s) were retried with a shorter time step" in captured.out
 
 
+def test_a_crossing_at_the_time_step_floor_goes_to_the_cut_not_to_a_stall(tmp_path):
+    """Two material lines that would cross at every time step down to ``min_dt`` are
+    handed back to :meth:`SinkingPlate.step` (which cuts the plate or releases the
+    interface there), not reported as a stalled step: at a small time step the floor
+    comes before the usual number of halvings."""
+    sim = SinkingPlate(PlateConfig(**{**SMALL, "min_dt": 0.5}), tmp_path)
+    calls = []
+    pairs = ([1, 2], [3, 4])
+
+    def crossing(velocity, dt, **kw):
+        calls.append(dt)
+        raise StepTooLong("segment [1, 2] would cross segment [3, 4]: reduce dt", pairs)
+
+    sim.lm.advance = crossing
+    with pytest.raises(StepTooLong) as info:
+        sim._tries(1.5, 4)
+    assert not isinstance(info.value, StepStalled) and info.value.crossing == pairs
+    assert calls == [1.5, 0.75]
+    calls.clear()
+
+    def stalling(velocity, dt, **kw):
+        calls.append(dt)
+        raise StepTooLong("triangle 0 inverts and none of its vertices can be relocated")
+
+    sim.lm.advance = stalling
+    with pytest.raises(StepStalled, match="fails at dt = 0.75"):
+        sim._tries(1.5, 4)
+    assert calls == [1.5, 0.75]
+
+
 def test_csv_log_keeps_rows_on_restart_and_widens_for_new_columns(tmp_path):
     """A restart keeps the rows up to its time; a row with columns the file lacks (a run
     restarted from an older version's output) widens the file instead of dropping them."""

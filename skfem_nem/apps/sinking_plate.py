@@ -262,8 +262,9 @@ class SinkingPlate:
 
     def _tries(self, dt: float, retries: int) -> dict:
         """:meth:`step` without cuts: dt halved until the step passes; a crossing of
-        material lines goes back to :meth:`step` after ``retries`` halvings, anything
-        else stops the run below ``min_dt`` (:class:`StepStalled`)."""
+        material lines goes back to :meth:`step` after ``retries`` halvings (or where the
+        next would go below ``min_dt``), anything else stops the run below ``min_dt``
+        (:class:`StepStalled`)."""
         saved = {k: v.copy() for k, v in self.lm.ip_fields.items()}
         attempt = 0
         while True:
@@ -282,9 +283,10 @@ class SinkingPlate:
                 # the predictor-corrector where the velocity varies fast: a shorter step
                 # changes less
                 self.lm.replace_ip_fields(saved)
-                if getattr(err, "crossing", None) is not None and attempt >= retries:
-                    raise
-                if dt / 2 < self.cfg.min_dt:
+                last = dt / 2 < self.cfg.min_dt
+                if getattr(err, "crossing", None) is not None and (attempt >= retries or last):
+                    raise                               # step() cuts or releases there
+                if last:
                     raise StepStalled(
                         f"step {self.lm.step + 1} at t = {self.lm.time:.6g} fails at dt = "
                         f"{dt:.3g} (min_dt {self.cfg.min_dt:g}): {err}") from err

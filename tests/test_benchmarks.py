@@ -507,3 +507,21 @@ def test_basis_update_recomputes_what_the_disc_moved(capsys):
     with pytest.raises(SystemExit) as exc:
         bench.main(["--radii", "0.7"])
     assert exc.value.code == 2 and "'0.7'" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------
+# vortex_resolution: the target spacing held in a vortex
+# --------------------------------------------------------------------------
+
+def test_vortex_resolution_prints_both_runs_and_their_bounds(capsys):
+    """A short run of the vortex study: a table row per output time for the run with the
+    target spacing and the one without injection, and the fewest nodes and longest edge
+    over each run, measured against the first mesh."""
+    bench = load_benchmark("vortex_resolution")
+    out = bench.main(["--nodes", "80", "--end-time", "1", "--every", "0.5"])
+    text = capsys.readouterr().out
+    assert text.count("| target spacing |") == 3 and text.count("| none |") == 3
+    fewest, longest = out[(80, "target spacing")]
+    assert 0.9 <= fewest <= 1.0 and 1.0 <= longest <= 2.0
+    assert out[(80, "none")][0] <= 1.0
+    assert "integral of 1: 1.0000000000000" in text or "integral of 1: 0.9999999999999" in text

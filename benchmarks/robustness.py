@@ -19,8 +19,9 @@ length 2.5) and ``narrow`` (box width 3): 120 runs), where the flow stretches th
 most; ``--scenario`` picks scenarios of either grid.
 
 A run that stops (the mesh cannot continue, a solver fails) is reported with its reason,
-never aborts the study. Each run writes its outputs in its own folder under ``--out``; the rows go to ``robustness.csv`` there as runs finish (a study can be
-resumed: finished runs are read back, not redone) and the markdown table is printed.
+never aborts the study. Each run writes its outputs in its own folder under ``--out``;
+the rows go to ``robustness.csv`` there as runs finish (a study can be resumed: finished
+runs are read back, not redone) and the markdown table is printed.
 With ``--continue-stopped`` the study's stopped runs are continued from the checkpoints
 their stops wrote, with today's code (a run's new row replaces the old one).
 

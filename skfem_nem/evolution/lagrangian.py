@@ -48,8 +48,7 @@ from .injection import NodeInjection
 from .merging import NodeRemoval
 from .quality import cross, inverted, min_angles
 from .remap import remap_average, remap_conservative
-from .spacing import (angle_fractions, check_spacing, reference_areas, smoothed_spacing,
-                      spacing_from_areas)
+from .spacing import SpacingTarget, spacing_from_areas
 from .stepping import LagrangianStep, StepTooLong, check_node_fields
 
 __all__ = ["LagrangianMesh"]
@@ -66,7 +65,7 @@ _A3 = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 /
 # ---------------------------------------------------------------------------
 
 
-class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
+class LagrangianMesh(SpacingTarget, NodeInjection, NodeRemoval, LagrangianStep):
     """A 2D node set carried by a flow, kept Delaunay by local flips.
 
     Parameters
@@ -102,8 +101,9 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
         The target node spacing that injection and removal hold the nodes to for the
         whole run (:mod:`~skfem_nem.evolution.spacing`). ``None`` (default): the
         initial node set's own spacing (the edge of the equilateral lattice with each
-        node's Voronoi area), carried by the material: an injected node gets the
-        natural-neighbour interpolant of its material's targets. A callable
+        node's Voronoi area, or its neighbourhood's where larger), carried by the
+        material: an injected node gets the natural-neighbour interpolant of its
+        material's targets. A callable
         ``spacing(x)`` -> (n,) positive: a target fixed in space, evaluated at the
         nodes' positions at every step.
 
@@ -256,51 +256,6 @@ class LagrangianMesh(NodeInjection, NodeRemoval, LagrangianStep):
             np.add.at(out, i, cot * e2 / 8.0)
             np.add.at(out, j, cot * e2 / 8.0)
         return out
-
-    # -- the target spacing (spacing.py) -----------------------------------------
-    @property
-    def target_spacing(self) -> np.ndarray:
-        """(n,) read-only: the target spacing of each node (the ``spacing`` given, or the
-        initial node set's, carried by the material)."""
-        out = self._target.copy()
-        out.flags.writeable = False
-        return out
-
-    def reference_areas(self) -> np.ndarray:
-        """(n,) the node areas (:meth:`node_areas`) that the target spacing means: the
-        equilateral lattice's cell area, the part of it inside the hull on the hull."""
-        return reference_areas(self._target, self._fractions())
-
-    def _initial_spacing(self):
-        """The default target: each node's own spacing, or its neighbourhood's where that
-        is larger (a small random cell does not make a fine target: its node would get
-        nodes injected wherever the flow hands it a typical cell; a drawn node set is
-        within its own target, nothing is injected before the flow moves it)."""
-        own = spacing_from_areas(self.node_areas(), self._fractions())
-        return np.maximum(own, smoothed_spacing(own, self.triangulation.edges))
-
-    def _fractions(self):
-        return angle_fractions(self.nodes, self.triangles)
-
-    def _spacing_at_nodes(self):
-        return check_spacing(self._spacing_fn(self.nodes.copy()), self.triangulation.npoints,
-                             "spacing(x)")
-
-    def _refresh_target(self):
-        """A callable target evaluated at the nodes where they are now (a carried one
-        stays)."""
-        if self._spacing_fn is not None:
-            self._target = self._spacing_at_nodes()
-
-    def _targets_at(self, x, Phi=None):
-        """Target spacings for new nodes at x (k, 2): the callable's values, or the
-        natural-neighbour interpolant ``Phi`` (k, n) of the carried ones."""
-        if self._spacing_fn is not None:
-            return check_spacing(self._spacing_fn(np.array(x)), x.shape[0], "spacing(x)")
-        if Phi is None:
-            from ..coordinates import sibson_coordinates
-            Phi = sibson_coordinates(self.triangulation, x)
-        return Phi @ self._target
 
     def longest_edge(self) -> float:
         """The longest edge of the triangulation."""

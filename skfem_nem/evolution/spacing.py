@@ -21,11 +21,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..coordinates import sibson_coordinates
 from .quality import cross
 
-__all__ = ["AREA_PER_SPACING2", "EDGE_FACTOR", "SPLIT_CLEARANCE", "SMOOTHING_ROUNDS",
-           "angle_fractions",
-           "spacing_from_areas", "smoothed_spacing", "reference_areas", "check_spacing"]
+__all__ = ["SpacingTarget", "AREA_PER_SPACING2", "EDGE_FACTOR", "SPLIT_CLEARANCE",
+           "SMOOTHING_ROUNDS", "angle_fractions", "spacing_from_areas", "smoothed_spacing",
+           "reference_areas", "check_spacing"]
 
 #: Voronoi-cell area of a node of the equilateral lattice of edge h, over h^2: a target
 #: spacing h means a target area of sqrt(3)/2 h^2 for an interior node
@@ -96,3 +97,52 @@ def check_spacing(h, n: int, name: str = "spacing") -> np.ndarray:
         raise ValueError(f"{name} must be positive and finite: {a[bad[0]]!r} at node "
                          f"{bad[0]} ({bad.size} node(s))")
     return a
+
+
+class SpacingTarget:
+    """The target spacing of :class:`~skfem_nem.evolution.lagrangian.LagrangianMesh` (which
+    provides the nodes, triangles, node areas and ``_target``, ``_spacing_fn``): the
+    per-node targets, their areas, and the targets of new nodes."""
+
+    @property
+    def target_spacing(self) -> np.ndarray:
+        """(n,) read-only: the target spacing of each node (the ``spacing`` given, or the
+        initial node set's, carried by the material)."""
+        out = self._target.copy()
+        out.flags.writeable = False
+        return out
+
+    def reference_areas(self) -> np.ndarray:
+        """(n,) the node areas (:meth:`node_areas`) that the target spacing means: the
+        equilateral lattice's cell area, the part of it inside the hull on the hull."""
+        return reference_areas(self._target, self._fractions())
+
+    def _initial_spacing(self):
+        """The default target: each node's own spacing, or its neighbourhood's where that
+        is larger (a small random cell does not make a fine target: its node would get
+        nodes injected wherever the flow hands it a typical cell; a drawn node set is
+        within its own target, nothing is injected before the flow moves it)."""
+        own = spacing_from_areas(self.node_areas(), self._fractions())
+        return np.maximum(own, smoothed_spacing(own, self.triangulation.edges))
+
+    def _fractions(self):
+        return angle_fractions(self.nodes, self.triangles)
+
+    def _spacing_at_nodes(self):
+        return check_spacing(self._spacing_fn(self.nodes.copy()), self.triangulation.npoints,
+                             "spacing(x)")
+
+    def _refresh_target(self):
+        """A callable target evaluated at the nodes where they are now (a carried one
+        stays)."""
+        if self._spacing_fn is not None:
+            self._target = self._spacing_at_nodes()
+
+    def _targets_at(self, x, Phi=None):
+        """Target spacings for new nodes at x (k, 2): the callable's values, or the
+        natural-neighbour interpolant ``Phi`` (k, n) of the carried ones."""
+        if self._spacing_fn is not None:
+            return check_spacing(self._spacing_fn(np.array(x)), x.shape[0], "spacing(x)")
+        if Phi is None:
+            Phi = sibson_coordinates(self.triangulation, x)
+        return Phi @ self._target

@@ -108,6 +108,7 @@ from skfem import BilinearForm, LinearForm
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from .condensation import condensed_divergence, condensed_viscous
+from .condensation_tet import condensed_divergence_tet, condensed_viscous_tet
 from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
 from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_columns,
                            outline_flux, wall_dofs, walls_fix_pressure)
@@ -135,9 +136,9 @@ class StokesSolution:
     info: dict = field(default_factory=dict)
 
     def velocity_at_nodes(self) -> np.ndarray:
-        """(n, 2) velocity at the mesh nodes."""
+        """(n, dim) velocity at the mesh nodes."""
         nd = self.spaces.ubasis.dofs.nodal_dofs
-        return np.stack([self.u[nd[0]], self.u[nd[1]]], axis=1)
+        return np.stack([self.u[nd[c]] for c in range(self.spaces.dim)], axis=1)
 
     def pressure_at_nodes(self) -> np.ndarray:
         """(n,) pressure at the mesh nodes (P1 pressure: its nodal values)."""
@@ -189,7 +190,7 @@ def quadrature_values(spaces: StokesSpaces, value: Field, name: str,
     """A coefficient at the quadrature points, shape ``shape + (ne, nq)``.
 
     ``value`` may be a number, a callable of the quadrature points
-    ``x`` (2, ne, nq), an array already of that shape, or an array of nodal
+    ``x`` (dim, ne, nq), an array already of that shape, or an array of nodal
     values (n,) + ... interpolated with the P1 functions of the mesh (the
     nodes carry the material, as in the paper). Raises ``ValueError`` naming
     ``name`` and the first offending element or node for non-finite values
@@ -271,11 +272,12 @@ class StokesSystem:
 
 def divergence_form(spaces: StokesSpaces):
     """The form of the divergence block: ``-(div u, q)`` for the quadratic velocities
-    (Taylor-Hood's, and the quadratic natural-neighbour one, whose linear smoothed
+    (Taylor-Hood's, MINI's, and the quadratic natural-neighbour one, whose linear smoothed
     gradients integrate it by parts exactly themselves), its integration by parts
     ``(u, grad q)`` for the linear natural-neighbour velocity (with the exact boundary
     term of :func:`~skfem_nem.models.stokes_walls.boundary_flux` added)."""
-    return divergence if spaces.method in ("taylor-hood", "nem2") else weak_divergence
+    return (divergence if spaces.method in ("taylor-hood", "nem2", "mini")
+            else weak_divergence)
 
 
 def _blocks_once(spaces: StokesSpaces) -> dict:
@@ -296,6 +298,8 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
         cache["B"] = (B - cache["flux"]).tocsr() if "flux" in cache else B
     else:
         cache["Bb"] = bform.assemble(bb, pb).tocsr()
+        if spaces.dim == 3:  # the natural-neighbour part, for condensed_divergence_tet
+            cache["Bn"] = bform.assemble(ub, pb).tocsr()
     cache["m"] = _unit.assemble(pb)
     return cache
 
@@ -307,18 +311,19 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     Parameters
     ----------
     eta
-        Viscosity (Pa s or nondimensional): number, callable of x (2, ne, nq),
+        Viscosity (Pa s or nondimensional): number, callable of x (dim, ne, nq),
         (ne, nq) values at the quadrature points, or (n,) nodal values.
     f
-        Body force per unit volume, shape (2,) + that of ``eta`` (e.g.
-        ``rho * g``); a callable returns (2, ne, nq).
+        Body force per unit volume, shape (dim,) + that of ``eta`` (e.g.
+        ``rho * g``); a callable returns (dim, ne, nq).
     tau0
-        Optional known stress (2, 2, ne, nq) (or callable) moved to the right
+        Optional known stress (dim, dim, ne, nq) (or callable) moved to the right
         side: the load gains ``-(tau0, eps(v))``.
     """
+    d = spaces.dim
     e = quadrature_values(spaces, eta, "viscosity eta", positive=True)
-    fv = quadrature_values(spaces, f, "body force f", shape=(2,))
-    t = None if tau0 is None else quadrature_values(spaces, tau0, "stress tau0", shape=(2, 2))
+    fv = quadrature_values(spaces, f, "body force f", shape=(d,))
+    t = None if tau0 is None else quadrature_values(spaces, tau0, "stress tau0", shape=(d, d))
     ub, pb = spaces.ubasis, spaces.pbasis
 
     def loads(basis):
@@ -340,9 +345,14 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
                             None)
     # static condensation of the bubbles, triangle by triangle (models.condensation)
     bb, Bb = spaces.bbasis, cache["Bb"]                      # Bb (np, nb)
-    cv = condensed_viscous(ub, bb, e)
+    if spaces.dim == 3:  # by sparse products (models.condensation_tet)
+        cv = condensed_viscous_tet(ub, bb, e)
+        B = condensed_divergence_tet(cache["Bn"], Bb, cv)
+    else:
+        cv = condensed_viscous(ub, bb, e)
+        B = condensed_divergence(ub, pb, bb, cv)
     fb = loads(bb)
-    B = (condensed_divergence(ub, pb, bb, cv) - cache["flux"]).tocsr()
+    B = (B - cache["flux"]).tocsr()
     S = (Bb @ cv.Ainv @ Bb.T).tocsr()
     b = b - cv.AiAbn.T @ fb
     g = -(Bb @ (cv.Ainv @ fb))

@@ -193,21 +193,29 @@ def v_cycle(ml, b: np.ndarray) -> np.ndarray:
 
 
 def velocity_components(ubasis) -> np.ndarray:
-    """0 or 1, the component (``u^1``, ``u^2``) of each dof of a vector basis."""
+    """0, 1 (or 2), the component (``u^1``, ``u^2``, ``u^3``) of each dof of a vector
+    basis."""
+    d = ubasis.mesh.dim()
     comp = np.zeros(ubasis.N, dtype=int)
-    for dofs_ in (ubasis.dofs.nodal_dofs, ubasis.dofs.facet_dofs):  # rows: u^1, u^2
-        comp[dofs_[1::2].ravel()] = 1
+    dofs = ubasis.dofs
+    for dofs_ in (dofs.nodal_dofs, dofs.facet_dofs, dofs.edge_dofs, dofs.interior_dofs):
+        for c in range(1, d):   # rows: u^1, u^2 (, u^3) of each entity
+            comp[dofs_[c::d].ravel()] = c
     return comp
 
 
 def rigid_modes(ubasis, free: np.ndarray) -> np.ndarray:
-    """(len(free), 3) rigid-body modes (two translations, one rotation) of a
-    vector velocity basis, restricted to the dofs ``free``."""
-    loc = ubasis.doflocs  # (2, nu)
+    """(len(free), 3) rigid-body modes (two translations, one rotation) of a 2D
+    vector velocity basis, or (len(free), 6) in 3D (three translations, three
+    rotations), restricted to the dofs ``free``."""
+    loc = np.asarray(ubasis.doflocs)  # (dim, nu)
     comp = velocity_components(ubasis)
-    Bm = np.zeros((ubasis.N, 3))
-    Bm[comp == 0, 0] = 1.0
-    Bm[comp == 1, 1] = 1.0
-    Bm[comp == 0, 2] = -loc[1, comp == 0]
-    Bm[comp == 1, 2] = loc[0, comp == 1]
+    d = loc.shape[0]
+    pairs = [(0, 1)] if d == 2 else [(0, 1), (1, 2), (2, 0)]
+    Bm = np.zeros((ubasis.N, d + len(pairs)))
+    for c in range(d):
+        Bm[comp == c, c] = 1.0
+    for k, (a, b) in enumerate(pairs):   # rotation in the (a, b) plane
+        Bm[comp == a, d + k] = -loc[b, comp == a]
+        Bm[comp == b, d + k] = loc[a, comp == b]
     return Bm[free]

@@ -3,9 +3,14 @@
 Kept apart from :mod:`skfem_nem.models.stokes` (forms, assembly, the solve) and from
 :mod:`skfem_nem.models.stokes_walls` (conditions on the velocity dofs), which both build
 on these spaces: which bases a method pairs (natural-neighbour velocity with bubbles and
-P1 pressure, the quadratic natural-neighbour velocity and P1 pressure, or Taylor-Hood),
-with one quadrature, and the same spaces restricted to a subset of the triangles for a
-distributed assembly (:meth:`StokesSpaces.restricted`).
+P1 pressure, the quadratic natural-neighbour velocity and P1 pressure, Taylor-Hood, or
+scikit-fem's MINI), with one quadrature, and the same spaces restricted to a subset of
+the triangles for a distributed assembly (:meth:`StokesSpaces.restricted`).
+
+The same methods on a Delaunay ``MeshTet`` (3D) take the tetrahedron's elements: its
+quartic bubble :class:`ElementTetBubble`, P1 and P0 pressures, P2 for Taylor-Hood and
+``ElementTetMini``; the natural-neighbour velocity is then the smoothed Box 1 basis, one
+smoothing cell per tetrahedron (:class:`~skfem_nem.NaturalNeighbourBasis`).
 """
 from __future__ import annotations
 
@@ -13,14 +18,16 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from skfem import Basis, MeshTri
-from skfem.element import ElementH1, ElementTriP0, ElementTriP1, ElementTriP2, ElementVector
-from skfem.refdom import RefTri
+from skfem import Basis, MeshTet, MeshTri
+from skfem.element import (ElementH1, ElementTetMini, ElementTetP0, ElementTetP1,
+                           ElementTetP2, ElementTriMini, ElementTriP0, ElementTriP1,
+                           ElementTriP2, ElementVector)
+from skfem.refdom import RefTet, RefTri
 
 from ..basis import (ElementNaturalNeighbour, ElementNaturalNeighbour2, NaturalNeighbourBasis,
                      gauss_rule)
 
-__all__ = ["ElementTriBubble", "StokesSpaces", "stokes_spaces"]
+__all__ = ["ElementTriBubble", "ElementTetBubble", "StokesSpaces", "stokes_spaces"]
 
 
 class ElementTriBubble(ElementH1):
@@ -43,11 +50,45 @@ class ElementTriBubble(ElementH1):
         return phi, dphi
 
 
+class ElementTetBubble(ElementH1):
+    """The quartic bubble ``256 x y z (1 - x - y - z)`` alone: one interior dof per
+    tetrahedron (the enrichment of the 3D MINI element)."""
+
+    interior_dofs = 1
+    dim = 3
+    maxdeg = 4
+    dofnames = ["b"]
+    doflocs = np.array([[0.25, 0.25, 0.25]])
+    refdom = RefTet
+
+    def lbasis(self, X, i):
+        x, y, z = X
+        if i != 0:
+            self._index_error()
+        s = 1.0 - x - y - z
+        phi = 256.0 * x * y * z * s
+        dphi = 256.0 * np.array([y * z * (s - x), x * z * (s - y), x * y * (s - z)])
+        return phi, dphi
+
+
+# the elements of each method on triangles and on tetrahedra
+_ELEMENTS = {
+    "tri": {"bubble": ElementTriBubble, "p1": ElementTriP1, "p0": ElementTriP0,
+            "p2": ElementTriP2, "mini": ElementTriMini},
+    "tet": {"bubble": ElementTetBubble, "p1": ElementTetP1, "p0": ElementTetP0,
+            "p2": ElementTetP2, "mini": ElementTetMini},
+}
+
+# Gauss orders on tetrahedra: Taylor-Hood's forms (P2 gradients times P2 gradients,
+# loads) exactly, and MINI's quartic bubble's gradients exactly
+TET_ORDER = {"taylor-hood": 4, "mini": 6}
+
+
 @dataclass
 class StokesSpaces:
     """Velocity and pressure bases on one triangulation (same quadrature)."""
 
-    mesh: MeshTri
+    mesh: MeshTri | MeshTet
     method: str
     ubasis: object
     pbasis: Basis
@@ -67,13 +108,18 @@ class StokesSpaces:
         return self.pbasis.N
 
     @property
+    def dim(self) -> int:
+        """Space dimension (2 on triangles, 3 on tetrahedra)."""
+        return self.mesh.dim()
+
+    @property
     def stabilised(self) -> bool:
         """True where the pressure projection stabilisation is used."""
         return self.method == "nem-projection"
 
     @property
     def quadrature_points(self) -> np.ndarray:
-        """Global coordinates of the quadrature points, (2, ne, nq)."""
+        """Global coordinates of the quadrature points, (dim, ne, nq)."""
         return np.asarray(self.pbasis.global_coordinates())
 
     def restricted(self, elements: np.ndarray) -> "StokesSpaces":
@@ -102,20 +148,22 @@ class StokesSpaces:
                             sub(self.p0basis), sub(self.bbasis), elements)
 
 
-def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: Optional[int] = None,
+def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optional[int] = None,
                   coordinates: str = "sibson", integration: Optional[str] = None) -> StokesSpaces:
     """Velocity/pressure bases for :func:`solve_stokes`.
 
     Parameters
     ----------
     mesh
-        A Delaunay ``MeshTri`` (build it with :func:`skfem_nem.delaunay_mesh`).
+        A Delaunay ``MeshTri`` or ``MeshTet`` (build it with
+        :func:`skfem_nem.delaunay_mesh`).
     method
         ``"nem"`` (natural-neighbour velocity with bubbles, P1 pressure), ``"nem2"``
         (quadratic natural-neighbour velocity, ``ElementNaturalNeighbour2``: P2's
         unknowns and rates, P1 pressure, inf-sup stable without bubbles; fixed meshes:
-        its functions are not updated locally) or ``"taylor-hood"`` (P2 velocity, P1
-        pressure).
+        its functions are not updated locally; triangles only), ``"taylor-hood"`` (P2
+        velocity, P1 pressure) or ``"mini"`` (scikit-fem's MINI: P1 velocity with a
+        bubble, P1 pressure, nothing condensed; a baseline).
     npoints
         Gauss points per triangle (1, 3, 4, 6, 7, 12, 13). Natural-neighbour
         velocities: ``None`` (default) integrates them consistently by
@@ -123,37 +171,49 @@ def stokes_spaces(mesh: MeshTri, method: str = "nem", npoints: Optional[int] = N
         triangle, one per smoothing cell; quadratic: linear smoothed gradients per
         triangle, :mod:`skfem_nem.basis.smoothing_quadratic`); a number asks for Gauss
         quadrature of their gradients with that rule. Taylor-Hood: default 6, which
-        integrates its forms exactly.
+        integrates its forms exactly. On tetrahedra only ``None``: the smoothed
+        natural-neighbour velocity takes 4 points per tetrahedron, Taylor-Hood and MINI
+        Gauss rules that integrate their forms exactly.
     coordinates
         ``"sibson"`` or ``"laplace"`` (NEM only).
     integration
         ``"smoothed"`` or ``"gauss"`` for the natural-neighbour velocity (see
         :class:`~skfem_nem.NaturalNeighbourBasis`); ``None`` follows
-        ``npoints``. Not an option of Taylor-Hood.
+        ``npoints``. Not an option of Taylor-Hood or MINI.
     """
+    tet = isinstance(mesh, MeshTet)
+    if not (tet or isinstance(mesh, MeshTri)):
+        raise ValueError(f"mesh must be a Delaunay MeshTri or MeshTet, got "
+                         f"{type(mesh).__name__}")
+    el = _ELEMENTS["tet" if tet else "tri"]
+    method = "taylor-hood" if method == "th" else method
+    if method not in ("nem", "nem-projection", "nem2", "taylor-hood", "mini"):
+        raise ValueError(f"method must be 'nem', 'nem-projection', 'nem2', 'taylor-hood' "
+                         f"or 'mini', got {method!r}")
+    if tet and npoints is not None:
+        raise ValueError(f"npoints={npoints!r} chooses a triangle rule; on tetrahedra "
+                         f"leave it None (each method takes its own rule)")
+    if tet and method == "nem2":
+        raise ValueError("method 'nem2' (quadratic natural neighbours) is built on "
+                         "triangles only; on tetrahedra use 'nem' or 'taylor-hood'")
     bb = None
-    if method in ("nem", "nem-projection"):
-        ub = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()),
-                                   npoints=npoints, coordinates=coordinates,
-                                   integration=integration)
+    if method.startswith("nem"):
+        elem = ElementNaturalNeighbour2() if method == "nem2" else ElementNaturalNeighbour()
+        ub = NaturalNeighbourBasis(mesh, ElementVector(elem, mesh.dim()), npoints=npoints,
+                                   coordinates=coordinates, integration=integration)
         quad = ub.quadrature
         if method == "nem":
-            bb = Basis(mesh, ElementVector(ElementTriBubble()), quadrature=quad)
-    elif method == "nem2":
-        ub = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour2()),
-                                   npoints=npoints, coordinates=coordinates,
-                                   integration=integration)
-        quad = ub.quadrature
-    elif method in ("taylor-hood", "th"):
-        method = "taylor-hood"
+            bb = Basis(mesh, ElementVector(el["bubble"](), mesh.dim()), quadrature=quad)
+    else:
         if integration not in (None, "gauss"):
             raise ValueError(f"integration={integration!r} is an option of the "
-                             f"natural-neighbour velocity; Taylor-Hood uses Gauss quadrature")
-        quad = gauss_rule(6 if npoints is None else npoints)
-        ub = Basis(mesh, ElementVector(ElementTriP2()), quadrature=quad)
-    else:
-        raise ValueError(f"method must be 'nem', 'nem-projection', 'nem2' or "
-                         f"'taylor-hood', got {method!r}")
-    pb = Basis(mesh, ElementTriP1(), quadrature=quad)
-    p0 = Basis(mesh, ElementTriP0(), quadrature=quad)
+                             f"natural-neighbour velocity; {method} uses Gauss quadrature")
+        if tet:
+            quad = gauss_rule(intorder=TET_ORDER[method], refdom=RefTet)
+        else:
+            quad = gauss_rule(6 if npoints is None else npoints)
+        ub = Basis(mesh, ElementVector(el["p2" if method == "taylor-hood" else "mini"]()),
+                   quadrature=quad)
+    pb = Basis(mesh, el["p1"](), quadrature=quad)
+    p0 = Basis(mesh, el["p0"](), quadrature=quad)
     return StokesSpaces(mesh, method, ub, pb, p0, bb)

@@ -19,6 +19,10 @@ from numba import njit
 if TYPE_CHECKING:  # (only for annotations)
     from . import stokes_bases
 
+# Gauss order on the boundary faces of a tetrahedral mesh for boundary_flux (the
+# natural-neighbour functions there are piecewise rational: no rule is exact)
+FACE_ORDER = 4
+
 __all__ = ["wall_dofs", "boundary_flux", "outline_flux", "fixed_velocity",
            "walls_fix_pressure", "constraint_rows", "free_columns"]
 
@@ -29,9 +33,11 @@ def wall_dofs(spaces: stokes_bases.StokesSpaces,
     """Velocity dofs fixed to zero by wall conditions.
 
     ``free_slip`` / ``no_slip``: ``"all"`` (every boundary facet), a list of
-    boundary names of the mesh (``mesh.boundaries``), or None. Free slip
-    fixes the normal component and needs axis-aligned walls; a tilted
-    boundary facet raises ``ValueError`` naming it.
+    boundary names of the mesh (``mesh.boundaries``; scikit-fem's
+    ``mesh.with_defaults()`` names a box's faces ``left``/``right`` (x), ``bottom``/``top``
+    (y) and, in 3D, ``front``/``back`` (z)), or None. Free slip fixes the normal component and
+    needs axis-aligned walls (edges in 2D, triangles in 3D); a tilted boundary facet
+    raises ``ValueError`` naming it.
     """
     mesh = spaces.mesh
     ub = spaces.ubasis
@@ -58,36 +64,53 @@ def wall_dofs(spaces: stokes_bases.StokesSpaces,
     fs = facets(free_slip, "free_slip")
     fs = np.setdiff1d(fs, ns)
     if fs.size:
-        p = mesh.p[:, mesh.facets[:, fs]]  # (2, 2, nf)
-        d = p[:, 1] - p[:, 0]
-        L = np.hypot(*d)
-        vert = np.abs(d[0]) <= tol * L  # wall x = const: fix u^1
-        horiz = np.abs(d[1]) <= tol * L  # wall y = const: fix u^2
-        bad = ~(vert | horiz)
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"free slip needs axis-aligned walls: boundary facet {int(fs[k])} "
-                             f"from {p[:, 0, k].tolist()} to {p[:, 1, k].tolist()} is tilted "
-                             f"({int(bad.sum())} such facet(s))")
-        if vert.any():
-            fixed.append(ub.get_dofs(fs[vert]).all("u^1"))
-        if horiz.any():
-            fixed.append(ub.get_dofs(fs[horiz]).all("u^2"))
+        axis = _facet_axes(mesh, fs, tol)  # wall x_k = const: fix u^(k+1)
+        for k in range(mesh.dim()):
+            if (axis == k).any():
+                fixed.append(ub.get_dofs(fs[axis == k]).all(f"u^{k + 1}"))
     if not fixed:
         return np.zeros(0, dtype=np.int64)
     return np.unique(np.concatenate(fixed))
 
 
+def _facet_axes(mesh, facets: np.ndarray, tol: float) -> np.ndarray:
+    """The axis (0, 1 or 2) each boundary facet is normal to; ``ValueError`` naming the
+    first facet that is tilted (normal to no axis)."""
+    p = mesh.p[:, mesh.facets[:, facets]]  # (dim, dim, nf)
+    if mesh.dim() == 2:
+        d = p[:, 1] - p[:, 0]
+        n = np.array([d[1], -d[0]])
+    else:
+        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], axis=0)
+    size = np.linalg.norm(n, axis=0)
+    axis = np.argmax(np.abs(n), axis=0)
+    rest = n.copy()
+    rest[axis, np.arange(n.shape[1])] = 0.0
+    off = np.linalg.norm(rest, axis=0)
+    bad = off > tol * size
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"free slip needs axis-aligned walls: boundary facet {int(facets[k])} "
+                         f"with vertices {p[:, :, k].T.tolist()} is tilted "
+                         f"({int(bad.sum())} such facet(s))")
+    return axis
+
+
 def boundary_flux(spaces: stokes_bases.StokesSpaces) -> sp.csr_matrix:
     """(np, nu) matrix of ``oint q_i (u . n) ds`` over the boundary facets.
 
-    Exact: on convex-hull edges both the natural-neighbour velocity and the
-    P1 pressure are linear between the edge's two nodes (Simpson weights).
+    Exact in 2D: on convex-hull edges both the natural-neighbour velocity and the
+    P1 pressure are linear between the edge's two nodes (Simpson weights). In 3D the
+    natural-neighbour functions on a hull face are the face's own 2D natural-neighbour
+    coordinates, not polynomials: there it is a Gauss rule of order 4 on the faces
+    (the term acts only on normal velocities, which walls fix).
     """
     mesh, ub, pb = spaces.mesh, spaces.ubasis, spaces.pbasis
     bf = mesh.boundary_facets()
     if spaces.elements is not None:  # restricted spaces: their triangles' facets
         bf = bf[np.isin(mesh.f2t[0, bf], spaces.elements)]
+    if mesh.dim() == 3:
+        return _face_flux(spaces, bf)
     a, b = mesh.facets[:, bf]
     d = mesh.p[:, b] - mesh.p[:, a]
     mid = 0.5 * (mesh.p[:, a] + mesh.p[:, b])
@@ -107,6 +130,35 @@ def boundary_flux(spaces: stokes_bases.StokesSpaces) -> sp.csr_matrix:
                          shape=(pb.N, ub.N))
 
 
+def _face_flux(spaces: stokes_bases.StokesSpaces, faces: np.ndarray) -> sp.csr_matrix:
+    """:func:`boundary_flux` on the boundary triangles ``faces`` of a tetrahedral mesh:
+    ``sum_q w_q q_i(x_q) phi_j(x_q) n_c(x_q)`` at the faces' Gauss points."""
+    from skfem import FacetBasis
+
+    from ..basis import ElementNaturalNeighbour, NaturalNeighbourFacetBasis
+
+    mesh, ub, pb = spaces.mesh, spaces.ubasis, spaces.pbasis
+    nb = NaturalNeighbourFacetBasis(mesh, ElementNaturalNeighbour(), facets=faces,
+                                    intorder=FACE_ORDER, coordinates=ub.coordinates)
+    fb = FacetBasis(mesh, pb.elem, facets=faces, intorder=FACE_ORDER)
+    nf, nq = fb.dx.shape
+    rows = np.asarray(fb.element_dofs)                           # (3, nf) pressure dofs
+    points = np.arange(nf * nq).reshape(nf, nq)
+    Q = sp.csr_matrix((pb.N, nf * nq))
+    for k in range(rows.shape[0]):
+        val = np.asarray(fb.basis[k][0].value) * fb.dx          # (nf, nq)
+        Q = Q + sp.csr_matrix((val.ravel(), (np.repeat(rows[k], nq), points.ravel())),
+                              shape=(pb.N, nf * nq))
+    Phi = nb.values_matrix                                       # (nf nq, n nodes)
+    n = np.asarray(fb.normals).reshape(3, -1)
+    nd = ub.dofs.nodal_dofs
+    out = sp.csr_matrix((pb.N, ub.N))
+    for c in range(3):
+        Fc = (Q @ sp.diags(n[c]) @ Phi).tocoo()
+        out = out + sp.csr_matrix((Fc.data, (Fc.row, nd[c, Fc.col])), shape=(pb.N, ub.N))
+    return out.tocsr()
+
+
 def outline_flux(spaces: stokes_bases.StokesSpaces, outline: np.ndarray) -> sp.csr_matrix:
     """(1, nu) row: the flux of the nodal velocities out of a closed polygon.
 
@@ -114,8 +166,11 @@ def outline_flux(spaces: stokes_bases.StokesSpaces, outline: np.ndarray) -> sp.c
     orientation). The flux is that of the velocity interpolated linearly
     between the outline nodes, i.e. the rate of change of the polygon's
     area when its nodes move with their velocities; constraining it to zero
-    keeps a material region bounded by nodes incompressible as a whole.
+    keeps a material region bounded by nodes incompressible as a whole. 2D only.
     """
+    if spaces.dim != 2:
+        raise ValueError(f"outline_flux takes a polygon of nodes: a 2D mesh, got a "
+                         f"{spaces.dim}D one")
     outline = np.asarray(outline, dtype=np.int64)
     P = spaces.mesh.p.T[outline]
     Q = np.roll(P, -1, axis=0)
@@ -158,7 +213,7 @@ def walls_fix_pressure(spaces: stokes_bases.StokesSpaces, D: np.ndarray) -> bool
     bn = np.unique(spaces.mesh.facets[:, spaces.mesh.boundary_facets()])
     fixed_ = np.zeros(spaces.n_velocity, dtype=bool)
     fixed_[D] = True
-    return bool(np.all(fixed_[nd[0, bn]] | fixed_[nd[1, bn]]))
+    return bool(np.all(fixed_[nd[:spaces.dim, bn]].any(axis=0)))
 
 
 def constraint_rows(constraints, nu: int) -> Tuple[sp.csr_matrix, np.ndarray]:

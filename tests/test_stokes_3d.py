@@ -1,0 +1,216 @@
+"""Stokes flow on Delaunay tetrahedra: the 3D spaces, walls, exactness, rates, solvers."""
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from skfem_nem import delaunay_mesh
+from skfem_nem.geometry import box_nodes_3d
+from skfem_nem.models.analytic3d import (Manufactured3D, Sinker, haberman_sayre, relative_errors,
+                                         settling_velocity)
+from skfem_nem.models.stokes import (assemble_stokes, inf_sup_constant, outline_flux,
+                                     solve_stokes, stokes_spaces, wall_dofs)
+from skfem_nem.models.stokes_amg import rigid_modes
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return delaunay_mesh(box_nodes_3d(150, seed=2)).with_defaults()
+
+
+@pytest.fixture(scope="module")
+def spaces(mesh):
+    return stokes_spaces(mesh)
+
+
+def _down(rho):
+    """Body force (0, 0, -rho(x))."""
+    return lambda x: np.array([0 * x[0], 0 * x[0], -rho(x)])
+
+
+def test_manufactured_solution_is_one():
+    ms = Manufactured3D(20.0)
+    x = np.random.default_rng(3).random((3, 20))
+    h = 1e-5
+
+    def sig(y):
+        g = ms.velocity_gradient(y)
+        return ms.viscosity(y) * (g + g.transpose(1, 0, 2)) - ms.pressure(y) * np.eye(3)[..., None]
+
+    div_sigma = np.zeros((3, 20))
+    for j in range(3):
+        e = np.zeros((3, 1))
+        e[j] = h
+        div_sigma += (sig(x + e)[:, j] - sig(x - e)[:, j]) / (2 * h)
+    assert np.abs(div_sigma + ms.force(x)).max() < 1e-5 * np.abs(ms.force(x)).max()
+    # free slip is exact on the faces: no normal velocity, no shear strain rate
+    face = np.random.default_rng(4).random((3, 10))
+    for k in range(3):
+        for side in (0.0, 1.0):
+            y = face.copy()
+            y[k] = side
+            assert np.abs(ms.velocity(y)[k]).max() < 1e-15
+            g = ms.velocity_gradient(y)
+            for j in range(3):
+                if j != k:
+                    assert np.abs(g[k, j] + g[j, k]).max() < 1e-13
+    assert ms.viscosity(np.ones((3, 1)))[0] / ms.viscosity(np.zeros((3, 1)))[0] == pytest.approx(20)
+
+
+def test_spaces_on_tetrahedra(mesh, spaces):
+    n = mesh.p.shape[1]
+    assert spaces.dim == 3 and spaces.n_velocity == 3 * n and spaces.n_pressure == n
+    assert spaces.bbasis.N == 3 * mesh.nelements
+    mini = stokes_spaces(mesh, "mini")
+    th = stokes_spaces(mesh, "taylor-hood")
+    assert mini.n_pressure == th.n_pressure == n
+    assert th.n_velocity == 3 * (n + mesh.edges.shape[1])
+    for bad, match in ((dict(method="nem2"), "triangles only"), (dict(npoints=4), "npoints"),
+                       (dict(method="p1"), "method must be")):
+        with pytest.raises(ValueError, match=match):
+            stokes_spaces(mesh, **bad)
+    with pytest.raises(ValueError, match="Gauss"):
+        stokes_spaces(mesh, "mini", integration="smoothed")
+
+
+@pytest.mark.parametrize("method", ["nem", "mini", "taylor-hood"])
+def test_hydrostatic_state_exact(mesh, method):
+    """A uniform body force is balanced by a linear pressure alone, at any viscosity:
+    no spurious flow (the gradient form of the divergence for natural neighbours)."""
+    S = stokes_spaces(mesh, method)
+    g = np.array([0.3, -0.2, -1.0])
+    sol = solve_stokes(S, lambda x: 1 + 99 * x[0] * x[1],
+                       lambda x: g[:, None, None] + 0 * x, solver="direct")
+    assert np.abs(sol.u).max() < 1e-11
+    v = sol.velocity_at_nodes()
+    assert v.shape == (mesh.p.shape[1], 3)
+    p = sol.pressure_at_nodes()
+    ref = g @ mesh.p
+    assert np.abs((p - p.mean()) - (ref - ref.mean())).max() < 1e-10
+
+
+def test_walls_by_name(mesh, spaces):
+    """scikit-fem's default names of a box's faces: free slip fixes the normal
+    component of the face's nodes, no slip all three."""
+    nd = spaces.ubasis.dofs.nodal_dofs
+    for name, axis in (("left", 0), ("top", 1), ("back", 2)):
+        D = wall_dofs(spaces, free_slip=[name])
+        nodes = np.unique(mesh.facets[:, mesh.boundaries[name]])
+        assert np.array_equal(np.sort(D), np.sort(nd[axis, nodes]))
+    D = wall_dofs(spaces, free_slip=None, no_slip=["front"])
+    nodes = np.unique(mesh.facets[:, mesh.boundaries["front"]])
+    assert np.array_equal(np.sort(D), np.sort(nd[:, nodes].ravel()))
+    with pytest.raises(ValueError, match="no boundary named 'bottomm'"):
+        wall_dofs(spaces, free_slip=["bottomm"])
+
+
+def test_tilted_wall_named():
+    p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1.5], [0.3, 0.3, 0.3]])
+    S = stokes_spaces(delaunay_mesh(p))
+    with pytest.raises(ValueError, match="tilted"):
+        wall_dofs(S)
+    with pytest.raises(ValueError, match="2D mesh"):
+        outline_flux(S, np.arange(4))
+
+
+def test_buoyant_sphere_moves_up_and_is_symmetric(spaces):
+    """A light ball at the centre of a closed box: it rises, nothing moves sideways on
+    average, and the no-slip walls hold."""
+    c = np.array([0.5, 0.5, 0.5])[:, None, None]
+    light = lambda x: -1.0 * (np.linalg.norm(x - c, axis=0) < 0.25)  # noqa: E731
+    sol = solve_stokes(spaces, 1.0, _down(light), free_slip=None, no_slip="all",
+                       solver="direct")
+    v = sol.velocity_at_nodes()
+    mesh = spaces.mesh
+    inner = np.linalg.norm(mesh.p - c[:, :, 0], axis=0) < 0.25
+    assert v[inner, 2].mean() > 0
+    assert abs(v[:, 0].mean()) < 0.1 * v[inner, 2].mean()
+    assert np.abs(v[mesh.boundary_nodes()]).max() == 0
+
+
+def test_rates_of_the_manufactured_solution():
+    """Velocity at rate >= 1.9 and pressure >= 0.9 in h (h ~ n^(-1/3)), viscosity ratio 20
+    across the cube, free slip on all faces (exact for this flow)."""
+    ms = Manufactured3D(20.0)
+    errs, sizes = [], []
+    for n in (150, 700):
+        m = delaunay_mesh(box_nodes_3d(n, seed=0))
+        S = stokes_spaces(m)
+        sol = solve_stokes(S, ms.viscosity, ms.force, solver="direct")
+        errs.append(relative_errors(S, sol, ms))
+        sizes.append(m.p.shape[1])
+    rate = -3 * np.log(np.array(errs[1]) / np.array(errs[0])) / np.log(sizes[1] / sizes[0])
+    assert rate[0] >= 1.9, (errs, rate)
+    assert rate[1] >= 0.9, (errs, rate)
+    assert errs[1][0] < 0.05
+
+
+def test_inf_sup_bounded_on_random_nodes():
+    """The bubble-enriched pair is inf-sup stable in 3D: its constant stays bounded below
+    as random node sets grow; the velocity without bubbles is not."""
+    betas = []
+    for n in (30, 90, 250):
+        S = stokes_spaces(delaunay_mesh(box_nodes_3d(n, seed=5)))
+        betas.append(inf_sup_constant(S))
+    assert min(betas) > 0.15, betas
+    assert betas[-1] > 0.6 * betas[0], betas
+    plain = stokes_spaces(delaunay_mesh(box_nodes_3d(90, seed=5)), "nem-projection")
+    assert inf_sup_constant(plain, stabilised=False) < 0.5 * betas[1]
+
+
+@pytest.mark.parametrize("solver", ["schur", "fgmres", "minres"])
+def test_iterative_solvers_agree_with_direct(spaces, solver):
+    ms = Manufactured3D(20.0)
+    ref = solve_stokes(spaces, ms.viscosity, ms.force, solver="direct")
+    sol = solve_stokes(spaces, ms.viscosity, ms.force, solver=solver, tol=1e-10)
+    assert np.abs(sol.u - ref.u).max() < 1e-7 * np.abs(ref.u).max()
+
+
+def test_rigid_modes_span_the_viscous_null_space(spaces):
+    """The six rigid-body motions of the 3D velocity are exactly the null space of the
+    condensed viscous block without walls (AMG's near null space)."""
+    sys_ = assemble_stokes(spaces, 1.0, 0.0)
+    R = rigid_modes(spaces.ubasis, np.arange(spaces.n_velocity))
+    assert R.shape == (spaces.n_velocity, 6)
+    assert np.abs(sys_.A @ R).max() < 1e-10 * abs(sys_.A).max()
+    assert np.linalg.matrix_rank(R) == 6
+
+
+def test_settling_references():
+    assert haberman_sayre(0.1) == pytest.approx(0.792, abs=1e-3)
+    assert haberman_sayre(0.2) == pytest.approx(0.595, abs=1e-3)
+    assert settling_velocity(0.1, 0.5, 1.0, 1.0, 1.0, viscosity_ratio=1.0) == pytest.approx(
+        2 / 9 * 0.01 * 6 / 5 * haberman_sayre(0.2))
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(1, 400), st.integers(0, 10 ** 6),
+       st.tuples(*[st.floats(0.2, 5.0)] * 3))
+def test_box_nodes_3d_hull_is_the_box(n, seed, size):
+    p = box_nodes_3d(n, size=size, seed=seed)
+    assert np.unique(p, axis=0).shape[0] == p.shape[0]
+    assert np.allclose(p.min(axis=0), 0) and np.allclose(p.max(axis=0), size)
+    on_face = np.isclose(p, 0).any(1) | np.isclose(p, size).any(1)
+    assert (~on_face).sum() <= n
+    for k in range(3):          # every face carries its four corners and more
+        assert np.isclose(p[:, k], 0).sum() >= 4 and np.isclose(p[:, k], size[k]).sum() >= 4
+
+
+def test_box_nodes_3d_bad_input():
+    for kw, match in ((dict(n=0), "n must"), (dict(n=10, size=(1, 0, 1)), "size"),
+                      (dict(n=10, origin=(0, np.nan, 0)), "origin"),
+                      (dict(n=10, boundary_spacing=-1.0), "boundary_spacing"),
+                      (dict(n=10, density=lambda x: 2 + 0 * x[:, 0]), "density")):
+        with pytest.raises(ValueError, match=match):
+            box_nodes_3d(**kw)
+
+
+def test_sinker_coefficients():
+    s = Sinker(8, contrast=1e4, seed=1)
+    inside = s.centres[:, :1]
+    assert s.viscosity(inside)[0] == pytest.approx(100.0)
+    assert s.force(inside)[2, 0] == pytest.approx(-1.0)
+    far = np.array([[5.0], [5.0], [5.0]])
+    assert s.viscosity(far)[0] == pytest.approx(0.01) and s.force(far)[2, 0] == 0
+    with pytest.raises(ValueError, match="count"):
+        Sinker(0)

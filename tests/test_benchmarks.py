@@ -525,3 +525,26 @@ def test_vortex_resolution_prints_both_runs_and_their_bounds(capsys):
     assert 0.9 <= fewest <= 1.0 and 1.0 <= longest <= 2.0
     assert out[(80, "none")][0] <= 1.0
     assert "integral of 1: 1.0000000000000" in text or "integral of 1: 0.9999999999999" in text
+
+
+# --------------------------------------------------------------------------
+# stokes_3d: rates, inf-sup constants and iterations on tetrahedra
+# --------------------------------------------------------------------------
+
+def test_stokes_3d_prints_its_three_tables(capsys):
+    """A small run of the 3D Stokes study: a row per size and method with rates from the
+    second size on, the inf-sup constants of the four pairs, and the FGMRES iterations of
+    both cases."""
+    bench = load_benchmark("stokes_3d")
+    out = bench.main(["--sizes", "60", "200", "--baseline-max", "60", "--iteration-sizes",
+                      "60", "--inf-sup", "30"])
+    text = capsys.readouterr().out
+    rows = [r for r in out["rates"].splitlines()[2:]]
+    assert [r.split("|")[3].strip() for r in rows] == ["nem", "mini", "taylor-hood", "nem"]
+    nem = rows[-1].split("|")
+    assert float(nem[6]) > 1.5 and float(nem[8]) > 0.5        # velocity and pressure rates
+    beta = [float(v) for v in out["inf_sup"].splitlines()[2].split("|")[3:7]]
+    assert beta[0] > 0.2 and beta[1] < 0.05
+    its = [int(r.split("|")[5]) for r in out["iterations"].splitlines()[2:]]
+    assert len(its) == 2 and all(0 < k < 500 for k in its)
+    assert "one-time kernel load" in text and "### FGMRES iterations" in text

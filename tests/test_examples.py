@@ -502,3 +502,27 @@ def test_ex21_quadratic(tmp_path):
     lines = {ln.get_label(): ln for ln in errors.lines}
     np.testing.assert_array_equal(lines["NEM2 L2"].get_ydata(), [r["l2"] for r in nem2])
     np.testing.assert_array_equal(lines["P2 H1"].get_xdata(), [r["dofs"] for r in p2])
+
+
+# --------------------------------------------------------------------------
+# ex22: a stiff sphere settling in a cylinder (3D Stokes)
+# --------------------------------------------------------------------------
+
+def test_ex22_settling_sphere(tmp_path):
+    ex = load("ex22_settling_sphere")
+    assert ex.REFERENCE == pytest.approx(2 / 9 * 0.04 * 0.5953, rel=2e-3)
+    # first order in the sphere's spacing: 0.70 of the reference at 2,567 nodes
+    assert 0.6 < ex.velocity / ex.REFERENCE < 1.0
+    v = ex.solution.velocity_at_nodes()
+    ball = np.linalg.norm(ex.mesh.p, axis=0) < 0.999 * ex.A
+    # the stiff sphere moves as one body, straight down, and the walls hold
+    assert v[ball, 2].std() < 0.02 * ex.velocity
+    assert np.abs(v[ball, :2]).max() < 0.02 * ex.velocity
+    assert np.abs(v[ex.mesh.boundary_nodes()]).max() == 0
+    fig = ex.visualize(tmp_path / "ex22.png")
+    speed = fig.axes[0].collections[0].get_array()
+    assert speed.max() == pytest.approx(ex.velocity / ex.REFERENCE, rel=0.05)
+    line = fig.axes[1].lines[0]
+    x, w = line.get_xdata(), line.get_ydata()
+    assert w[np.abs(x) < 0.1].min() == pytest.approx(ex.velocity / ex.REFERENCE, rel=0.03)
+    assert w[np.abs(x) > 0.6].max() < 0.1 and w.min() < 0      # the return flow by the wall

@@ -214,3 +214,14 @@ def test_sinker_coefficients():
     assert s.viscosity(far)[0] == pytest.approx(0.01) and s.force(far)[2, 0] == 0
     with pytest.raises(ValueError, match="count"):
         Sinker(0)
+
+
+def test_auto_takes_fgmres_in_3d_from_its_size(spaces, monkeypatch):
+    from skfem_nem.models import stokes_solvers as solvers
+    ms = Manufactured3D(20.0)
+    small = solve_stokes(spaces, ms.viscosity, ms.force)
+    assert small.info["solver"] == "schur"
+    monkeypatch.setattr(solvers, "AUTO_FGMRES_UNKNOWNS_3D", 10)
+    big = solve_stokes(spaces, ms.viscosity, ms.force)
+    assert big.info["solver"] == "fgmres"
+    assert np.abs(big.u - small.u).max() < 1e-7 * np.abs(small.u).max()

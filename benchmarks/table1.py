@@ -57,6 +57,14 @@ The bars: ratio NEM / P2 <= 1.0 at every size (consistent integration may
 not make the default NEM dearer than quadratic FEM); NEM peak memory <= 2x P2's
 (checked where P2's peak is at least 10 MB). A verdict line is printed for each.
 
+``--dim 3`` measures the same on Delaunay tetrahedra (the 3D Table 1 of the paper's
+claim that "all the theory described is equally valid in three dimensions"): ``--sizes``
+are then numbers of nodes (uniform random in the unit cube plus its 8 corners, seed 0;
+default 1,000, 10,000 and 100,000), NEM is the smoothed Box 1 basis (one smoothing cell
+per tetrahedron, 4 points), P2 and P1 are ``ElementTetP2`` / ``ElementTetP1`` with
+scikit-fem's order-2 rule (4 points), and the columns of the 2D-only variants (Gauss-3,
+method 2) are left out.
+
 Run ``python benchmarks/table1.py [--sizes 32 200 1800 32768 500000]
 [--problems elasticity laplace] [--min-time 0.5] [--threads N]``. The
 whole default run takes 4-7 minutes on 2 cores; the 500,000-triangle NEM
@@ -76,6 +84,8 @@ import time
 PAPER = {32: 1.1, 200: 1.2, 1800: 1.36}
 PAPER2 = {32: 2.1, 200: 2.1, 1800: 2.22}
 METHODS = ("nem", "nem3", "nem2", "p2", "p1")
+METHODS_3D = ("nem", "p2", "p1")
+SIZES_3D = [1000, 10000, 100000]
 RATIO_BAR = 1.0
 MEMORY_BAR = 2.0
 MEMORY_FLOOR_MB = 10.0
@@ -86,10 +96,14 @@ def nodes_for(triangles: int) -> int:
     return max(4, (int(triangles) + 7) // 2)
 
 
-def points(n: int):
+def points(n: int, dim: int = 2):
+    """``n`` nodes: the unit square's (cube's) corners and uniform random ones, seed 0."""
     import numpy as np
     rng = np.random.default_rng(0)
-    return np.vstack([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]], rng.random((n - 4, 2))])
+    corners = np.array(np.meshgrid(*[[0.0, 1.0]] * dim, indexing="ij")).reshape(dim, -1).T
+    if dim == 2:
+        corners = corners[[0, 2, 1, 3]]     # (0,0), (1,0), (0,1), (1,1) as before
+    return np.vstack([corners, rng.random((n - len(corners), dim))])
 
 
 def _peak_mb() -> float:
@@ -102,9 +116,10 @@ def _rss_mb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
 
 
-def _setup(problem: str, method: str):
+def _setup(problem: str, method: str, dim: int = 2):
     """(form, make_basis) for one problem and method."""
-    from skfem import Basis, ElementTriP1, ElementTriP2, ElementVector
+    from skfem import (Basis, ElementTetP1, ElementTetP2, ElementTriP1, ElementTriP2,
+                       ElementVector)
     from skfem.models.elasticity import lame_parameters, linear_elasticity
     from skfem.models.poisson import laplace
 
@@ -112,8 +127,9 @@ def _setup(problem: str, method: str):
 
     vector = problem == "elasticity"
     form = linear_elasticity(*lame_parameters(1e3, 0.3)) if vector else laplace
+    p2, p1 = (ElementTetP2, ElementTetP1) if dim == 3 else (ElementTriP2, ElementTriP1)
     base = {"nem": ElementNaturalNeighbour, "nem3": ElementNaturalNeighbour,
-            "nem2": ElementNaturalNeighbour, "p2": ElementTriP2, "p1": ElementTriP1}[method]()
+            "nem2": ElementNaturalNeighbour, "p2": p2, "p1": p1}[method]()
     elem = ElementVector(base) if vector else base
     if method == "nem":
         return form, lambda mesh: NaturalNeighbourBasis(mesh, elem)
@@ -125,9 +141,9 @@ def _setup(problem: str, method: str):
 
 
 def run_child(meshfile: str, problem: str, method: str, min_time: float, budget: float,
-              threads: int | None, max_repeat: int = 1000) -> dict:
+              threads: int | None, max_repeat: int = 1000, dim: int = 2) -> dict:
     import numpy as np
-    from skfem import MeshTri
+    from skfem import MeshTet, MeshTri
 
     import skfem_nem
     from skfem_nem.geometry.meshes import adopt as _adopt
@@ -135,10 +151,10 @@ def run_child(meshfile: str, problem: str, method: str, min_time: float, budget:
     if threads:
         import numba
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    form, make_basis = _setup(problem, method)
+    form, make_basis = _setup(problem, method, dim)
 
     # warm-up on a tiny mesh: numba compilation / cache loading, first-call costs
-    tiny = skfem_nem.delaunay_mesh(points(40))
+    tiny = skfem_nem.delaunay_mesh(points(40, dim))
     for _ in range(2):
         form.assemble(make_basis(tiny))
 
@@ -149,9 +165,9 @@ def run_child(meshfile: str, problem: str, method: str, min_time: float, budget:
         layer = "none"
 
     with np.load(meshfile) as f:
-        mesh = MeshTri(f["p"], f["t"])
+        mesh = (MeshTet if dim == 3 else MeshTri)(f["p"], f["t"])
     t0 = time.perf_counter()
-    _adopt(mesh, "lasserre" if method == "nem2" else "area")  # cached on the mesh
+    _adopt(mesh, "lasserre" if method == "nem2" or dim == 3 else "area")  # cached on the mesh
     t_adopt = time.perf_counter() - t0
     gc.collect()
     base_peak, base_rss = _peak_mb(), _rss_mb()
@@ -260,10 +276,40 @@ def table(problem: str, rows: list[dict]) -> list[str]:
     return lines
 
 
+def table_3d(problem: str, rows: list[dict]) -> list[str]:
+    """The 3D table: NEM (smoothed Box 1) against P2 and P1 on the same tetrahedra."""
+    fe = "vector P2" if problem == "elasticity" else "P2"
+    lines = [f"### 3D {'linear elasticity' if problem == 'elasticity' else 'Laplace'}: "
+             f"NEM (Sibson, Box 1, smoothed) vs {fe} on Delaunay tetrahedra", "",
+             "| tetrahedra | nodes | stencil mean / max | entries a row NEM / P2 | NEM basis s "
+             "| NEM assembly s | P2 basis + assembly s | P1 basis + assembly s | ratio NEM/P2 "
+             "| ratio CPU time | peak MB NEM / P2 | NEM mesh adoption s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        nem, p2, p1 = r["nem"], r["p2"], r["p1"]
+        lines.append(
+            f"| {nem['triangles']:,} | {nem['nodes']:,} "
+            f"| {nem['stencil_mean']:.1f} / {nem['stencil_max']} "
+            f"| {nem['nnz'] / nem['ndofs']:.0f} / {p2['nnz'] / p2['ndofs']:.0f} "
+            f"| {_fmt_t(nem['basis_s'])} | {_fmt_t(nem['assembly_s'])} "
+            f"| {_fmt_t(p2['total_s'])} | {_fmt_t(p1['total_s'])} "
+            f"| {nem['total_s'] / p2['total_s']:.2f} | {nem['cpu_s'] / p2['cpu_s']:.2f} "
+            f"| {_fmt_mb(nem['peak_mb'])} / {_fmt_mb(p2['peak_mb'])} "
+            f"| {_fmt_t(nem['adopt_s'])} |")
+    lines.append("")
+    worst = max((r["nem"]["total_s"] / r["p2"]["total_s"], r["nem"]["nodes"]) for r in rows)
+    lines.append(f"- time bar (NEM/P2 <= {RATIO_BAR} at every size): "
+                 f"{'PASS' if worst[0] <= RATIO_BAR else 'FAIL'} (worst {worst[0]:.2f} at "
+                 f"{worst[1]:,} nodes)")
+    return lines
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", nargs="+", type=float, default=[32, 200, 1800, 32768, 500000],
-                    help="target numbers of triangles")
+    ap.add_argument("--sizes", nargs="+", type=float, default=None,
+                    help="target numbers of triangles (2D; default 32 200 1800 32768 "
+                         "500000) or nodes (--dim 3; default 1000 10000 100000)")
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=2)
     ap.add_argument("--problems", nargs="+", choices=("elasticity", "laplace"),
                     default=["elasticity", "laplace"])
     ap.add_argument("--min-time", type=float, default=0.5,
@@ -275,8 +321,11 @@ def main(argv=None):
                     help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.child:
-        print(json.dumps(run_child(*a.child, a.min_time, a.budget, a.threads)))
+        print(json.dumps(run_child(*a.child, a.min_time, a.budget, a.threads, dim=a.dim)))
         return
+    if a.sizes is None:
+        a.sizes = SIZES_3D if a.dim == 3 else [32, 200, 1800, 32768, 500000]
+    methods = METHODS_3D if a.dim == 3 else METHODS
 
     import numpy as np
 
@@ -287,15 +336,17 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         for target in a.sizes:
             target = int(target)
-            mesh = skfem_nem.delaunay_mesh(points(nodes_for(target)))
+            n = target if a.dim == 3 else nodes_for(target)
+            mesh = skfem_nem.delaunay_mesh(points(n, a.dim))
             meshfile = os.path.join(tmp, f"mesh{target}.npz")
             np.savez(meshfile, p=mesh.p, t=mesh.t)
             del mesh
             for problem in a.problems:
                 row = {"target": target}
-                for method in METHODS:
+                for method in methods:
                     cmd = [sys.executable, __file__, "--child", meshfile, problem, method,
-                           "--min-time", str(a.min_time), "--budget", str(a.budget)]
+                           "--min-time", str(a.min_time), "--budget", str(a.budget),
+                           "--dim", str(a.dim)]
                     if a.threads:
                         cmd += ["--threads", str(a.threads)]
                     res = subprocess.run(cmd, capture_output=True, text=True)
@@ -321,7 +372,7 @@ def main(argv=None):
           f"medians, seconds; 'ratio CPU time' = median process CPU time (all threads) of NEM "
           f"basis + assembly over P2's, less sensitive to other load.\n")
     for problem in a.problems:
-        print("\n".join(table(problem, results[problem])))
+        print("\n".join((table_3d if a.dim == 3 else table)(problem, results[problem])))
         print()
 
 

@@ -207,3 +207,33 @@ def test_lattice_nodes_flat_tetrahedra_and_structured_meshes():
         assert abs(np.ones(b.N) @ mass.assemble(b) @ np.ones(b.N) - 1) < 1e-12
         on = ((mesh.p == 0) | (mesh.p == 1)).any(axis=0)
         assert set(b.get_dofs().flatten()) == set(np.flatnonzero(on))
+
+
+def test_constant_gradients_contracted_once(mesh, monkeypatch):
+    """On tetrahedra the smoothed gradients are the same at an element's four points,
+    and the assembly contracts gradient terms once per element: the same matrices as
+    contracting them point by point, for forms with gradients, values and both."""
+    from skfem import BilinearForm
+    from skfem.helpers import ddot, dot, grad, sym_grad
+
+    from skfem_nem import NaturalNeighbourBasis
+
+    vb = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()))
+    sb = NaturalNeighbourBasis(mesh)
+    assert vb.gradients_constant_per_element and sb.gradients_constant_per_element
+    assert not NaturalNeighbourBasis(mesh, intorder=2,
+                                     integration="gauss").gradients_constant_per_element
+
+    @BilinearForm
+    def visc(u, v, w):
+        return 2 * (1 + w.x[0]) * ddot(sym_grad(u), sym_grad(v)) + dot(u, v) * w.x[1]
+
+    @BilinearForm
+    def adv(u, v, w):
+        return dot(grad(u), w.x) * v + u * v
+
+    fast = [visc.assemble(vb).toarray(), adv.assemble(sb).toarray()]
+    monkeypatch.setattr(NaturalNeighbourBasis, "gradients_constant_per_element", False)
+    slow = [visc.assemble(vb).toarray(), adv.assemble(sb).toarray()]
+    for a, b in zip(fast, slow):
+        assert np.abs(a - b).max() < 1e-12 * np.abs(b).max()

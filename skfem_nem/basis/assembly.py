@@ -291,7 +291,7 @@ def _gather(e, ptr, sten, indptr, indices, vals, grads, nq, B):
 
 @njit(cache=True, parallel=True)
 def _contract_bilinear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, pa, pb,
-                       Du, Dv, off, K):
+                       Du, Dv, off, K, const_grad):
     """Local matrices of elements e0..e1-1.
 
     ``C`` (npairs, e1 - e0, nq): coefficient (times dx) of the pair
@@ -299,7 +299,9 @@ def _contract_bilinear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, p
     ``a = c (1 + dim) + k`` with k = 0 for the value and 1 + g for d/dx_g.
     Element e's matrix, (Dv S) rows (test function j, component cv at
     ``Dv j + cv``) by (Du S) columns (``Du i + cu``), row-major, goes to
-    ``K[off[e]:off[e + 1]]``.
+    ``K[off[e]:off[e + 1]]``. With ``const_grad`` (the gradients are the same at
+    all of an element's points) the gradient-gradient pairs sum their coefficients
+    over the points first and are contracted once.
     """
     dim = grads.shape[0]
     L = 1 + dim
@@ -314,20 +316,34 @@ def _contract_bilinear(e0, e1, ptr, sten, indptr, indices, vals, grads, nq, C, p
             K[o + r] = 0.0
         for q in range(nq):
             for p in range(npair):
-                coef = C[p, e - e0, q]
-                if coef == 0.0:
+                if const_grad and pa[p] % L > 0 and pb[p] % L > 0:
                     continue
-                cu = pa[p] // L
-                k = pa[p] % L
-                cv = pb[p] // L
-                l_ = pb[p] % L
-                for i in range(S):
-                    t = coef * B[q, k, i]
-                    if t == 0.0:
-                        continue
-                    col = o + Du * i + cu
-                    for j in range(S):
-                        K[col + (Dv * j + cv) * nc] += t * B[q, l_, j]
+                _add_pair(C[p, e - e0, q], pa[p], pb[p], L, B[q], B[q], S, Du, Dv, o, nc, K)
+        if const_grad:
+            for p in range(npair):
+                if pa[p] % L > 0 and pb[p] % L > 0:
+                    coef = 0.0
+                    for q in range(nq):
+                        coef += C[p, e - e0, q]
+                    _add_pair(coef, pa[p], pb[p], L, B[0], B[0], S, Du, Dv, o, nc, K)
+
+
+@njit(cache=True, inline="always")
+def _add_pair(coef, a, b, L, Bu, Bv, S, Du, Dv, o, nc, K):
+    """Add ``coef`` times the outer product of the rows ``a % L`` of ``Bu`` (trial
+    component ``a // L``) and ``b % L`` of ``Bv`` (test component ``b // L``) to the
+    element matrix at ``K[o:]``."""
+    if coef == 0.0:
+        return
+    cu, k = a // L, a % L
+    cv, l_ = b // L, b % L
+    for i in range(S):
+        t = coef * Bu[k, i]
+        if t == 0.0:
+            continue
+        col = o + Du * i + cu
+        for j in range(S):
+            K[col + (Dv * j + cv) * nc] += t * Bv[l_, j]
 
 
 @njit(cache=True, parallel=True)
@@ -534,10 +550,11 @@ def _element_matrices(form, u, v, kwargs):
     np.cumsum(Du * Dv * S * S, out=off[1:])
     K = np.empty(off[-1])
     kernel = _contract_bilinear if _parallel(u) else _contract_bilinear_serial
+    const_grad = bool(getattr(u, "gradients_constant_per_element", False))
     try:
         for e0, e1, C, active in _coefficients(form, u, kwargs, Du, Dv, pa, pb):
             kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
-                   C, pa[active], pb[active], Du, Dv, off, K)
+                   C, pa[active], pb[active], Du, Dv, off, K, const_grad)
     except _NotProbeable:
         return None  # take the group road
     return Du, Dv, off, K

@@ -13,7 +13,8 @@ from skfem.element import Element, ElementVector
 from skfem.quadrature import get_quadrature
 from skfem.refdom import RefTet, RefTri
 
-__all__ = ["ElementNaturalNeighbour", "ElementNaturalNeighbour2", "ElementTetNaturalNeighbour",
+__all__ = ["coordinate_method", "ElementNaturalNeighbour", "ElementNaturalNeighbour2",
+           "ElementTetNaturalNeighbour",
            "gauss_rule", "element_for", "element_order", "integration_scheme",
            "QUADRATURE_POINTS", "INTEGRATIONS"]
 
@@ -168,3 +169,23 @@ def gauss_rule(npoints=None, intorder=None, quadrature=None, refdom=RefTri):
                              f"got {npoints}")
         return get_quadrature(RefTri, QUADRATURE_POINTS[npoints])
     return get_quadrature(refdom, 2 if intorder is None else intorder)
+
+
+def coordinate_method(mesh, coordinates: str, method):
+    """The coordinates' method for ``mesh`` (``"area"`` on triangles by default,
+    ``"lasserre"`` on tetrahedra); ``ValueError`` naming a bad ``coordinates`` or
+    ``method`` or a pair that does not go together."""
+    if coordinates not in ("sibson", "laplace"):
+        raise ValueError(f"coordinates must be 'sibson' or 'laplace', got {coordinates!r}")
+    tet = isinstance(mesh, MeshTet)
+    if method is None:
+        method = "lasserre" if tet else "area"
+    if method not in ("area", "lasserre"):
+        raise ValueError(f"method must be 'area' or 'lasserre', got {method!r}")
+    if tet and method != "lasserre":
+        raise ValueError("on tetrahedra the coordinates come from the Lasserre method only "
+                         "(method='lasserre')")
+    if method == "lasserre" and coordinates != "sibson":
+        raise ValueError("the Lasserre method computes Sibson coordinates only "
+                         "(coordinates='sibson')")
+    return method

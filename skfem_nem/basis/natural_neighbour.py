@@ -39,7 +39,8 @@ from . import assembly, nonlinear, plotting
 from ..coordinates import natural_neighbour_coordinates
 from ..geometry.meshes import adopt, own_triangulation
 from .domain import check_used_nodes, into_domain
-from .elements import element_for, element_order, gauss_rule, integration_scheme
+from .elements import (coordinate_method, element_for, element_order, gauss_rule,
+                       integration_scheme)
 from .companions import companion_basis, is_natural_neighbour, refuse_keywords
 from .plotting import DEFAULT_NREFS, refined_values, visuals_call
 from .projection import (field_values, l2_project, normalize_elements, normalize_facets,
@@ -267,26 +268,18 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         return np.zeros(self.N, dtype=dtype)
 
     @property
+    def gradients_constant_per_element(self) -> bool:
+        """True when every function's gradient is the same at all the quadrature points
+        of an element: the smoothed linear basis on tetrahedra (one smoothing cell per
+        tetrahedron). The assembly then contracts gradient terms once per element."""
+        return (getattr(self, "integration", None) == "smoothed"
+                and getattr(self, "order", 1) == 1 and self.mesh.dim() == 3
+                and self.dx.ndim == 2)
+
+    @property
     def nstencil_entries(self) -> int:
         """Sum over elements of the stencil size squared (assembly work)."""
         return int((self.stencil_sizes.astype(np.int64) ** 2).sum())
-
-
-def _check_method(mesh, coordinates, method):
-    if coordinates not in ("sibson", "laplace"):
-        raise ValueError(f"coordinates must be 'sibson' or 'laplace', got {coordinates!r}")
-    tet = isinstance(mesh, MeshTet)
-    if method is None:
-        method = "lasserre" if tet else "area"
-    if method not in ("area", "lasserre"):
-        raise ValueError(f"method must be 'area' or 'lasserre', got {method!r}")
-    if tet and method != "lasserre":
-        raise ValueError("on tetrahedra the coordinates come from the Lasserre method only "
-                         "(method='lasserre')")
-    if method == "lasserre" and coordinates != "sibson":
-        raise ValueError("the Lasserre method computes Sibson coordinates only "
-                         "(coordinates='sibson')")
-    return method
 
 
 class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
@@ -383,7 +376,7 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         dofs, the quadrature and its weights ``dx``."""
         elem = element_for(mesh, elem, "NaturalNeighbourBasis")
         check_used_nodes(mesh, "NaturalNeighbourBasis")
-        self.method = _check_method(mesh, coordinates, method)
+        self.method = coordinate_method(mesh, coordinates, method)
         self.integration = integration_scheme(integration, npoints, intorder, quadrature)
         self.triangulation = adopt(mesh, self.method)
         self.coordinates = coordinates
@@ -654,7 +647,7 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
         if element_order(elem) != 1:
             raise NotImplementedError("no NaturalNeighbourFacetBasis for the quadratic element")
         check_used_nodes(mesh, "NaturalNeighbourFacetBasis")
-        self.method = _check_method(mesh, coordinates, method)
+        self.method = coordinate_method(mesh, coordinates, method)
         # (the facet rule serves both schemes: values and smoothed gradients)
         self.integration = integration = integration_scheme(integration)
         self.triangulation = adopt(mesh, self.method)

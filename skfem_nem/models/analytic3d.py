@@ -17,11 +17,11 @@ __all__ = ["Manufactured3D", "Sinker", "relative_errors", "stokes_law", "haberma
 class Manufactured3D:
     """A smooth divergence-free flow in the unit cube with the viscosity
     ``eta = exp(a (x + y + z))``, ``a = ln(ratio) / 3`` (``ratio`` between the corners
-    (0, 0, 0) and (1, 1, 1)):
+    (0, 0, 0) and (1, 1, 1))::
 
         u = (2 sin(pi x) cos(pi y) cos(pi z), -cos(pi x) sin(pi y) cos(pi z),
              -cos(pi x) cos(pi y) sin(pi z)),
-        p = P cos(pi x) cos(pi y) cos(pi z)   (mean zero; P = ``pressure_scale``),
+        p = P cos(pi x) cos(pi y) cos(pi z)   (mean zero; P = pressure_scale),
 
     and the body force ``f = -div(2 eta eps(u)) + grad p = -2 eps(u) grad eta
     - eta lap u + grad p`` that makes them solve the Stokes equations (``lap u =

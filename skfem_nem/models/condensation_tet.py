@@ -1,73 +1,232 @@
-"""Static condensation of the Stokes bubbles on tetrahedra, by sparse products.
+"""Static condensation of the Stokes bubbles on tetrahedra, inside the assembly.
 
 The 3D natural-neighbour velocity of method ``"nem"`` carries one quartic bubble per
 tetrahedron and component (:class:`~skfem_nem.models.stokes_bases.ElementTetBubble`).
-Each bubble lives in one tetrahedron, so the bubbles' viscous block ``A_bb`` is block
-diagonal, 3 x 3 a tetrahedron, and eliminating them gives
+Each bubble lives in one tetrahedron, so eliminating it changes that tetrahedron's element
+matrix only:
 
     A = A_nn - A_bn^T A_bb^-1 A_bn,      B = B_n - B_b A_bb^-1 A_bn,
 
-with ``A_bn`` the coupling of the bubbles to the natural-neighbour functions. The 2D
-condensation (:mod:`skfem_nem.models.condensation`) does this triangle by triangle inside
-numba kernels written for two components; here the blocks are scikit-fem assemblies on
-the smoothed Box 1 basis and the products are sparse. With one smoothing cell per
-tetrahedron the natural-neighbour gradients are constant on it and the bubble's gradient
-integrates to zero there, so ``A_bn`` vanishes for a viscosity constant on each
-tetrahedron and is small otherwise: the condensation is cheap beside the assembly of
-``A_nn``. The 2D kernels stay as they are: ``--dim 2`` is bitwise unchanged.
+with ``A_bn`` the coupling of the bubbles to the natural-neighbour functions and ``A_bb``
+their 3 x 3 block. With one smoothing cell per tetrahedron the smoothed gradients of the
+natural-neighbour functions are constant on it (``gradients_constant_per_element``), so
+the viscous form ``2 eta eps(u) : eps(v)`` needs only the tetrahedron's summed weight
+``W = sum_q eta_q dx_q`` and gradients ``G`` (S x 3):
+``K[(j, cv), (i, cu)] = W (delta_cu,cv G_i . G_j + G_i[cv] G_j[cu])``, and the bubbles only
+``g = sum_q eta_q dx_q grad b(x_q)`` and their block:
+``A_bn[c, (i, d)] = delta_cd G_i . g + G_i[c] g[d]``. The kernels below compute these per
+tetrahedron (:func:`_tet_blocks`) and fill the condensed block row by row over the
+stencils' pattern (:func:`_condensed_rows_tet`), as the 2D kernels of
+:mod:`skfem_nem.models.condensation` do for triangles; no element matrix is stored, and
+the block comes out exactly symmetric (each entry sums the same products in the same
+order as its transpose). The 2D kernels stay as they are: ``--dim 2`` is bitwise
+unchanged. The divergence block's natural-neighbour part is coefficient-free and
+assembled once; its condensation ``B_b (A_bb^-1 A_bn)`` is a sparse product with four
+entries per bubble row.
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from skfem import BilinearForm
-from skfem.helpers import ddot, sym_grad
+from numba import njit, prange
 
+from ..basis.assembly import parallel_kernels, stencil_position
+from ..basis.summation import blocks, node_pattern
+from ..coordinates.batch import index_dtype
+from ..jit import serial_twin
 from .condensation import CondensedViscous
 
 __all__ = ["condensed_viscous_tet", "condensed_divergence_tet"]
 
 
-@BilinearForm
-def _viscous(u, v, w):
-    # the viscous form 2 eta eps(u) : eps(v) (as in models.stokes, which imports this)
-    return 2.0 * w["eta"] * ddot(sym_grad(u), sym_grad(v))
+@njit(cache=True, parallel=True)
+def _tet_blocks(ptr, sten, indptr, indices, grads, nq, w, gb, G, Wsum, X, Ainv, det):
+    """Per tetrahedron e: its stencil functions' (constant) gradients into
+    ``G[3 ptr[e]:3 ptr[e + 1]]`` (3 per function), the summed weight ``Wsum[e]``, the
+    bubbles' coupling ``A_bn`` (3 x 3 S, row-major) into ``X[9 ptr[e]:9 ptr[e + 1]]``, the
+    inverse of their 3 x 3 block into ``Ainv[e]`` and its determinant into ``det[e]``
+    (not positive: the rest of e is left unset)."""
+    ne = ptr.shape[0] - 1
+    for e in prange(ne):
+        s0 = ptr[e]
+        S = ptr[e + 1] - s0
+        for t in range(3 * S):
+            G[3 * s0 + t] = 0.0
+        r = e * nq                       # the gradients are the same at every point
+        for kk in range(indptr[r], indptr[r + 1]):
+            i = stencil_position(sten, s0, S, indices[kk])
+            for d in range(3):
+                G[3 * (s0 + i) + d] = grads[d, kk]
+        W = 0.0
+        g = np.zeros(3)
+        M = np.zeros((3, 3))
+        for q in range(nq):
+            wq = w[e, q]
+            W += wq
+            gg = gb[0, e, q] ** 2 + gb[1, e, q] ** 2 + gb[2, e, q] ** 2
+            for a in range(3):
+                g[a] += wq * gb[a, e, q]
+                M[a, a] += wq * gg
+                for b in range(3):
+                    M[a, b] += wq * gb[a, e, q] * gb[b, e, q]
+        Wsum[e] = W
+        d = (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+             - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+             + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
+        det[e] = d
+        if not d > 0.0:
+            continue
+        for a in range(3):
+            for b in range(3):     # the cofactor inverse of the symmetric block
+                a1, a2, b1, b2 = (a + 1) % 3, (a + 2) % 3, (b + 1) % 3, (b + 2) % 3
+                Ainv[e, b, a] = (M[a1, b1] * M[a2, b2] - M[a1, b2] * M[a2, b1]) / d
+        for a in range(3):
+            for b in range(a + 1, 3):
+                m = 0.5 * (Ainv[e, a, b] + Ainv[e, b, a])
+                Ainv[e, a, b] = Ainv[e, b, a] = m
+        o = 9 * s0
+        for i in range(S):
+            Gi = G[3 * (s0 + i):3 * (s0 + i) + 3]
+            dot = Gi[0] * g[0] + Gi[1] * g[1] + Gi[2] * g[2]
+            for c in range(3):
+                for dd in range(3):
+                    X[o + c * 3 * S + 3 * i + dd] = (dot if c == dd else 0.0) + Gi[c] * g[dd]
 
 
-def _block_inverse(Abb: sp.csr_matrix, bd: np.ndarray) -> sp.csr_matrix:
-    """The inverse of the block-diagonal ``Abb`` whose blocks are the dofs ``bd`` (d, ne)
-    of each tetrahedron's bubbles; ``ValueError`` naming the first singular block."""
-    d, ne = bd.shape
-    blocks = np.empty((ne, d, d))
-    for i in range(d):
-        for j in range(d):
-            blocks[:, i, j] = np.asarray(Abb[bd[i], bd[j]]).ravel()
-    det = np.linalg.det(blocks)
+@njit(cache=True, parallel=True)
+def _condensed_rows_tet(ptr, sten, G, Wsum, X, Ainv, inc_ptr, inc_e, inc_l, cptr, cols, n3,
+                        nblocks, indices_out, data_out):
+    """The condensed viscous block row by row: node v's three rows hold its couplings
+    with the nodes ``cols[cptr[v]:cptr[v + 1]]`` (dofs ``3 node + c``, CSR order); each
+    tetrahedron around v adds the row of its condensed element matrix that belongs to
+    v, computed where it is added (:func:`_add_row_tet`)."""
+    n = cptr.shape[0] - 1
+    for blk in prange(nblocks):
+        pos = np.full(n3, -1, np.int64)
+        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+            nv = cptr[v + 1] - cptr[v]
+            base = 9 * cptr[v]
+            for k in range(nv):
+                pos[cols[cptr[v] + k]] = k
+                for cv in range(3):
+                    for cu in range(3):
+                        o = base + (cv * nv + k) * 3 + cu
+                        indices_out[o] = 3 * cols[cptr[v] + k] + cu
+                        data_out[o] = 0.0
+            for t in range(inc_ptr[v], inc_ptr[v + 1]):
+                _add_row_tet(inc_e[t], inc_l[t], ptr, sten, G, Wsum, X, Ainv, pos, base, nv,
+                             data_out)
+
+
+@njit(cache=True, inline="always")
+def _add_row_tet(e, j, ptr, sten, G, Wsum, X, Ainv, pos, base, nv, data_out):
+    """Add row j (three components) of tetrahedron e's condensed element matrix:
+    ``W (delta G_i . G_j + G_i[cv] G_j[cu]) - (A_bn^T A_bb^-1 A_bn)[(j, cv), (i, cu)]``,
+    written so that its transpose multiplies the same pairs in the same order."""
+    s0 = ptr[e]
+    S = ptr[e + 1] - s0
+    W = Wsum[e]
+    o = 9 * s0
+    gj = G[3 * (s0 + j):3 * (s0 + j) + 3]
+    for i in range(S):
+        gi = G[3 * (s0 + i):3 * (s0 + i) + 3]
+        dot = gi[0] * gj[0] + gi[1] * gj[1] + gi[2] * gj[2]
+        d = base + pos[sten[s0 + i]] * 3
+        for cv in range(3):
+            for cu in range(3):
+                k = W * ((dot if cu == cv else 0.0) + gi[cv] * gj[cu])
+                corr = 0.0
+                for a in range(3):
+                    xa_j = X[o + a * 3 * S + 3 * j + cv]
+                    xa_i = X[o + a * 3 * S + 3 * i + cu]
+                    corr += Ainv[e, a, a] * (xa_j * xa_i)
+                    for b in range(a + 1, 3):
+                        xb_j = X[o + b * 3 * S + 3 * j + cv]
+                        xb_i = X[o + b * 3 * S + 3 * i + cu]
+                        corr += Ainv[e, a, b] * ((xa_j * xb_i) + (xb_j * xa_i))
+                data_out[d + cv * nv * 3 + cu] += k - corr
+
+
+_tet_blocks_serial = serial_twin(_tet_blocks)
+_condensed_rows_tet_serial = serial_twin(_condensed_rows_tet)
+
+
+def _bubble_gradient(bbasis) -> np.ndarray:
+    """(3, ne, nq) gradient of the scalar bubble at the quadrature points."""
+    return np.ascontiguousarray(np.asarray(bbasis.basis[0][0].grad)[0])
+
+
+def _nodal(ubasis) -> None:
+    """``ValueError`` unless the velocity dofs are ``3 node + c`` with constant
+    gradients per tetrahedron (the smoothed vector natural-neighbour basis)."""
+    nodal = np.asarray(ubasis.dofs.nodal_dofs[:3])
+    n = nodal.shape[1]
+    if (ubasis.N != 3 * n or not np.array_equal(nodal, 3 * np.arange(n) + np.c_[0:3])
+            or not getattr(ubasis, "gradients_constant_per_element", False)):
+        raise ValueError("the velocity basis must be the smoothed vector natural-neighbour "
+                         "basis on tetrahedra (dofs 3 node + c, one smoothing cell each)")
+
+
+def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
+    """The viscous block ``2 eta eps(u) : eps(v)`` of the smoothed natural-neighbour
+    velocity ``ubasis`` on tetrahedra with the bubbles of ``bbasis`` (a vector
+    :class:`~skfem_nem.models.stokes_bases.ElementTetBubble` basis on the same quadrature)
+    condensed out, for the viscosity ``eta`` (ne, nq) at the quadrature points; exactly
+    symmetric. Raises ``ValueError`` naming the first tetrahedron whose bubble block is
+    singular."""
+    _nodal(ubasis)
+    ptr, sten = ubasis.stencil_ptr, ubasis.stencil_nodes
+    ne, nq = ubasis.dx.shape
+    n_st = int(ptr[-1])
+    G, X = np.empty(3 * n_st), np.empty(9 * n_st)
+    Wsum, Ainv, det = np.empty(ne), np.zeros((ne, 3, 3)), np.empty(ne)
+    w = np.ascontiguousarray(eta * ubasis.dx)
+    Phi = ubasis.values_matrix
+    parallel = parallel_kernels(ubasis)
+    (_tet_blocks if parallel else _tet_blocks_serial)(
+        ptr, sten, Phi.indptr, Phi.indices, ubasis.gradient_entries, nq, w,
+        _bubble_gradient(bbasis), G, Wsum, X, Ainv, det)
     bad = ~(det > 0)
     if bad.any():
         raise ValueError(f"degenerate tetrahedron {int(np.flatnonzero(bad)[0])}: its bubble "
                          f"block is singular ({int(bad.sum())} tetrahedra)")
-    inv = np.linalg.inv(blocks)
-    inv = 0.5 * (inv + inv.transpose(0, 2, 1))
-    rows = np.repeat(bd.T, d, axis=1).ravel()
-    cols = np.tile(bd.T, (1, d)).ravel()
-    return sp.csr_matrix((inv.ravel(), (rows, cols)), shape=Abb.shape)
+    A = _summed_tet(ubasis, G, Wsum, X, Ainv, parallel)
+    return CondensedViscous(A, *_bubble_matrices(ubasis, bbasis, X, Ainv), None)
 
 
-def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
-    """The viscous block ``2 eta eps(u) : eps(v)`` of the natural-neighbour velocity
-    ``ubasis`` on tetrahedra with the bubbles of ``bbasis`` (a vector
-    :class:`~skfem_nem.models.stokes_bases.ElementTetBubble` basis on the same quadrature)
-    condensed out, for the viscosity ``eta`` (ne, nq) at the quadrature points. The block
-    comes out exactly symmetric."""
-    Ann = _viscous.assemble(ubasis, eta=eta).tocsr()
-    Abn = _viscous.assemble(ubasis, bbasis, eta=eta).tocsr()          # (nb, nu)
-    Abb = _viscous.assemble(bbasis, eta=eta).tocsr()
-    Ainv = _block_inverse(Abb, np.asarray(bbasis.element_dofs))
-    AiAbn = (Ainv @ Abn).tocsr()
-    A = (Ann - Abn.T @ AiAbn).tocsr()
-    A = (0.5 * (A + A.T)).tocsr()
-    return CondensedViscous(A, Ainv, AiAbn, None)
+def _summed_tet(ubasis, G, Wsum, X, Ainv, parallel) -> sp.csr_matrix:
+    """The condensed block from :func:`_condensed_rows_tet`, CSR over the stencils' pattern."""
+    inc_ptr, inc_e, inc_l, cptr, cols = node_pattern(ubasis, parallel)
+    n = cptr.shape[0] - 1
+    nnz = 9 * int(cptr[-1])
+    idt = index_dtype(ubasis.N, nnz)
+    indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
+    (_condensed_rows_tet if parallel else _condensed_rows_tet_serial)(
+        ubasis.stencil_ptr, ubasis.stencil_nodes, G, Wsum, X, Ainv, inc_ptr, inc_e, inc_l,
+        cptr, cols, n, blocks(n), indices, data)
+    nv = np.diff(cptr)
+    indptr = np.empty(3 * n + 1, dtype=idt)
+    indptr[:-1] = (9 * cptr[:-1, None] + 3 * nv[:, None] * np.arange(3)[None]).ravel()
+    indptr[-1] = nnz
+    return sp.csr_matrix((data, indices, indptr), shape=(ubasis.N, ubasis.N))
+
+
+def _bubble_matrices(ubasis, bbasis, X, Ainv) -> tuple:
+    """``(A_bb^-1, A_bb^-1 A_bn)`` as sparse matrices on the bubble dofs."""
+    ptr, sten = ubasis.stencil_ptr, ubasis.stencil_nodes
+    ne = ptr.size - 1
+    S = np.diff(ptr)
+    bd = np.asarray(bbasis.element_dofs)                     # (3, ne)
+    Ainv_m = sp.csr_matrix((Ainv.ravel(), (np.repeat(bd.T, 3, axis=1).ravel(),
+                                           np.tile(bd.T, (1, 3)).ravel())),
+                           shape=(bbasis.N, bbasis.N))
+    # A_bn row-major (3 x 3 S) per tetrahedron: rows (e, c), columns 3 sten + d
+    e_of = np.repeat(np.arange(ne), 9 * S)
+    local = np.arange(9 * int(ptr[-1])) - np.repeat(9 * ptr[:-1], 9 * S)
+    c, rest = local // np.repeat(3 * S, 9 * S), local % np.repeat(3 * S, 9 * S)
+    cols = 3 * sten[ptr[e_of] + rest // 3] + rest % 3
+    Abn = sp.csr_matrix((X, (bd[c, e_of], cols)), shape=(bbasis.N, ubasis.N))
+    return Ainv_m, (Ainv_m @ Abn).tocsr()
 
 
 def condensed_divergence_tet(Bn: sp.csr_matrix, Bb: sp.csr_matrix,

@@ -207,7 +207,9 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
     else:
         if integration not in (None, "gauss"):
             raise ValueError(f"integration={integration!r} is an option of the "
-                             f"natural-neighbour velocity; {method} uses Gauss quadrature")
+                             f"natural-neighbour velocity; "
+                             f"{'Taylor-Hood' if method == 'taylor-hood' else 'MINI'} "
+                             f"uses Gauss quadrature")
         if tet:
             quad = gauss_rule(intorder=TET_ORDER[method], refdom=RefTet)
         else:

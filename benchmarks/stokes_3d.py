@@ -147,7 +147,8 @@ def main(argv=None):
     ap.add_argument("--sizes", type=int, nargs="+", default=[1000, 3000, 10000])
     ap.add_argument("--baseline-max", type=int, default=3000)
     ap.add_argument("--iteration-sizes", type=int, nargs="+", default=[1000, 10000])
-    ap.add_argument("--inf-sup", type=int, nargs="+", default=[30, 90, 250, 500])
+    ap.add_argument("--inf-sup", type=int, nargs="*", default=[30, 90, 250, 500],
+                    help="interior node counts of the inf-sup table (none: skipped)")
     ap.add_argument("--ratio", type=float, default=20.0)
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--sphere", type=float, nargs="*", default=[],

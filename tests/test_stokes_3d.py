@@ -255,3 +255,15 @@ def test_condensation_kernels_match_scikit_fem_assembly(spaces):
     assert (cv.A - cv.A.T).count_nonzero() == 0 or abs(cv.A - cv.A.T).max() == 0
     assert np.abs(sp.csr_matrix(cv.Ainv).toarray() - np.linalg.inv(Abb)).max() < 1e-9 * np.abs(
         np.linalg.inv(Abb)).max()
+
+
+def test_viscous_amg_in_3d_is_plain_aggregation(spaces):
+    """The 3D block's hierarchy does not smooth its prolongator (its rows would be as
+    dense as the block's): each fine dof maps to one aggregate's six rigid-body modes."""
+    from skfem_nem.models.stokes_solvers import StokesCache
+    ms = Manufactured3D(20.0)
+    cache = StokesCache()
+    sol = solve_stokes(spaces, ms.viscosity, ms.force, solver="fgmres", cache=cache)
+    P = cache.hierarchy.ml.levels[0].P.tocsr()
+    assert np.diff(P.indptr).max() <= 6
+    assert sol.iterations < 60

@@ -267,3 +267,15 @@ def test_viscous_amg_in_3d_is_plain_aggregation(spaces):
     P = cache.hierarchy.ml.levels[0].P.tocsr()
     assert np.diff(P.indptr).max() <= 6
     assert sol.iterations < 60
+
+
+@pytest.mark.parametrize("method", ["nem", "nem-projection"])
+def test_divergence_block_matches_scikit_fem(spaces, mesh, method):
+    """The divergence block of the natural neighbours on tetrahedra by sparse products is
+    scikit-fem's assembly of ``(u, grad q)``."""
+    from skfem_nem.models.condensation_tet import divergence_tet
+    from skfem_nem.models.stokes import weak_divergence
+    S = spaces if method == "nem" else stokes_spaces(mesh, method)
+    B = divergence_tet(S.ubasis, S.pbasis)
+    ref = weak_divergence.assemble(S.ubasis, S.pbasis)
+    assert abs(B - ref).max() < 1e-14 * abs(ref).max()

@@ -36,7 +36,7 @@ from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 from .condensation import CondensedViscous
 
-__all__ = ["condensed_viscous_tet", "condensed_divergence_tet"]
+__all__ = ["condensed_viscous_tet", "condensed_divergence_tet", "divergence_tet"]
 
 
 @njit(cache=True, parallel=True)
@@ -227,6 +227,29 @@ def _bubble_matrices(ubasis, bbasis, X, Ainv) -> tuple:
     cols = 3 * sten[ptr[e_of] + rest // 3] + rest % 3
     Abn = sp.csr_matrix((X, (bd[c, e_of], cols)), shape=(bbasis.N, ubasis.N))
     return Ainv_m, (Ainv_m @ Abn).tocsr()
+
+
+def divergence_tet(ubasis, pbasis) -> sp.csr_matrix:
+    """The divergence block ``(u, grad q)`` (np, nu) of the natural-neighbour velocity
+    ``ubasis`` and the P1 pressure ``pbasis`` on tetrahedra, by two sparse products: the
+    P1 gradients are constant on a tetrahedron, so ``B[r, 3 j + d] = sum_e d_d lambda_r(e)
+    int_e phi_j``, and ``int_e phi_j`` is the sum of the weighted values at e's points."""
+    Phi = ubasis.values_matrix                          # (ne nq, n) values at the points
+    ne, nq = ubasis.dx.shape
+    sums = sp.csr_matrix((ubasis.dx.ravel(), np.arange(ne * nq),
+                          np.arange(0, ne * nq + 1, nq)), shape=(ne, ne * nq))
+    integrals = (sums @ Phi).tocsr()                    # (ne, n): int_e phi_j
+    tets = np.asarray(pbasis.element_dofs)              # (4, ne) pressure dofs
+    out = sp.csr_matrix((pbasis.N, ubasis.N))
+    nodal = np.asarray(ubasis.dofs.nodal_dofs)
+    for d in range(3):
+        grad_d = np.stack([np.asarray(pbasis.basis[k][0].grad)[d, :, 0] for k in range(4)])
+        Gd = sp.csr_matrix((grad_d.ravel(), (tets.ravel(), np.tile(np.arange(ne), 4))),
+                           shape=(pbasis.N, ne))
+        Bd = (Gd @ integrals).tocoo()
+        out = out + sp.csr_matrix((Bd.data, (Bd.row, nodal[d, Bd.col])),
+                                  shape=(pbasis.N, ubasis.N))
+    return out.tocsr()
 
 
 def condensed_divergence_tet(Bn: sp.csr_matrix, Bb: sp.csr_matrix,

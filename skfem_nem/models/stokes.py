@@ -108,7 +108,7 @@ from skfem import BilinearForm, LinearForm
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from .condensation import condensed_divergence, condensed_viscous
-from .condensation_tet import condensed_divergence_tet, condensed_viscous_tet
+from .condensation_tet import condensed_divergence_tet, condensed_viscous_tet, divergence_tet
 from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
 from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_columns,
                            outline_flux, wall_dofs, walls_fix_pressure)
@@ -293,13 +293,15 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
     bform = divergence_form(spaces)
     if bform is weak_divergence:
         cache["flux"] = boundary_flux(spaces)
+    # natural neighbours on tetrahedra: (u, grad q) by sparse products (condensation_tet)
+    nem3 = spaces.dim == 3 and bform is weak_divergence
     if bb is None:
-        B = bform.assemble(ub, pb).tocsr()
+        B = divergence_tet(ub, pb) if nem3 else bform.assemble(ub, pb).tocsr()
         cache["B"] = (B - cache["flux"]).tocsr() if "flux" in cache else B
     else:
         cache["Bb"] = bform.assemble(bb, pb).tocsr()
-        if spaces.dim == 3:  # the natural-neighbour part, for condensed_divergence_tet
-            cache["Bn"] = bform.assemble(ub, pb).tocsr()
+        if nem3:  # the natural-neighbour part, for condensed_divergence_tet
+            cache["Bn"] = divergence_tet(ub, pb)
     cache["m"] = _unit.assemble(pb)
     return cache
 

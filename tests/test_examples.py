@@ -526,3 +526,30 @@ def test_ex22_settling_sphere(tmp_path):
     x, w = line.get_xdata(), line.get_ydata()
     assert w[np.abs(x) < 0.1].min() == pytest.approx(ex.velocity / ex.REFERENCE, rel=0.03)
     assert w[np.abs(x) > 0.6].max() < 0.1 and w.min() < 0      # the return flow by the wall
+
+
+# --------------------------------------------------------------------------
+# ex23: a heavy sphere sinking in 3D on moving nodes
+# --------------------------------------------------------------------------
+
+def test_ex23_sinking_sphere_3d(tmp_path):
+    ex = load("ex23_sinking_sphere_3d")
+    rows = ex.rows
+    assert rows.shape == (ex.STEPS + 1, 6) and (rows[:, 5] == rows[0, 5]).all()
+    # it sinks, steadily, at about 0.4 of the unbounded velocity (walls 3.3 diameters apart)
+    assert (np.diff(rows[:, 2]) < 0).all() and (rows[:, 3] > 0).all()
+    assert 0.3 < rows[0, 3] / ex.UNBOUNDED < 0.5
+    assert np.ptp(rows[:, 3]) < 0.15 * rows[0, 3]
+    drop = rows[0, 2] - rows[-1, 2]
+    area = (0.5 * (rows[1:, 3] + rows[:-1, 3]) * np.diff(rows[:, 1])).sum()
+    assert drop == pytest.approx(area, rel=0.05)
+    # the material travels with its nodes: the sphere's nodes are the first ones'
+    s = ex.mesh.node_fields["sphere"] > 0.5
+    start = ex.mesh.node_fields["start"]
+    assert np.allclose(np.linalg.norm(start[s] - ex.START, axis=1) < ex.RADIUS, True)
+    assert np.abs(ex.mesh.nodes[s, 2].mean() - rows[-1, 2]) < 1e-12
+    fig = ex.visualize(tmp_path / "ex23.png")
+    lines = {ln.get_label(): ln for ln in fig.axes[1].lines}
+    np.testing.assert_array_equal(lines["centre of the sphere's nodes"].get_ydata(), rows[:, 2])
+    red = {ln.get_label(): ln for ln in fig.axes[0].lines}[f"sphere, t = {ex.mesh.time:.3g}"]
+    assert red.get_ydata().mean() < rows[0, 2] - 0.5 * drop

@@ -548,3 +548,20 @@ def test_stokes_3d_prints_its_three_tables(capsys):
     its = [int(r.split("|")[5]) for r in out["iterations"].splitlines()[2:]]
     assert len(its) == 2 and all(0 < k < 500 for k in its)
     assert "one-time kernel load" in text and "### FGMRES iterations" in text
+
+
+# --------------------------------------------------------------------------
+# sibson_3d: our 3D Sibson coordinates against natinterp3d (optional peer)
+# --------------------------------------------------------------------------
+
+def test_sibson_3d_against_natinterp3d(capsys):
+    """Where natinterp3d is installed: the same interpolated values to round-off at all
+    but a few queries, our weights linearly precise to round-off everywhere, and at every
+    query where the values differ natinterp3d's weights are the ones that are not."""
+    pytest.importorskip("natinterp3d")
+    bench = load_benchmark("sibson_3d")
+    out = bench.main(["--points", "3000", "--queries", "5000", "--repeat", "1"])
+    assert out["linear_ours"] < 1e-13
+    assert out["differing"] <= 0.01 * 5000
+    assert out["differing_peer_imprecise"] == out["differing"]
+    assert "| natinterp3d |" in capsys.readouterr().out

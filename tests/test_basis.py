@@ -587,3 +587,33 @@ def test_group_fields_are_built_for_scikit_fem_and_dropped_after_its_assembly(me
     u[vbasis.nodal_dofs[0]] = mesh.p[0]          # u = (x, 0): divergence 1
     one = LinearForm(lambda q, w: q).assemble(p1)
     np.testing.assert_allclose(D @ u, one, atol=1e-12)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_element_matrices_summed_in_blocks_are_the_same_bits(dim, monkeypatch):
+    """The whole-mesh assembly makes and sums its element matrices block by block of
+    elements under a memory budget: a budget of a few elements gives the same matrix,
+    bit for bit, as one block of all (elasticity, a coefficient varying in space)."""
+    from skfem import BilinearForm, ElementVector
+    from skfem.helpers import ddot, sym_grad
+
+    from skfem_nem import ElementNaturalNeighbour, NaturalNeighbourBasis, delaunay_mesh
+    from skfem_nem.basis import assembly
+
+    rng = np.random.default_rng(7)
+    mesh = delaunay_mesh(rng.random((60 if dim == 3 else 150, dim)))
+    vb = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour()))
+
+    @BilinearForm
+    def elastic(u, v, w):
+        return (1 + w.x[0]) * ddot(sym_grad(u), sym_grad(v))
+
+    whole = elastic.assemble(vb).tocsr()
+    monkeypatch.setattr(assembly, "ELEMENT_MATRIX_BUDGET", 3000)
+    blocks = list(assembly._budget_blocks(np.r_[0, np.cumsum(
+        (dim * np.diff(vb.stencil_ptr)) ** 2)]))
+    assert len(blocks) > 10
+    parts = elastic.assemble(vb).tocsr()
+    assert np.array_equal(whole.indptr, parts.indptr)
+    assert np.array_equal(whole.indices, parts.indices)
+    assert np.array_equal(whole.data, parts.data)

@@ -384,6 +384,11 @@ _contract_linear_serial = serial_twin(_contract_linear)
 #: below this many stencil entries squared (times quadrature points) the
 #: kernels run on one thread
 PARALLEL_MIN = 1 << 21
+#: the element matrices of the whole-mesh assembly are made and summed in blocks of
+#: elements taking at most this many numbers (256 MB): all at once, 3D elasticity took
+#: 4.3 GB at 10,000 nodes (9 S^2 numbers a tetrahedron). Blocks sum each entry's elements
+#: in the same ascending order as one, so the matrices are the same to the bit
+ELEMENT_MATRIX_BUDGET = 1 << 25
 
 
 def _parallel(basis) -> bool:
@@ -432,11 +437,12 @@ def _unit_fields(D, dim, reps, ne, nq, which):
     return (DiscreteField(val, grad),)
 
 
-def _chunks(ne, calls):
-    """Element ranges such that ``calls`` stacked copies of one make about
-    65,536 elements per form call."""
+def _chunks(ne, calls, lo=0, hi=None):
+    """Ranges of the elements ``lo .. hi - 1`` (default all ``ne``) such that ``calls``
+    stacked copies of one make about 65,536 elements per form call."""
+    hi = ne if hi is None else hi
     step = max(1, (1 << 16) // max(1, calls))
-    return [(e0, min(ne, e0 + step)) for e0 in range(0, ne, step)]
+    return [(e0, min(hi, e0 + step)) for e0 in range(lo, hi, step)]
 
 
 class _Touched(Exception):
@@ -498,7 +504,7 @@ class _NotProbeable(Exception):
     """The form cannot be called on unit fields (e.g. it reads u.hess)."""
 
 
-def _coefficients(form, basis, kwargs, Du, Dv, which_u, which_v):
+def _coefficients(form, basis, kwargs, Du, Dv, which_u, which_v, lo=0, hi=None):
     """The form's coefficients, chunk by chunk of elements: yields
     ``(e0, e1, C, active)`` with C (len(active), e1 - e0, nq) the coefficients
     (times dx) of the nonzero unit-field pairs ``active`` (indices into
@@ -511,7 +517,7 @@ def _coefficients(form, basis, kwargs, Du, Dv, which_u, which_v):
     reps = len(which_u)
     const = _constant_coefficients(form.form, Du, Dv, dim, which_u, which_v, nq)
     fields = {}
-    for e0, e1 in _chunks(ne, 1 if const is not None else reps):
+    for e0, e1 in _chunks(ne, 1 if const is not None else reps, lo, hi):
         if const is not None:
             active = np.flatnonzero(const)
             yield e0, e1, const[active, None, None] * basis.dx[None, e0:e1], active
@@ -533,31 +539,48 @@ def _coefficients(form, basis, kwargs, Du, Dv, which_u, which_v):
 
 
 def _element_matrices(form, u, v, kwargs):
-    """``(Du, Dv, off, K)``: the element matrices of a bilinear form on two
-    natural-neighbour bases that share their functions (element e's, (Dv S) x (Du S)
-    row-major, at ``K[off[e]:off[e + 1]]``); None if the form cannot be probed."""
+    """``(Du, Dv, blocks)``: the element matrices of a bilinear form on two
+    natural-neighbour bases that share their functions, made block by block of
+    elements (``blocks`` yields ``(e0, e1, off, K)``, element e's matrix, (Dv S) x (Du S)
+    row-major, at ``K[off[e]:off[e + 1]]``, at most :data:`ELEMENT_MATRIX_BUDGET` numbers
+    a block); None if the form cannot be probed (the generator raises
+    :class:`_NotProbeable` on its first block then)."""
     if form.dtype != np.float64:
         return None
     Du, dim = _components(u)
     Dv, _ = _components(v)
+    S = np.diff(u.stencil_ptr)
+    off = np.zeros(S.shape[0] + 1, dtype=np.int64)
+    np.cumsum(Du * Dv * S * S, out=off[1:])
+    return Du, Dv, _blocks_of_matrices(form, u, kwargs, Du, Dv, dim, off)
+
+
+def _blocks_of_matrices(form, u, kwargs, Du, Dv, dim, off):
+    """The generator of :func:`_element_matrices`."""
     P, Q = Du * (1 + dim), Dv * (1 + dim)
     pa, pb = (x.ravel() for x in np.meshgrid(np.arange(P), np.arange(Q), indexing="ij"))
     Phi, G = u.values_matrix, u.gradient_entries
-    ptr, sten = u.stencil_ptr, u.stencil_nodes
-    nq = u.dx.shape[1]
-    S = np.diff(ptr)
-    off = np.zeros(S.shape[0] + 1, dtype=np.int64)
-    np.cumsum(Du * Dv * S * S, out=off[1:])
-    K = np.empty(off[-1])
     kernel = _contract_bilinear if _parallel(u) else _contract_bilinear_serial
     const_grad = bool(getattr(u, "gradients_constant_per_element", False))
-    try:
-        for e0, e1, C, active in _coefficients(form, u, kwargs, Du, Dv, pa, pb):
-            kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
-                   C, pa[active], pb[active], Du, Dv, off, K, const_grad)
-    except _NotProbeable:
-        return None  # take the group road
-    return Du, Dv, off, K
+    for b0, b1 in _budget_blocks(off):
+        offb = off - off[b0]
+        K = np.empty(offb[b1])
+        for e0, e1, C, active in _coefficients(form, u, kwargs, Du, Dv, pa, pb, b0, b1):
+            kernel(e0, e1, u.stencil_ptr, u.stencil_nodes, Phi.indptr, Phi.indices, Phi.data,
+                   G, u.dx.shape[1], C, pa[active], pb[active], Du, Dv, offb, K, const_grad)
+        yield b0, b1, offb, K
+
+
+def _budget_blocks(off):
+    """Consecutive element ranges whose matrices take at most ``ELEMENT_MATRIX_BUDGET``
+    numbers (an element larger than that alone)."""
+    ne = off.size - 1
+    b0 = 0
+    while b0 < ne:
+        b1 = int(np.searchsorted(off, off[b0] + ELEMENT_MATRIX_BUDGET, side="right")) - 1
+        b1 = min(ne, max(b1, b0 + 1))
+        yield b0, b1
+        b0 = b1
 
 
 def parallel_kernels(basis) -> bool:
@@ -571,7 +594,10 @@ def _whole_bilinear(form, u, v, kwargs):
     out = _element_matrices(form, u, v, kwargs)
     if out is None:
         return None
-    return sum_coo(u, v, *out, parallel=_parallel(u))
+    try:
+        return sum_coo(u, v, *out, parallel=_parallel(u))
+    except _NotProbeable:
+        return None  # take the group road
 
 
 def _whole_linear(form, v, kwargs):

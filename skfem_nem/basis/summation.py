@@ -100,14 +100,16 @@ def _node_pattern(ptr, sten, inc_ptr, inc_e, n, nblocks):
 
 
 @njit(cache=True, parallel=True)
-def _sum_rows(ptr, sten, off, K, inc_ptr, inc_e, inc_l, cptr, cols, Du, Dv, ndu, ndv,
-              nblocks, rows_out, cols_out, data_out):
-    """Sum the local matrices ``K`` into the global matrix, row by row:
+def _sum_rows(ptr, sten, off, K, e0, e1, init, inc_ptr, inc_e, inc_l, cptr, cols, Du, Dv,
+              ndu, ndv, nblocks, rows_out, cols_out, data_out):
+    """Add the local matrices ``K`` of the elements ``e0 .. e1 - 1`` into the global
+    matrix, row by row (``init``: first set the rows, columns and zeros):
     node v's rows (components cv) hold the entries with the nodes
     ``cols[cptr[v]:cptr[v + 1]]`` (components cu) at
     ``Dv Du cptr[v] + (cv n_v + k) Du + cu``; no two entries share a place,
     and with dofs numbered ``D node + c`` the entries come out row-major
-    sorted (canonical CSR order)."""
+    sorted (canonical CSR order). Blocks of elements added in ascending order sum each
+    entry's elements in the same order as one block of all."""
     n = cptr.shape[0] - 1
     for blk in prange(nblocks):
         pos = np.full(n, -1, np.int64)
@@ -116,15 +118,18 @@ def _sum_rows(ptr, sten, off, K, inc_ptr, inc_e, inc_l, cptr, cols, Du, Dv, ndu,
             base = Dv * Du * cptr[v]
             for k in range(nv):
                 pos[cols[cptr[v] + k]] = k
-            for cv in range(Dv):
-                for k in range(nv):
-                    for cu in range(Du):
-                        o = base + (cv * nv + k) * Du + cu
-                        rows_out[o] = ndv[cv, v]
-                        cols_out[o] = ndu[cu, cols[cptr[v] + k]]
-                        data_out[o] = 0.0
+            if init:
+                for cv in range(Dv):
+                    for k in range(nv):
+                        for cu in range(Du):
+                            o = base + (cv * nv + k) * Du + cu
+                            rows_out[o] = ndv[cv, v]
+                            cols_out[o] = ndu[cu, cols[cptr[v] + k]]
+                            data_out[o] = 0.0
             for t in range(inc_ptr[v], inc_ptr[v + 1]):
                 e = inc_e[t]
+                if e < e0 or e >= e1:
+                    continue
                 j = inc_l[t]
                 s0 = ptr[e]
                 S = ptr[e + 1] - s0
@@ -178,7 +183,7 @@ def blocks(n: int) -> int:
     return max(1, min(n // 256, 4 * numba.get_num_threads()))
 
 
-def _summed(u, v, Du, Dv, off, K, parallel, idt):
+def _summed(u, v, Du, Dv, element_blocks, parallel, idt):
     """Rows, columns and values of the summed element matrices, each entry once."""
     inc_ptr, inc_e, inc_l, cptr, cols = node_pattern(u, parallel)
     n = cptr.shape[0] - 1
@@ -188,15 +193,19 @@ def _summed(u, v, Du, Dv, off, K, parallel, idt):
     ndu = np.ascontiguousarray(u.function_dofs[:Du], dtype=np.int64)
     ndv = np.ascontiguousarray(v.function_dofs[:Dv], dtype=np.int64)
     kernel = _sum_rows if parallel else _sum_rows_serial
-    kernel(u.stencil_ptr, u.stencil_nodes, off, K, inc_ptr, inc_e, inc_l, cptr, cols,
-           Du, Dv, ndu, ndv, blocks(n), ind[0], ind[1], data)
+    for k, (e0, e1, off, K) in enumerate(element_blocks):
+        kernel(u.stencil_ptr, u.stencil_nodes, off, K, e0, e1, k == 0, inc_ptr, inc_e,
+               inc_l, cptr, cols, Du, Dv, ndu, ndv, blocks(n), ind[0], ind[1], data)
     return ind, data, cptr
 
 
-def sum_coo(u, v, Du, Dv, off, K, parallel: bool = False):
-    """COO arrays ``(rows and columns (2, nnz), values)`` of the element matrices ``K``
-    (element e's, (Dv S) x (Du S) row-major, at ``K[off[e]:off[e + 1]]``) of the
+def sum_coo(u, v, Du, Dv, element_blocks, parallel: bool = False):
+    """COO arrays ``(rows and columns (2, nnz), values)`` of the element matrices of the
     ``Du``-vector trial basis ``u`` and the ``Dv``-vector test basis ``v`` (sharing
-    their stencils) summed: each entry once."""
-    ind, data, _ = _summed(u, v, Du, Dv, off, K, parallel, index_dtype(max(u.N, v.N), 0))
+    their stencils) summed: each entry once. ``element_blocks`` yields ``(e0, e1, off,
+    K)`` for consecutive ascending ranges of elements covering them all: element e's
+    matrix, (Dv S) x (Du S) row-major, at ``K[off[e]:off[e + 1]]`` (``off`` indexed by
+    the element, its block's ``K`` only held while the block is summed)."""
+    ind, data, _ = _summed(u, v, Du, Dv, element_blocks, parallel,
+                           index_dtype(max(u.N, v.N), 0))
     return ind, data

@@ -375,3 +375,29 @@ def test_a_node_pressed_against_a_wall_is_removed():
     rep = lm.merge_nodes()
     assert rep["node_map"][k] == -1
     check_constrained(lm)
+
+
+def test_a_pair_on_top_of_each_other_is_joined():
+    """Two interior nodes that come 1e-9 apart share one Voronoi cell, so each keeps about
+    half a normal area and the area rule would keep both; the distance to the nearest node
+    catches them: one of the two goes, and nothing else (a converging flow that brings two
+    nodes together made an old-grid run crawl at a tiny dt before)."""
+    from skfem_nem.evolution.merging import PAIR_GAP_FRACTION
+    nodes = square_nodes(200, seed=3)
+    inner = np.flatnonzero((nodes > 0.2).all(axis=1) & (nodes < 0.8).all(axis=1))
+    a = int(inner[0])
+    twin = nodes[a] + [1e-9, 0.0]
+    lm = LagrangianMesh(np.vstack([nodes, twin]))
+    ratio = lm.spacing_ratios()
+    b = nodes.shape[0]
+    assert ratio[a] < 1e-6 and ratio[b] < 1e-6            # caught by the distance
+    # well apart, the distance rule leaves a node alone
+    spacing = np.sqrt(lm.reference_areas())
+    far = np.flatnonzero(ratio[:b] >= CLUSTER_FRACTION)
+    assert far.size > 0.9 * b
+    alone = LagrangianMesh(nodes).merge_nodes()["removed"]   # the draw's own crowding
+    rep = lm.merge_nodes()
+    assert rep["removed"] == alone + 1
+    d, _ = cKDTree(lm.nodes).query(np.vstack([nodes[a], twin]), k=2)
+    assert d[:, 0].max() < 2e-9 and d[:, 1].min() > 1e-3      # one of the two is left
+    assert PAIR_GAP_FRACTION < CLUSTER_FRACTION and np.all(spacing > 0)

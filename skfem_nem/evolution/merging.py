@@ -28,7 +28,7 @@ from ..geometry.predicates import orient2d
 from .quality import area_shares
 
 __all__ = ["NodeRemoval", "conservative_fill", "CLUSTER_FRACTION", "FOLD_ANGLE",
-           "WALL_GAP_FRACTION"]
+           "WALL_GAP_FRACTION", "PAIR_GAP_FRACTION"]
 
 #: a node whose spacing (square root of its share of the triangle areas) fell below this
 #: fraction of its reference spacing (the square root of the largest target area, the
@@ -53,6 +53,14 @@ FOLD_ANGLE = 20.0
 #: share of the areas stays; a fraction well below CLUSTER_FRACTION leaves the nodes that
 #: a drawn node set puts near the walls alone
 WALL_GAP_FRACTION = 0.02
+#: an interior node closer to another node than this fraction of its reference spacing is
+#: removed too: two nodes that the flow brings on top of each other share one Voronoi
+#: cell, so each keeps about half a normal area and the area rule never sees them, while
+#: their velocities may differ by a tenth of the speed over a distance of 1e-9 and the
+#: predictor-corrector cannot contract there (an old-grid run crawled at dt = 0.002 for
+#: thousands of steps with such a pair 4e-9 apart); as small as WALL_GAP_FRACTION, it
+#: leaves the close pairs of a drawn node set to the area rule
+PAIR_GAP_FRACTION = 0.02
 
 
 # ---------------------------------------------------------------------------
@@ -513,7 +521,9 @@ class NodeRemoval:
         wall node the smaller of that and its nearest neighbour on the wall over its
         reference spacing, for a node off the walls the smaller of its ratio and its
         distance to the nearest wall over :data:`WALL_GAP_FRACTION` of its reference
-        spacing, times :data:`CLUSTER_FRACTION`; ``inf`` for the corners of
+        spacing, times :data:`CLUSTER_FRACTION`, and of that and its distance to the nearest
+        node over :data:`PAIR_GAP_FRACTION` of its reference spacing, times
+        :data:`CLUSTER_FRACTION`; ``inf`` for the corners of
         the box and hull nodes off its walls (never removed)."""
         tri = self.triangulation
         P, T = self.nodes, self.triangles
@@ -551,6 +561,10 @@ class NodeRemoval:
                 gap = np.minimum(P - lo, hi - P).min(axis=1) / np.sqrt(ref)
                 gap *= CLUSTER_FRACTION / WALL_GAP_FRACTION  # removed below WALL_GAP_FRACTION
                 ratio[free] = np.minimum(ratio[free], gap[free])
+            # an interior node by its distance to the nearest node: a pair on top of each
+            # other shares one cell and keeps its areas
+            ratio[free] = np.minimum(ratio[free], (_nearest(P, E) / np.sqrt(ref)
+                                                   * (CLUSTER_FRACTION / PAIR_GAP_FRACTION))[free])
         ratio[~(free | wall) | ~(ref > 0)] = np.inf
         return ratio
 
@@ -585,6 +599,15 @@ class NodeRemoval:
                 fold.append((ang, v))
         fold = np.array([v for _, v in sorted(fold)], dtype=np.int64)
         return np.r_[fold, crowded[~np.isin(crowded, fold)]]
+
+
+def _nearest(P: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """(n,) each node's distance to its nearest neighbour along the edges E (k, 2)."""
+    length = np.hypot(*(P[E[:, 0]] - P[E[:, 1]]).T)
+    near = np.full(P.shape[0], np.inf)
+    np.minimum.at(near, E[:, 0], length)
+    np.minimum.at(near, E[:, 1], length)
+    return near
 
 
 def _neighbour_lists(E: np.ndarray, n: int):

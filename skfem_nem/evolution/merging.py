@@ -545,11 +545,7 @@ class NodeRemoval:
         # a wall node also by its nearest neighbour on the wall: two wall nodes can
         # converge while their shares stay large (a strained flow keeps areas), and unlike
         # interior nodes they cannot be relocated past each other
-        H = tri.hull_edges
-        length = np.hypot(*(P[H[:, 0]] - P[H[:, 1]]).T)
-        nearest = np.full(P.shape[0], np.inf)
-        np.minimum.at(nearest, H[:, 0], length)
-        np.minimum.at(nearest, H[:, 1], length)
+        nearest = _nearest(P, tri.hull_edges)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.sqrt(share / ref)
             ratio[wall] = np.minimum(ratio[wall], nearest[wall] / np.sqrt(ref[wall]))

@@ -10,7 +10,8 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["box_nodes", "hilbert_order", "line_segments", "polyline_nodes", "remove_close"]
+__all__ = ["box_nodes", "draw_interior", "hilbert_order", "line_segments", "polyline_nodes",
+           "remove_close"]
 
 # random nodes closer than this fraction of the local spacing to a side or a
 # line node are dropped (near-duplicates make slivers)
@@ -152,7 +153,7 @@ def box_nodes(n: int, width: float = 1.0, height: float = 1.0,
     h = np.sqrt(width * height / n)
     hb = h if boundary_spacing is None else float(boundary_spacing)
     fixed = _fixed_nodes(x0, y0, width, height, hb, lines)
-    inner = _draw_interior(rng, n, x0, y0, width, height, density)
+    inner = draw_interior(rng, n, (x0, y0), (width, height), density)
     # local spacing ~ h / sqrt(density)
     loc = h if density is None else h / np.sqrt(np.asarray(density(inner)))
     margin = np.minimum.reduce([inner[:, 0] - x0, x0 + width - inner[:, 0],
@@ -208,13 +209,16 @@ def _fixed_nodes(x0: float, y0: float, width: float, height: float, hb: float,
     return np.unique(np.round(fixed, MERGE_DECIMALS), axis=0) if len(lines) else fixed
 
 
-def _draw_interior(rng: np.random.Generator, n: int, x0: float, y0: float, width: float,
-                   height: float, density: Optional[Callable]) -> np.ndarray:
-    """``n`` random points in the box, accepted with probability ``density``."""
+def draw_interior(rng: np.random.Generator, n: int, origin, size,
+                  density: Optional[Callable]) -> np.ndarray:
+    """``n`` random points in the box ``origin + [0, size]`` (any dimension), accepted with
+    probability ``density``; ``ValueError`` if ``density`` is not one value in (0, 1] per
+    point."""
+    origin, size = np.asarray(origin, dtype=float), np.asarray(size, dtype=float)
     pts = []
     count = 0
     while count < n:
-        c = rng.random((2 * n, 2)) * [width, height] + [x0, y0]
+        c = rng.random((2 * n, size.size)) * size + origin
         if density is not None:
             d = np.asarray(density(c), dtype=float)
             if d.shape != (c.shape[0],) or not np.all((d > 0) & (d <= 1 + DENSITY_SLACK)):

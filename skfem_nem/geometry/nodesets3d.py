@@ -14,7 +14,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from .nodesets import CLEARANCE, DENSITY_SLACK, MERGE_DECIMALS, box_nodes
+from .nodesets import CLEARANCE, MERGE_DECIMALS, box_nodes, draw_interior
 
 __all__ = ["box_nodes_3d"]
 
@@ -60,7 +60,7 @@ def box_nodes_3d(n: int, size: Sequence[float] = (1.0, 1.0, 1.0),
     if not (np.isfinite(hb) and hb > 0):
         raise ValueError(f"boundary_spacing must be a positive number, got {boundary_spacing}")
     faces = _face_nodes(size, origin, hb, seed)
-    inner = _draw_interior3(rng, n, size, origin, density)
+    inner = draw_interior(rng, n, origin, size, density)
     loc = h if density is None else h / np.cbrt(np.asarray(density(inner)))
     rel = inner - origin
     margin = np.minimum(rel, size - rel).min(axis=1)
@@ -96,20 +96,3 @@ def _face_nodes(size: np.ndarray, origin: np.ndarray, hb: float, seed: int) -> n
     # edges belong to two faces: keep each node once (the 2D sides place them alike)
     _, first = np.unique(np.round(p, MERGE_DECIMALS), axis=0, return_index=True)
     return p[np.sort(first)]
-
-
-def _draw_interior3(rng: np.random.Generator, n: int, size: np.ndarray, origin: np.ndarray,
-                    density: Optional[Callable]) -> np.ndarray:
-    """``n`` random points in the box, accepted with probability ``density``."""
-    pts, count = [], 0
-    while count < n:
-        c = rng.random((2 * n, 3)) * size + origin
-        if density is not None:
-            d = np.asarray(density(c), dtype=float)
-            if d.shape != (c.shape[0],) or not np.all((d > 0) & (d <= 1 + DENSITY_SLACK)):
-                raise ValueError("density must return one value in (0, 1] per point")
-            c = c[rng.random(c.shape[0]) < d]
-        c = c[: n - count]
-        pts.append(c)
-        count += c.shape[0]
-    return np.concatenate(pts)

@@ -4,7 +4,7 @@
 Nodes: the corners, random nodes on the edges and faces (spaced like the
 interior ones) and 700 random interior nodes. On their Delaunay tetrahedra
 (Qhull, :func:`skfem_nem.delaunay_mesh`) the problem is solved with ``NEM``
-(Sibson functions from the paper's Box 1, the Lasserre method; 4-point rule)
+(Sibson functions from the paper's Box 1, the Lasserre method; smoothed gradients)
 and with scikit-fem's ``P1`` / ``P2``; L2 and H1-seminorm errors with the
 11-point rule. NEM is more accurate than P1 on the same tetrahedra, less than P2.
 
@@ -86,7 +86,7 @@ def solve_on(mesh, method):
     """Solve on one mesh; returns (basis, u, {"l2", "h1", "dofs", "seconds"})."""
     t0 = time.perf_counter()
     if method == "NEM":
-        basis = NaturalNeighbourBasis(mesh)                   # 4-point rule
+        basis = NaturalNeighbourBasis(mesh)                   # smoothed gradients
         ebasis = NaturalNeighbourBasis(mesh, intorder=4)      # for the errors
     else:
         elem = ElementTetP1() if method == "P1" else ElementTetP2()

@@ -98,6 +98,27 @@ def test_3d_chunks_give_the_same_matrices():
     assert all(abs(a - b).max() == 0.0 for a, b in zip(dPhi, dPhi2))
 
 
+def test_3d_large_batches_in_z_order_keep_the_callers_rows():
+    # from _SORT_MIN queries on, a batch runs in Z-order; every row must come back to
+    # its query, bit for bit the row a small (unsorted) batch of that query gives
+    from skfem_nem.coordinates import lasserre
+    rng = np.random.default_rng(11)
+    p = rng.random((800, 3))
+    q = 0.2 + 0.6 * rng.random((lasserre._SORT_MIN + 500, 3))
+    Phi, dPhi = sibson_coordinates(p, q, gradient=True, chunk=1000)
+    parts = [sibson_coordinates(p, q[i:i + 900], gradient=True) for i in range(0, len(q), 900)]
+    import scipy.sparse as sp
+    Phi2 = sp.vstack([a for a, _ in parts], format="csr")
+    assert np.array_equal(Phi.indptr, Phi2.indptr) and np.array_equal(Phi.indices, Phi2.indices)
+    assert np.array_equal(Phi.data, Phi2.data)
+    for k in range(3):
+        assert np.array_equal(dPhi[k].data, sp.vstack([b[k] for _, b in parts], format="csr").data)
+    # and a point outside is still named by its own index
+    q[1234] = [2.0, 0.5, 0.5]
+    with pytest.raises(ValueError, match=r"x\[1234\]"):
+        sibson_coordinates(p, q)
+
+
 def test_dispatch_errors():
     rng = np.random.default_rng(0)
     p3 = rng.random((50, 3))

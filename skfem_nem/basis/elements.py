@@ -126,9 +126,12 @@ def element_for(mesh, elem, who):
     return elem
 
 
-def integration_scheme(integration, npoints=None, intorder=None, quadrature=None):
+def integration_scheme(integration, npoints=None, intorder=None, quadrature=None, dim=2):
     """The integration scheme: ``integration`` if given (checked against the
-    rule options), else Gauss when a rule is asked for, smoothed otherwise."""
+    rule options), else Gauss when a rule is asked for, smoothed otherwise. On
+    tetrahedra (``dim`` 3) a smoothed basis takes ``intorder`` or ``quadrature``
+    as the points that carry values (all in the tetrahedron, its one smoothing
+    cell)."""
     rule = [k for k, v in (("npoints", npoints), ("intorder", intorder),
                            ("quadrature", quadrature)) if v is not None]
     if integration is None:
@@ -136,7 +139,7 @@ def integration_scheme(integration, npoints=None, intorder=None, quadrature=None
     if integration not in INTEGRATIONS:
         raise ValueError(f"integration must be one of {', '.join(map(repr, INTEGRATIONS))}, "
                          f"got {integration!r}")
-    if integration == "smoothed" and rule:
+    if integration == "smoothed" and rule and not (dim == 3 and rule[0] != "npoints"):
         raise ValueError(f"{rule[0]} chooses a Gauss rule, but integration='smoothed' has "
                          f"its own points (one per smoothing cell); pass "
                          f"integration='gauss' with it")

@@ -48,7 +48,7 @@ from .projection import (field_values, l2_project, normalize_elements, normalize
 from .groups import GroupBasis, restrict_field
 from .stencils import fill_group, stencil_union
 from . import updates
-from .smoothing import cells_2d, cells_2d_alone, cells_3d, combine, value_rule
+from .smoothing import smoothed_functions, value_rule, vertex_points
 from . import quadratic
 from .smoothing_quadratic import smoothed_quadratic
 
@@ -95,28 +95,10 @@ class _NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         # gradients as one (dim, nnz) array on Phi's pattern
         return Phi, np.stack([Dk.data for Dk in D]) if len(D) else np.empty((0, Phi.nnz))
 
-    def _build_smoothed(self, x, elems, cell_of):
-        """Values at the (dim, ne, nq) points x (in the elements ``elems``)
-        and smoothed gradients over the cells ``cell_of`` (ne * nq,) of the
-        cells of ``np.unique(elems)`` (:mod:`skfem_nem.basis.smoothing`)."""
-        dim, ne, nq = x.shape
-        pts = x.transpose(1, 2, 0).reshape(-1, dim)
-        mesh = self.mesh
-        if dim == 2 and elems.size < mesh.nelements:
-            # a subdomain or an update: without numbering all the mesh's edges
-            points, hint, cp, coef = cells_2d_alone(mesh.p.T, mesh.t, np.unique(elems))
-        else:
-            cells = cells_2d if dim == 2 else cells_3d
-            points, hint, cp, coef = cells(mesh.p.T, mesh.t, mesh.t2f, mesh.facets,
-                                           np.unique(elems))
-        # one batch: the integration points, then the cells' boundary points
-        Phi = self._coordinates(np.concatenate([pts, points]),
-                                hint=np.concatenate([np.repeat(elems, nq), hint]))
-        ptr, idx, val, grad = combine(Phi, cell_of, cp + ne * nq, coef)
-        import scipy.sparse as sp
-        Phi = sp.csr_matrix((val, idx.astype(Phi.indices.dtype), ptr),
-                            shape=(ne * nq, Phi.shape[1]))
-        return Phi, grad
+    def _build_smoothed(self, x, elems, cell_of, nodal=None):
+        """Values at the (dim, ne, nq) points x and smoothed gradients
+        (:func:`~skfem_nem.basis.smoothing.smoothed_functions`)."""
+        return smoothed_functions(self.mesh, self._coordinates, x, elems, cell_of, nodal)
 
     @property
     def order(self) -> int:
@@ -306,14 +288,18 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         smoothed over cells, the boundary integral of each function times the
         normal over the cell's area (:mod:`skfem_nem.basis.smoothing`). Three cells
         per triangle (one at each vertex, one integration point each: the
-        3-point rule's points, weights ``|T|/3``) or one per tetrahedron (4
-        points). Consistent: the linear patch test passes to round-off and
+        3-point rule's points, weights ``|T|/3``) or one per tetrahedron (its
+        four vertices, 1/20 of its volume each, where the values are known,
+        and its centroid, 4/5: one coordinate query). Consistent: the linear
+        patch test passes to round-off and
         the rates are optimal. ``"gauss"``: values and exact gradients at the
         points of a Gauss rule (``intorder``, ``npoints``, ``quadrature``;
         default the 3-point rule on triangles, 4 points on tetrahedra); not
         exact for natural-neighbour functions, so not consistent.
     intorder, npoints, quadrature
-        A Gauss rule per cell (implies ``integration="gauss"``): scikit-fem's
+        A Gauss rule per cell (implies ``integration="gauss"`` unless
+        ``integration="smoothed"`` is given on tetrahedra: then the rule's
+        points carry the values and share the tetrahedron's smoothed gradient): scikit-fem's
         integration order (on tetrahedra: 2 -> 4 points, 3 -> 6, 4 -> 11), or
         on triangles the number of points (1, 3, 4, 6, 7, 12, 13; 4 and 13
         have a negative weight), or an explicit ``(X, W)`` pair on the
@@ -377,10 +363,11 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         elem = element_for(mesh, elem, "NaturalNeighbourBasis")
         check_used_nodes(mesh, "NaturalNeighbourBasis")
         self.method = coordinate_method(mesh, coordinates, method)
-        self.integration = integration_scheme(integration, npoints, intorder, quadrature)
+        self.integration = integration_scheme(integration, npoints, intorder, quadrature,
+                                              mesh.dim())
         self.triangulation = adopt(mesh, self.method)
         self.coordinates = coordinates
-        if self.integration == "smoothed":
+        if self.integration == "smoothed" and intorder is None and quadrature is None:
             rule = value_rule(mesh.dim())
         else:
             rule = gauss_rule(npoints, intorder, quadrature, mesh.refdom)
@@ -411,9 +398,12 @@ class NaturalNeighbourBasis(_NaturalNeighbourBasisBase):
         nq = self.X.shape[1]
         # 2D: point q of a triangle lies in the cell of its vertex q;
         # 3D: one cell per tetrahedron
-        cell_of = (np.arange(elems.size * nq) if self.mesh.dim() == 2
-                   else np.repeat(np.arange(elems.size), nq))
-        return self._build_smoothed(x, elems, cell_of)
+        if self.mesh.dim() == 2:
+            return self._build_smoothed(x, elems, np.arange(elems.size * nq))
+        vert = vertex_points(self.X)
+        nodal = np.where(vert >= 0, self.mesh.t[np.maximum(vert, 0)][:, elems].T, -1)
+        return self._build_smoothed(x, elems, np.repeat(np.arange(elems.size), nq),
+                                    nodal.ravel())
 
     def updated(self, mesh: MeshTri) -> "NaturalNeighbourBasis":
         """This basis on ``mesh``, a later state of its mesh (nodes moved, added or taken

@@ -43,9 +43,12 @@ neighbouring triangle) and the segments midpoint-centroid (shared by two
 cells of a triangle); each segment is evaluated once, at
 ``SEGMENT_POINTS`` Gauss-Legendre points.
 
-3D: the cell is the tetrahedron itself; its four faces (shared with the
-neighbouring tetrahedra) are evaluated once each at ``FACE_POINTS`` points,
-and the 4-point rule's points share the tetrahedron's smoothed gradient.
+3D: the cell is the tetrahedron itself; its faces (shared with the
+neighbouring tetrahedra) are integrated by their centroids and their
+vertices, where the values are known (:func:`cells_3d`). Values
+are carried by the vertices and the centroid (:func:`value_rule`), which
+share the tetrahedron's smoothed gradient; at a vertex the values are known,
+so the centroid is the one coordinate query of a tetrahedron's own.
 
 The smoothed gradients and the values at the integration points are stored
 on one CSR sparsity pattern per row (an integration point), as the Gauss
@@ -74,17 +77,32 @@ _PARALLEL_MIN = 4096
 # barycentric coordinates of the 3-point rule's points, point i nearest vertex i
 _X3 = np.array([[1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 _W3 = np.full(3, 1 / 6)
+# 3D: the tetrahedron's four vertices (1/20 of its volume each) and its centroid
+# (4/5), the positive rule of degree 2 whose vertex values are known: one
+# coordinate query a tetrahedron instead of four for scikit-fem's 4-point rule
+_X5 = np.array([[0.0, 1.0, 0.0, 0.0, 0.25], [0.0, 0.0, 1.0, 0.0, 0.25],
+                [0.0, 0.0, 0.0, 1.0, 0.25]])
+_W5 = np.array([1 / 120] * 4 + [2 / 15])
 
 
 def value_rule(dim: int):
     """The reference-cell rule (X, W) whose points carry values and the
     smoothed gradients: 2D the 3-point rule (point i in vertex i's cell),
-    3D the 4-point rule."""
+    3D the vertices and the centroid (:data:`_X5`)."""
     if dim == 2:
         return _X3.copy(), _W3.copy()
-    from skfem.quadrature import get_quadrature
-    from skfem.refdom import RefTet
-    return get_quadrature(RefTet, 2)
+    return _X5.copy(), _W5.copy()
+
+
+def vertex_points(X) -> np.ndarray:
+    """(nq,) the reference vertex each point of the rule X (dim, nq) is (vertex
+    0 the origin, vertex i the unit vector i), -1 for the points that are none:
+    there every natural-neighbour function is known (1 for the node, 0 for the
+    others) and needs no coordinate query."""
+    dim = X.shape[0]
+    ref = np.vstack([np.zeros(dim), np.eye(dim)])       # (dim + 1, dim)
+    hit = (X.T[:, None, :] == ref[None, :, :]).all(axis=2)   # (nq, dim + 1)
+    return np.where(hit.any(axis=1), hit.argmax(axis=1), -1)
 
 
 # ---------------------------------------------------------------------------
@@ -205,42 +223,43 @@ def _cells_2d(p, t, t2f, facets, elems, s, w):
 
 
 def cells_3d(p, t, t2f, facets, elems):
-    """Face points of the tetrahedra ``elems`` (one cell each; the 3-point
-    rule of degree 2 on each face); as :func:`cells_2d`, with cell j the
-    tetrahedron elems[j]. Vectorised numpy: in 3D the coordinates, not the
+    """Face points of the tetrahedra ``elems`` (one cell each); as
+    :func:`cells_2d`, with cell j the tetrahedron elems[j], except that an index
+    ``pts >= len(points)`` names the node ``pts - len(points)``.
+
+    Each face is integrated by its centroid (weight 3/4) and its vertices (1/12
+    each), the positive rule of degree 2 on a triangle whose vertex values are
+    known: one coordinate query a face (shared by its two tetrahedra). The face
+    opposite vertex o has the outward area vector ``-3 |T| grad lambda_o``, so
+    the smoothed gradient is ``sum_o -9/4 grad lambda_o phi(c_o) + sum_v 1/4
+    grad lambda_v phi(x_v)``, exact for linear functions (measured against
+    other rules in docs/ndim.md). Vectorised numpy: the coordinates, not the
     cells, are the cost."""
-    from skfem.quadrature import get_quadrature
-    from skfem.refdom import RefTri
-    X, W = get_quadrature(RefTri, 2)
-    lam = np.vstack([1.0 - X.sum(axis=0), X])           # (3, nfp) barycentric
-    w = 2.0 * W                                         # weights summing to 1
-    nfp = w.size
     k = elems.size
-    F = t2f[:, elems].T                                 # (k, 4)
+    T = np.asarray(t)[:, elems]                         # (4, k)
+    F = np.asarray(t2f)[:, elems]                       # (4, k)
     fac, finv = np.unique(F.ravel(), return_inverse=True)
-    finv = finv.reshape(k, 4)
-    FV = p[facets[:, fac].T]                            # (nf, 3, 3)
-    points = np.einsum("fvd,vq->fqd", FV, lam).reshape(-1, 3)
+    finv = finv.reshape(F.shape)
+    FV = np.asarray(facets)[:, fac]                     # (3, nf)
+    points = (p[FV[0]] + p[FV[1]] + p[FV[2]]) / 3.0
     own = np.empty(fac.size, dtype=np.int64)
     own[finv.ravel()] = np.repeat(elems, 4)
-    V = p[t[:, elems].T]                                # (k, 4, 3)
-    vol = np.abs(np.einsum("kd,kd->k", V[:, 1] - V[:, 0],
-                           np.cross(V[:, 2] - V[:, 0], V[:, 3] - V[:, 0]))) / 6.0
+    # the vertex opposite each face: the tetrahedron's node not on it
+    opposite = T.sum(axis=0) - FV[:, finv].sum(axis=0)  # (4, k) node numbers
+    o = (T[None, :, :] == opposite[:, None, :]).argmax(axis=1)   # (4, k) local vertex
+    V = p[T.T]                                          # (k, 4, 3)
+    E = V[:, 1:] - V[:, :1]                             # (k, 3, 3) edges from vertex 0
+    cof = np.stack([np.cross(E[:, 1], E[:, 2]), np.cross(E[:, 2], E[:, 0]),
+                    np.cross(E[:, 0], E[:, 1])], axis=1)  # (k, 3, 3)
+    det = np.einsum("kd,kd->k", E[:, 0], cof[:, 0])
     with np.errstate(divide="ignore", invalid="ignore"):
-        scale = np.where(vol > 0, 1.0 / vol, 0.0)       # flat tetrahedra: no gradient
-    pts = np.empty((k, 4, nfp), dtype=np.int64)
-    coef = np.empty((k, 4, nfp, 3))
-    g = V.mean(axis=1)
-    for f in range(4):
-        A = FV[finv[:, f]]                              # the facet's own vertex order
-        nA = 0.5 * np.cross(A[:, 1] - A[:, 0], A[:, 2] - A[:, 0])
-        # outward: away from the tetrahedron's centroid
-        out = np.einsum("kd,kd->k", nA, A.mean(axis=1) - g) > 0
-        nA *= np.where(out, 1.0, -1.0)[:, None]
-        pts[:, f] = finv[:, f][:, None] * nfp + np.arange(nfp)
-        coef[:, f] = nA[:, None, :] * w[None, :, None]
-    coef *= scale[:, None, None, None]
-    return points, np.repeat(own, nfp), pts.reshape(k, 4 * nfp), coef.reshape(k, 4 * nfp, 3)
+        scale = np.where(det != 0, 1.0 / det, 0.0)      # flat tetrahedra: no gradient
+    G = np.empty((k, 4, 3))                             # grad lambda_i
+    G[:, 1:] = cof * scale[:, None, None]
+    G[:, 0] = -G[:, 1:].sum(axis=1)
+    pts = np.concatenate([finv.T, fac.size + T.T], axis=1)          # (k, 8)
+    coef = np.concatenate([-2.25 * G[np.arange(k)[:, None], o.T], 0.25 * G], axis=1)
+    return points, own, pts, np.ascontiguousarray(coef)
 
 
 # ---------------------------------------------------------------------------
@@ -325,23 +344,44 @@ def _smoothed_rows(cell_of, pts, coef, v_ptr, v_idx, v_val, s_ptr, s_idx, s_val,
 _smoothed_rows_serial = serial_twin(_smoothed_rows)
 
 
-def combine(Phi, cell_of, pts, coef):
-    """Values at the integration points and their cells' smoothed gradients,
-    on one sparsity pattern.
-
-    ``Phi`` is the CSR matrix of the coordinates at the integration points
-    (rows 0 .. len(cell_of) - 1) and at the cells' boundary points (rows
-    ``pts``); ``cell_of`` names each integration point's cell, and the
-    smoothed gradient of cell c is ``sum_j coef[c, j] * Phi[pts[c, j]]``.
-    Returns (indptr, indices, values, grads (dim, nnz)) of len(cell_of) rows.
-    """
+@njit(cache=True, parallel=True)
+def _joined_rows(cell_of, v_ptr, v_idx, v_val, c_ptr, c_idx, c_grad, count, out_ptr, out_idx,
+                 out_val, out_grad, fill):
+    """Row r as the merge of the value row r and the gradient row of its cell
+    cell_of[r] (both sorted by column); counts (``fill=False``) or writes
+    (``fill=True``) as :func:`_smoothed_rows`."""
     nrows = cell_of.shape[0]
-    kernel = _smoothed_rows if nrows >= _PARALLEL_MIN else _smoothed_rows_serial
-    Phi.sort_indices()
-    ip, ix = Phi.indptr.astype(np.int64), Phi.indices.astype(np.int64)
-    args = (np.ascontiguousarray(cell_of, dtype=np.int64), np.ascontiguousarray(pts),
-            np.ascontiguousarray(coef), ip, ix, Phi.data, ip, ix, Phi.data)
-    dim = coef.shape[2]
+    nb = (nrows + _BLOCK - 1) // _BLOCK
+    dim = c_grad.shape[0]
+    for blk in prange(nb):
+        for r in range(blk * _BLOCK, min(nrows, blk * _BLOCK + _BLOCK)):
+            c = cell_of[r]
+            i, ie, j, je = v_ptr[r], v_ptr[r + 1], c_ptr[c], c_ptr[c + 1]
+            n = 0
+            at = out_ptr[r] if fill else 0
+            while i < ie or j < je:
+                vi = v_idx[i] if i < ie else -1
+                cj = c_idx[j] if j < je else -1
+                take_v = vi >= 0 and (cj < 0 or vi <= cj)
+                take_c = cj >= 0 and (vi < 0 or cj <= vi)
+                if fill:
+                    out_idx[at + n] = vi if take_v else cj
+                    out_val[at + n] = v_val[i] if take_v else 0.0
+                    for d in range(dim):
+                        out_grad[d, at + n] = c_grad[d, j] if take_c else 0.0
+                i += take_v
+                j += take_c
+                n += 1
+            if not fill:
+                count[r] = n
+
+
+_joined_rows_serial = serial_twin(_joined_rows)
+
+
+def _run(kernel, serial, nrows, args, dim):
+    """The two passes of a row kernel (count, then fill) into one CSR pattern."""
+    kernel = kernel if nrows >= _PARALLEL_MIN else serial
     count = np.zeros(nrows, np.int64)
     ptr = np.zeros(nrows + 1, np.int64)
     kernel(*args, count, ptr, np.empty(0, np.int64), np.empty(0), np.empty((dim, 0)), False)
@@ -352,3 +392,84 @@ def combine(Phi, cell_of, pts, coef):
     grad = np.empty((dim, nnz))
     kernel(*args, count, ptr, idx, val, grad, True)
     return ptr, idx, val, grad
+
+
+def _csr(M):
+    M.sort_indices()
+    return M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data
+
+
+def combine(V, S, cell_of, pts, coef):
+    """Values at the integration points and their cells' smoothed gradients,
+    on one sparsity pattern.
+
+    ``V`` is the CSR matrix of the functions' values at the integration points
+    (one row each), ``S`` that of the cells' boundary points; ``cell_of`` names
+    each integration point's cell, and the smoothed gradient of cell c is
+    ``sum_j coef[c, j] * S[pts[c, j]]``. Returns (indptr, indices, values,
+    grads (dim, nnz)) of len(cell_of) rows. Where cells hold several points
+    (3D: five), each cell's gradient row is merged once and then joined with
+    its points' value rows.
+    """
+    nrows, ncells, dim = cell_of.shape[0], pts.shape[0], coef.shape[2]
+    cells = (np.ascontiguousarray(pts), np.ascontiguousarray(coef))
+    if nrows <= ncells:
+        args = (np.ascontiguousarray(cell_of, dtype=np.int64), *cells, *_csr(V), *_csr(S))
+        return _run(_smoothed_rows, _smoothed_rows_serial, nrows, args, dim)
+    none = (np.zeros(ncells + 1, np.int64), np.empty(0, np.int64), np.empty(0))
+    args = (np.arange(ncells), *cells, *none, *_csr(S))
+    c_ptr, c_idx, _, c_grad = _run(_smoothed_rows, _smoothed_rows_serial, ncells, args, dim)
+    args = (np.ascontiguousarray(cell_of, dtype=np.int64), *_csr(V), c_ptr, c_idx, c_grad)
+    return _run(_joined_rows, _joined_rows_serial, nrows, args, dim)
+
+
+def with_nodes(Q, nodal):
+    """The CSR value rows of points some of which are nodes: row r is ``Q``'s next
+    row where ``nodal[r] < 0`` (a queried point), else 1 at column ``nodal[r]``
+    (every natural-neighbour function is 1 at its node and 0 at the others)."""
+    import scipy.sparse as sp
+    ask = nodal < 0
+    lengths = np.ones(nodal.size, np.int64)
+    lengths[ask] = np.diff(Q.indptr)
+    ptr = np.zeros(nodal.size + 1, np.int64)
+    np.cumsum(lengths, out=ptr[1:])
+    idx = np.empty(ptr[-1], np.int64)
+    val = np.ones(ptr[-1])
+    at = ptr[:-1][~ask]
+    idx[at] = nodal[~ask]
+    dest = np.repeat(ptr[:-1][ask] - Q.indptr[:-1], np.diff(Q.indptr)) + np.arange(Q.nnz)
+    idx[dest] = Q.indices
+    val[dest] = Q.data
+    return sp.csr_matrix((val, idx, ptr), shape=(nodal.size, Q.shape[1]))
+
+
+def smoothed_functions(mesh, coordinates, x, elems, cell_of, nodal=None):
+    """Values at the (dim, ne, nq) points x (in the elements ``elems``) and smoothed
+    gradients over the cells ``cell_of`` (ne * nq,) of the cells of ``np.unique(elems)``:
+    ``(values CSR, gradients (dim, nnz) on its pattern)``. ``coordinates(points,
+    hint=...)`` gives the natural-neighbour coordinates (CSR) at (k, dim) points;
+    ``nodal`` (ne * nq,) names the node a point is (-1: none), whose values need no
+    query."""
+    import scipy.sparse as sp
+    dim, ne, nq = x.shape
+    pts = x.transpose(1, 2, 0).reshape(-1, dim)
+    cells = np.unique(elems)
+    if dim == 3:
+        points, hint, cp, coef = cells_3d(mesh.p.T, mesh.t, mesh.t2f, mesh.facets, cells)
+    elif elems.size < mesh.nelements:
+        # a subdomain or an update: without numbering all the mesh's edges
+        points, hint, cp, coef = cells_2d_alone(mesh.p.T, mesh.t, cells)
+    else:
+        points, hint, cp, coef = cells_2d(mesh.p.T, mesh.t, mesh.t2f, mesh.facets, cells)
+    ask = slice(None) if nodal is None else nodal < 0
+    # one batch: the integration points, then the cells' boundary points
+    m = pts[ask].shape[0]
+    Phi = coordinates(np.concatenate([pts[ask], points]),
+                      hint=np.concatenate([np.repeat(elems, nq)[ask], hint]))
+    V = Phi[:m] if nodal is None else with_nodes(Phi[:m], nodal)
+    # 3D: rows past the boundary points are the nodes (cells_3d)
+    S = Phi[m:] if dim == 2 else sp.vstack([Phi[m:], sp.identity(Phi.shape[1], format="csr")],
+                                           format="csr")
+    ptr, idx, val, grad = combine(V, S, cell_of, cp, coef)
+    return sp.csr_matrix((val, idx.astype(Phi.indices.dtype), ptr),
+                         shape=(ne * nq, Phi.shape[1])), grad

@@ -106,5 +106,5 @@ def smoothed_quadratic(mesh, coordinates, x, w, elems):
     Phi = coordinates(np.concatenate([pts, points]),
                       hint=np.concatenate([np.repeat(elems, 3), hint]))
     Q, _ = lift(mesh, Phi)
-    ptr, idx, val, grad = combine(Q, np.arange(pts.shape[0]), sources, coef)
+    ptr, idx, val, grad = combine(Q, Q, np.arange(pts.shape[0]), sources, coef)
     return sp.csr_matrix((val, idx, ptr), shape=(pts.shape[0], Q.shape[1])), grad

@@ -10,8 +10,8 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["box_nodes", "draw_interior", "hilbert_order", "line_segments", "polyline_nodes",
-           "remove_close"]
+__all__ = ["box_nodes", "draw_interior", "hilbert_order", "line_segments", "morton_order",
+           "polyline_nodes", "remove_close"]
 
 # random nodes closer than this fraction of the local spacing to a side or a
 # line node are dropped (near-duplicates make slivers)
@@ -26,6 +26,8 @@ DISC_SLACK = 1e-9
 # levels of the Hilbert curve of hilbert_order: a grid of 2^16 cells a side, finer than
 # any node spacing of a mesh that fits in memory, its index within an int64
 HILBERT_BITS = 16
+# levels of morton_order's grid: 2^(MORTON_BITS * d) cells must fit in an int64 (d <= 4)
+MORTON_BITS = 15
 
 
 def polyline_nodes(vertices, spacing: float, closed: bool = False) -> np.ndarray:
@@ -96,6 +98,34 @@ def hilbert_order(points) -> np.ndarray:
         x[swap], y[swap] = y[swap], x[swap]
         s >>= 1
     return np.argsort(d, kind="stable")
+
+
+def morton_order(points) -> np.ndarray:
+    """The order of ``points`` (n, d) along the Z-order (Morton) curve through their
+    bounding box, any dimension up to 4.
+
+    A batch of queries taken in this order walks the triangulation's memory a
+    neighbourhood at a time: 3D coordinates of random queries among random nodes
+    take about half the time (``docs/ndim.md``). The Hilbert curve of
+    :func:`hilbert_order` keeps neighbours closer but a batch needs only locality.
+
+    >>> p = np.array([[0.9, 0.1], [0.1, 0.1], [0.9, 0.9], [0.1, 0.9]])
+    >>> morton_order(p).tolist()
+    [1, 0, 3, 2]
+    """
+    P = np.asarray(points, dtype=float)
+    if P.ndim != 2 or not 1 <= P.shape[1] <= 4 or not np.isfinite(P).all():
+        raise ValueError(f"points must be a finite (n, d <= 4) array, got shape {P.shape}")
+    d = P.shape[1]
+    bits = min(MORTON_BITS, 62 // d)
+    lo = P.min(axis=0)
+    span = np.where(P.max(axis=0) > lo, P.max(axis=0) - lo, 1.0)
+    cell = np.minimum(((P - lo) / span * (1 << bits)).astype(np.int64), (1 << bits) - 1)
+    key = np.zeros(P.shape[0], dtype=np.int64)
+    for b in range(bits):
+        for k in range(d):
+            key |= ((cell[:, k] >> b) & 1) << (b * d + k)
+    return np.argsort(key, kind="stable")
 
 
 def remove_close(points, keep, distance: float) -> np.ndarray:

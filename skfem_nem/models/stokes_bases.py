@@ -82,6 +82,9 @@ _ELEMENTS = {
 # Gauss orders on tetrahedra: Taylor-Hood's forms (P2 gradients times P2 gradients,
 # loads) exactly, and MINI's quartic bubble's gradients exactly
 TET_ORDER = {"taylor-hood": 4, "mini": 6}
+#: order of the rule carrying the natural-neighbour velocity's values on tetrahedra
+#: (scikit-fem's 4 points, as the bubble's condensation integrates on it)
+BUBBLE_ORDER = 2
 
 
 @dataclass
@@ -199,8 +202,13 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
     bb = None
     if method.startswith("nem"):
         elem = ElementNaturalNeighbour2() if method == "nem2" else ElementNaturalNeighbour()
+        # tetrahedra: values at scikit-fem's 4-point rule, where the bubble's gradient
+        # is not zero (it is at the default points, the vertices and the centroid)
+        smoothed = tet and integration in (None, "smoothed")
         ub = NaturalNeighbourBasis(mesh, ElementVector(elem, mesh.dim()), npoints=npoints,
-                                   coordinates=coordinates, integration=integration)
+                                   coordinates=coordinates,
+                                   integration="smoothed" if smoothed else integration,
+                                   intorder=BUBBLE_ORDER if smoothed else None)
         quad = ub.quadrature
         if method == "nem":
             bb = Basis(mesh, ElementVector(el["bubble"](), mesh.dim()), quadrature=quad)

@@ -89,11 +89,24 @@ def test_sinking_plate_help_states_each_default_once(capsys):
     text = re.sub(r"\s+", " ", capsys.readouterr().out)
     assert "default: None" not in text and "default: False" not in text
     assert "(default: out/sinking-plate)" in text
-    section = text.split("parameters (nondimensional):")[1]
+    section = text.split("the --dim 3 default):")[1]
     # one block per option: "--flag METAVAR help" or "--flag, --no-flag help"
     blocks = re.split(r" (?=--[a-z-]+ [A-Z_]{2,} |--[a-z-]+, --no-)", " " + section)
-    for f in fields(PlateConfig):
-        flag = "--" + f.name.replace("_", "-")
+
+    def block(name):
+        flag = "--" + name.replace("_", "-")
         part, = [b for b in blocks if b.startswith(flag + " ") or b.startswith(flag + ",")]
-        assert part.count("(default") == 1 and f"(default {getattr(PlateConfig, f.name)})" \
-            in part, (flag, part)
+        assert part.count("(default") == 1, part
+        return part
+
+    from skfem_nem.apps.plate3d_config import Plate3DConfig
+    three = {f.name: getattr(Plate3DConfig, f.name) for f in fields(Plate3DConfig)}
+    for f in fields(PlateConfig):
+        part = block(f.name)
+        d2 = getattr(PlateConfig, f.name)
+        assert f"(default {d2})" in part, part
+        d3 = three.pop(f.name, None)
+        tail = "[2D only]" if d3 is None else "[3D: same]" if d3 == d2 else f"[3D: {d3}]"
+        assert tail in part, (part, tail)
+    for name, d3 in three.items():      # the 3D plate's own
+        assert f"[3D only] (default {d3})" in block(name)

@@ -104,27 +104,81 @@ def interpolate(args) -> int:
 
 
 def sinking_plate(args) -> int:
-    from dataclasses import fields as dfields
-
     from ..parallel.petsc import PetscUnavailableError
-    from .sinking_plate import PlateConfig, SinkingPlate, load_config, stored_config
+    from .plate_config import load_config, stored_dim
 
-    given = {f.name: getattr(args, f.name) for f in dfields(PlateConfig)
-             if getattr(args, f.name) is not None}
     if args.max_steps is not None and args.max_steps < 0:
         _fail(f"sinking-plate: --max-steps must be a non-negative integer, got "
               f"{args.max_steps}")
     try:
+        dim = _plate_dim(args, stored_dim)
+        kind, run_class = _plate_kind(dim)
+        given = _given_parameters(args, kind, dim)
         if args.restart:
-            cfg = _restart_config(args, given, stored_config)
+            cfg = _restart_config(args, given, kind)
         else:
-            cfg = load_config(args.config, given)
-        sim = (SinkingPlate.restart(args.output, cfg) if args.restart
-               else SinkingPlate(cfg, args.output))
+            cfg = load_config(args.config, given, kind)
+        sim = (run_class.restart(args.output, cfg) if args.restart
+               else run_class(cfg, args.output))
     except (ValueError, OSError, PetscUnavailableError) as err:
         _fail(f"sinking-plate: {err}")
     with _silent(not sim.root):  # over MPI: rank 0 speaks for all
         return _run_plate(sim, cfg, args)
+
+
+def _plate_dim(args, stored_dim) -> int:
+    """2 or 3: ``--dim`` (default 2), or on ``--restart`` the stored run's, which
+    ``--dim`` may only repeat."""
+    if not args.restart:
+        return args.dim or 2
+    dim = stored_dim(args.output)
+    if args.dim is not None and args.dim != dim:
+        raise ValueError(f"--dim {args.dim} cannot change when a run is restarted (the run "
+                         f"in {args.output} is {dim}D)")
+    return dim
+
+
+def _plate_kind(dim: int):
+    """The configuration class and the run class of the 2D or the 3D plate."""
+    if dim == 3:
+        from .plate3d_config import Plate3DConfig
+        from .sinking_plate_3d import SinkingPlate3D
+        return Plate3DConfig, SinkingPlate3D
+    from .sinking_plate import PlateConfig, SinkingPlate
+    return PlateConfig, SinkingPlate
+
+
+def _given_parameters(args, kind, dim) -> dict:
+    """The parameters given on the command line; one of the other plate's raises."""
+    from dataclasses import fields as dfields
+    names = {f.name for f in dfields(kind)}
+    given = {}
+    for name in _plate_parameters():
+        value = getattr(args, name)
+        if value is None:
+            continue
+        if name not in names:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag} is not a parameter of the {dim}D plate"
+                             + (" (the 3D plate is viscous: scalar-only memory)"
+                                if dim == 3 else " (it is one of the 3D plate: --dim 3)"))
+        given[name] = value
+    return given
+
+
+def _plate_parameters() -> dict:
+    """Every parameter of the 2D and the 3D plate: name -> (2D default or None, 3D
+    default or None, help)."""
+    from dataclasses import fields as dfields
+
+    from .plate3d_config import HELP_3D, Plate3DConfig
+    from .sinking_plate import HELP, PlateConfig
+    out = {f.name: (getattr(PlateConfig, f.name), None, HELP.get(f.name, ""))
+           for f in dfields(PlateConfig)}
+    for f in dfields(Plate3DConfig):
+        d2, _, text = out.get(f.name, (None, None, HELP_3D[f.name]))
+        out[f.name] = (d2, getattr(Plate3DConfig, f.name), text)
+    return out
 
 
 def _silent(on: bool):
@@ -138,8 +192,8 @@ def _silent(on: bool):
 
 def _run_plate(sim, cfg, args) -> int:
     """Run the constructed ``sim``: progress, the one-line stop, the files written."""
-    print(f"sinking plate: {sim.lm.nodes.shape[0]} nodes, {sim.lm.triangles.shape[0]} "
-          f"triangles, t = {sim.lm.time:g} -> {cfg.end_time:g}; output in {args.output}")
+    print(f"sinking plate: {sim.lm.nodes.shape[0]} nodes, {sim.cells}, "
+          f"t = {sim.lm.time:g} -> {cfg.end_time:g}; output in {args.output}")
     if not kernels_cached():
         print("first run after installing: compiling the numerical kernels (about half a "
               "minute, once) before the first step", flush=True)
@@ -199,9 +253,10 @@ def kernels_cached(root=None) -> bool:
     return True
 
 
-def _restart_config(args, given, stored_config):
-    """The configuration stored with the run in ``args.output``, with the
-    options a restart may change; anything else is refused, naming it."""
+def _restart_config(args, given, kind):
+    """The configuration (of the class ``kind``) stored with the run in ``args.output``,
+    with the options a restart may change; anything else is refused, naming it."""
+    from .plate_config import stored_config
     if args.config:
         raise ValueError("--config cannot be combined with --restart: a restarted run "
                          "continues with the configuration stored in its checkpoint")
@@ -211,9 +266,9 @@ def _restart_config(args, given, stored_config):
         raise ValueError(f"--{fixed[0].replace('_', '-')} cannot change when a run is "
                          f"restarted (it continues with its stored configuration; only "
                          f"{allowed} may change)")
-    cfg = stored_config(args.output, given)
+    cfg = stored_config(args.output, given, kind)
     for k, v in given.items():
-        print(f"restart: {k} = {v:g} (was {stored_config(args.output).__dict__[k]:g})")
+        print(f"restart: {k} = {v:g} (was {stored_config(args.output, kind=kind).__dict__[k]:g})")
     return cfg
 
 
@@ -229,10 +284,6 @@ class _DefaultsHelp(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def _add_plate_parser(sub):
-    from dataclasses import fields as dfields
-
-    from .sinking_plate import HELP, PlateConfig
-
     sp = sub.add_parser(
         "sinking-plate", help="the paper's Fig. 6: an elasto-plastic plate sinking through a "
         "layered viscous fluid on an evolving natural-neighbour mesh",
@@ -250,16 +301,26 @@ def _add_plate_parser(sub):
     sp.add_argument("--max-steps", type=int, default=None,
                     help="stop after this many steps (a checkpoint is written)")
     sp.add_argument("--quiet", action="store_true", help="no progress bar")
-    g = sp.add_argument_group("parameters (nondimensional)")
-    for f in dfields(PlateConfig):
-        default = getattr(PlateConfig, f.name)
-        flag = "--" + f.name.replace("_", "-")
+    sp.add_argument("--dim", type=int, choices=(2, 3), default=None,
+                    help="2 (default): the paper's plate, elasto-plastic, on a mesh repaired "
+                    "by flips; 3: a viscous slab in a box, on nodes retriangulated every step "
+                    "(a restart continues the stored run's)")
+    g = sp.add_argument_group("parameters (nondimensional; [3D: ...] the --dim 3 default)")
+    for name, (d2, d3, text) in _plate_parameters().items():
+        flag = "--" + name.replace("_", "-")
+        if d2 is None:
+            info = f"[3D only] (default {d3})"
+        else:
+            info = f"(default {d2})" + ("" if d3 is None else
+                                        f" [3D: {d3}]" if d3 != d2 else " [3D: same]")
+            info += " [2D only]" if d3 is None else ""
+        default = d2 if d2 is not None else d3
         if isinstance(default, bool):  # --segments / --no-segments
-            g.add_argument(flag, dest=f.name, action=argparse.BooleanOptionalAction,
-                           default=None, help=f"{HELP.get(f.name, '')} (default {default})")
+            g.add_argument(flag, dest=name, action=argparse.BooleanOptionalAction,
+                           default=None, help=f"{text} {info}")
             continue
-        g.add_argument(flag, dest=f.name, type=type(default), default=None,
-                       help=f"{HELP.get(f.name, '')} (default {default})")
+        g.add_argument(flag, dest=name, type=type(default), default=None,
+                       help=f"{text} {info}")
     return sp
 
 

@@ -10,6 +10,7 @@ every completed step readable.
 from __future__ import annotations
 
 import csv
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -38,14 +39,14 @@ def atomic_write_text(path, text: str) -> None:
 def write_vtu(path, points: np.ndarray, triangles: np.ndarray,
               point_data: Optional[Dict[str, np.ndarray]] = None,
               cell_data: Optional[Dict[str, np.ndarray]] = None) -> None:
-    """Write a triangle mesh with data as a VTU file (via meshio).
+    """Write a triangle or tetrahedron mesh with data as a VTU file (via meshio).
 
     Parameters
     ----------
     points
-        (n, 2) node coordinates (written with z = 0).
+        (n, 2) node coordinates (written with z = 0), or (n, 3).
     triangles
-        (nt, 3) vertex indices.
+        (nt, 3) vertex indices of triangles, or (nt, 4) of tetrahedra.
     point_data
         Named arrays (n,) or (n, k); 2-vectors are padded to 3 components so
         ParaView shows them as vectors.
@@ -72,7 +73,9 @@ def write_vtu(path, points: np.ndarray, triangles: np.ndarray,
         if v[0].shape[0] != len(triangles):
             raise ValueError(f"cell data {k!r} has {v[0].shape[0]} rows, the mesh "
                              f"{len(triangles)} triangles")
-    mesh = meshio.Mesh(pts, [("triangle", np.asarray(triangles, dtype=np.int64))],
+    cells = np.asarray(triangles, dtype=np.int64)
+    kind = {3: "triangle", 4: "tetra"}[cells.shape[1]]
+    mesh = meshio.Mesh(pts, [(kind, cells)],
                        point_data=pd, cell_data=cd)
     path = Path(path)
     tmp = path.with_name(path.stem + ".tmp" + path.suffix)
@@ -169,3 +172,16 @@ def read_csv_columns(path) -> Dict[str, np.ndarray]:
         rows = list(csv.DictReader(fh))
     return {k: np.array([float(r[k]) if r[k] != "" else np.nan for r in rows])
             for k in (rows[0] if rows else {})}
+
+
+def next_output_time(time: float, interval: float) -> float:
+    """The first multiple of ``interval`` after ``time`` (a run's next output)."""
+    return (math.floor(time / interval + 1e-9) + 1) * interval
+
+
+def progress_bar(end_time: float, time: float, desc: str):
+    """A tqdm bar over the run's time, from ``time`` to ``end_time``."""
+    from tqdm import tqdm
+    return tqdm(total=end_time, initial=time, unit="t", desc=desc,
+                bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]"
+                           "{postfix}")

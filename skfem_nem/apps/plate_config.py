@@ -15,7 +15,7 @@ from typing import Dict, Optional
 
 from ..models.stokes_solvers import SOLVERS
 
-__all__ = ["HELP", "PlateConfig", "load_config", "stored_config"]
+__all__ = ["HELP", "PlateConfig", "load_config", "stored_config", "stored_dim"]
 
 
 @dataclass
@@ -198,27 +198,38 @@ HELP = {
 }
 
 
-def load_config(path: Optional[str] = None, overrides: Optional[Dict] = None) -> PlateConfig:
-    """A validated :class:`PlateConfig` from a TOML file (optional) and
-    overrides. The file's keys stand at its top level or all under a
-    ``[sinking-plate]`` table. Unknown keys, values of the wrong type, NaN
+def load_config(path: Optional[str] = None, overrides: Optional[Dict] = None,
+                kind: type = PlateConfig):
+    """A validated configuration of the class ``kind`` (:class:`PlateConfig`, or
+    the 3D plate's :class:`~skfem_nem.apps.plate3d_config.Plate3DConfig`) from a TOML
+    file (optional) and overrides. The file's keys stand at its top level or all
+    under a ``[sinking-plate]`` table. Unknown keys, values of the wrong type, NaN
     and bad values raise ``ValueError`` naming the key (and the file)."""
     data: Dict = {}
     if path is not None:
         data = _read_toml(path)
     data.update({k: v for k, v in (overrides or {}).items() if v is not None})
-    return _config_from(data)
+    return _config_from(data, kind)
 
 
-def stored_config(out, overrides: Optional[Dict] = None) -> PlateConfig:
-    """The configuration of the run whose checkpoint is in ``out``, with
-    ``overrides`` applied and validated; ``FileNotFoundError`` without one."""
+def stored_dim(out) -> int:
+    """The dimension of the run whose checkpoint is in ``out`` (2 unless stored);
+    ``FileNotFoundError`` without one."""
     out = Path(out)
     if not (out / "checkpoint.json").exists():
         raise FileNotFoundError(f"no checkpoint in {out} (checkpoint.json missing)")
+    return int(json.loads((out / "checkpoint.json").read_text()).get("dim", 2))
+
+
+def stored_config(out, overrides: Optional[Dict] = None, kind: type = PlateConfig):
+    """The configuration (of the class ``kind``) of the run whose checkpoint is in
+    ``out``, with ``overrides`` applied and validated; ``FileNotFoundError``
+    without one."""
+    out = Path(out)
+    stored_dim(out)
     data = dict(json.loads((out / "checkpoint.json").read_text())["config"])
     data.update(overrides or {})
-    return _config_from(data)
+    return _config_from(data, kind)
 
 
 def _read_toml(path) -> Dict:
@@ -241,15 +252,15 @@ def _read_toml(path) -> Dict:
     return data
 
 
-def _config_from(data: Dict) -> PlateConfig:
+def _config_from(data: Dict, kind: type = PlateConfig):
     """Check names and types, coerce ints to floats where floats are meant
     (and "inf"), then validate."""
-    known = {f.name: f for f in fields(PlateConfig)}
+    known = {f.name: f for f in fields(kind)}
     kw = {}
     for k, v in data.items():
         if k not in known:
             raise ValueError(f"unknown configuration key {k!r} (known: {', '.join(known)})")
-        default = getattr(PlateConfig, k)
+        default = getattr(kind, k)
         if isinstance(default, float) and isinstance(v, str) and v.lower() in ("inf", "infinity"):
             v = math.inf
         if isinstance(default, float) and isinstance(v, int) and not isinstance(v, bool):
@@ -260,6 +271,6 @@ def _config_from(data: Dict) -> PlateConfig:
         if isinstance(v, float) and math.isnan(v):
             raise ValueError(f"{k} must be a number, got nan")
         kw[k] = v
-    cfg = PlateConfig(**kw)
+    cfg = kind(**kw)
     cfg.validate()
     return cfg

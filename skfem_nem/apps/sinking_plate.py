@@ -36,7 +36,6 @@ the end), ``diagnostics.png``, ``checkpoint.npz`` +
 from __future__ import annotations
 
 import json
-import math
 import time as _time
 from dataclasses import asdict
 from pathlib import Path
@@ -54,7 +53,8 @@ from .plate_films import on_interface, release_interface_film, release_near_outl
 from .plate_outlines import PlateOutlines, polygon_area_centroid
 from .plate_time_step import (FILM_FRACTION, WALL_FRACTION, ClosingFilm,  # noqa: F401
                               hold_off_walls, node_spacing, stable_dt)
-from .output import CSVLog, PVDWriter, atomic_write_text, write_vtu
+from .output import (CSVLog, PVDWriter, atomic_write_text, next_output_time,
+                     progress_bar, write_vtu)
 from ..models.rheology import (Material, PicardNotConverged, from_ip_field, second_invariant,
                                to_ip_field, vep_step)
 from ..models.stokes import outline_flux, stokes_spaces
@@ -182,6 +182,10 @@ class SinkingPlate:
         self.first_output = None
 
     # -- state ------------------------------------------------------------------
+    @property
+    def cells(self) -> str:
+        return f"{self.lm.triangles.shape[0]} triangles"
+
     @property
     def outline(self) -> np.ndarray:
         """The plate's outline nodes in order (after a breakup: piece after piece,
@@ -533,10 +537,7 @@ class SinkingPlate:
             self.checkpoint()
         bar = None
         if progress and self.root:
-            from tqdm import tqdm
-            bar = tqdm(total=c.end_time, initial=lm.time, unit="t", desc="sinking plate",
-                       bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]"
-                                  "{postfix}")
+            bar = progress_bar(c.end_time, lm.time, "sinking plate")
         steps = 0
         try:
             while lm.time < c.end_time * (1 - 1e-12):
@@ -553,8 +554,7 @@ class SinkingPlate:
                 steps += 1
                 if lm.time >= self.next_output * (1 - 1e-12) or lm.time >= c.end_time * (1 - 1e-12):
                     self.write_output(*self._last)
-                    self.next_output = (math.floor(lm.time / c.output_interval + 1e-9) + 1) \
-                        * c.output_interval
+                    self.next_output = next_output_time(lm.time, c.output_interval)
                 if lm.step % c.checkpoint_every == 0:
                     self.checkpoint()
                 if bar is not None:

@@ -45,7 +45,7 @@ def _tet_blocks(ptr, sten, indptr, indices, grads, nq, w, gb, G, Wsum, X, Ainv, 
     ``G[3 ptr[e]:3 ptr[e + 1]]`` (3 per function), the summed weight ``Wsum[e]``, the
     bubbles' coupling ``A_bn`` (3 x 3 S, row-major) into ``X[9 ptr[e]:9 ptr[e + 1]]``, the
     inverse of their 3 x 3 block into ``Ainv[e]`` and its determinant into ``det[e]``
-    (not positive: the rest of e is left unset)."""
+    (not positive: the coupling is zero and ``Ainv[e]`` is left as it was)."""
     ne = ptr.shape[0] - 1
     for e in prange(ne):
         s0 = ptr[e]
@@ -74,7 +74,11 @@ def _tet_blocks(ptr, sten, indptr, indices, grads, nq, w, gb, G, Wsum, X, Ainv, 
              - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
              + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
         det[e] = d
+        o = 9 * s0
         if not d > 0.0:
+            # a flat tetrahedron (zero weights): its bubble drops out, no coupling
+            for t in range(9 * S):
+                X[o + t] = 0.0
             continue
         for a in range(3):
             for b in range(3):     # the cofactor inverse of the symmetric block
@@ -84,7 +88,6 @@ def _tet_blocks(ptr, sten, indptr, indices, grads, nq, w, gb, G, Wsum, X, Ainv, 
             for b in range(a + 1, 3):
                 m = 0.5 * (Ainv[e, a, b] + Ainv[e, b, a])
                 Ainv[e, a, b] = Ainv[e, b, a] = m
-        o = 9 * s0
         for i in range(S):
             Gi = G[3 * (s0 + i):3 * (s0 + i) + 3]
             dot = Gi[0] * g[0] + Gi[1] * g[1] + Gi[2] * g[2]
@@ -186,7 +189,9 @@ def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
     (_tet_blocks if parallel else _tet_blocks_serial)(
         ptr, sten, Phi.indptr, Phi.indices, ubasis.gradient_entries, nq, w,
         _bubble_gradient(bbasis), G, Wsum, X, Ainv, det)
-    bad = ~(det > 0)
+    # flat tetrahedra (Qhull's, of co-spherical or co-planar nodes) carry no weight and
+    # no bubble; any other singular block is an error
+    bad = ~(det > 0) & (Wsum > 0)
     if bad.any():
         raise ValueError(f"degenerate tetrahedron {int(np.flatnonzero(bad)[0])}: its bubble "
                          f"block is singular ({int(bad.sum())} tetrahedra)")

@@ -226,4 +226,25 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
                    quadrature=quad)
     pb = Basis(mesh, el["p1"](), quadrature=quad)
     p0 = Basis(mesh, el["p0"](), quadrature=quad)
+    if tet:
+        for b in (ub, pb, p0, bb):
+            _zero_flat_gradients(b)
     return StokesSpaces(mesh, method, ub, pb, p0, bb)
+
+
+def _zero_flat_gradients(basis) -> None:
+    """Gradients 0 on the flat tetrahedra of ``basis`` (zero volume: Qhull's, between
+    co-spherical or co-planar nodes), where scikit-fem's inverse mapping gives NaN: they
+    carry no weight, and 0 times NaN would spoil the assembled sums."""
+    if basis is None or not hasattr(basis, "basis") or not hasattr(basis, "dx"):
+        return
+    flat = np.flatnonzero(~(np.asarray(basis.dx).sum(axis=-1) > 0))
+    if flat.size == 0:
+        return
+    for fields in basis.basis:
+        for field in fields:
+            grad = getattr(field, "grad", None)
+            # (constant fields, such as P0's zero gradient, are broadcast: nothing to do)
+            if isinstance(grad, np.ndarray) and grad.ndim >= 2 and \
+                    grad.shape[-2] == basis.dx.shape[0] and grad.flags.writeable:
+                grad[..., flat, :] = 0.0

@@ -1,0 +1,150 @@
+"""The 3D sinking plate's configuration: a slab in a box, its parameters and their help.
+
+Beside :mod:`skfem_nem.apps.plate_config` (the 2D plate) because the 3D plate is a
+different model: the paper's 3D programme with scalar-only memory, so the plate is
+viscous (no elastic stress, no yield: those need the tensor memory of the 2D mesh) and
+its density and viscosity are carried by the nodes. The names the two share mean the
+same (``width`` is the box along x, ``height`` along z); ``depth``, ``plate_width`` and
+``plate_y`` are the third direction. Reading from TOML, the command line and a checkpoint
+is :func:`~skfem_nem.apps.plate_config.load_config` with ``kind=Plate3DConfig``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..models.stokes_solvers import SOLVERS
+
+__all__ = ["HELP_3D", "Plate3DConfig"]
+
+
+@dataclass
+class Plate3DConfig:
+    """Parameters of the 3D sinking-plate run (nondimensional: box height 1, upper
+    fluid viscosity 1, buoyancy scale ``plate_density * gravity * height`` = 1.5)."""
+
+    #: box height (z)
+    height: float = 1.0
+    #: box width (x)
+    width: float = 4.0
+    #: box depth (y)
+    depth: float = 2.0
+    #: height of the fluid layer interface above the bottom
+    interface_z: float = 0.75
+    #: fluid viscosity above the interface
+    eta_upper: float = 1.0
+    #: fluid viscosity below the interface
+    eta_lower: float = 10.0
+    #: plate length (x)
+    plate_length: float = 1.5
+    #: plate width (y)
+    plate_width: float = 1.0
+    #: plate thickness (z)
+    plate_thickness: float = 0.1
+    #: x of the plate centre
+    plate_x: float = 2.0
+    #: y of the plate centre
+    plate_y: float = 1.0
+    #: height of the plate centre above the bottom
+    plate_z: float = 0.82
+    #: density excess of the plate over the fluid
+    plate_density: float = 1.5
+    #: gravitational acceleration (downward)
+    gravity: float = 1.0
+    #: plate viscosity (a viscous plate: scalar-only memory)
+    plate_viscosity: float = 1000.0
+    #: number of random interior nodes drawn (before thinning near the walls)
+    nodes: int = 10000
+    #: random seed of the node set
+    seed: int = 0
+    #: node density ~ 1 / (1 + distance to the plate / density_length)^3
+    density_length: float = 0.15
+    #: end time
+    end_time: float = 300.0
+    #: largest time step
+    max_dt: float = 50.0
+    #: smallest time step: a step the nodes cannot make (Qhull would lose a node) is
+    #: retried with half the time step down to this one, then the run stops
+    min_dt: float = 0.01
+    #: largest node displacement per step, as a fraction of the node's mean edge length
+    cfl: float = 0.5
+    #: time between VTU outputs
+    output_interval: float = 100.0
+    #: relative residual of the Stokes solver's iterations
+    solver_tol: float = 1e-8
+    #: Stokes solver (``solve_stokes``'s ``solver``; "auto": FGMRES with AMG in 3D)
+    solver: str = "auto"
+    #: write a checkpoint every this many steps
+    checkpoint_every: int = 5
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the first bad parameter."""
+        for k in ("height", "width", "depth", "eta_upper", "eta_lower", "plate_length",
+                  "plate_width", "plate_thickness", "plate_density", "gravity",
+                  "plate_viscosity", "density_length", "end_time", "max_dt", "min_dt", "cfl",
+                  "output_interval", "solver_tol"):
+            v = getattr(self, k)
+            number = isinstance(v, (int, float)) and not isinstance(v, bool)
+            if not (number and v > 0 and math.isfinite(v)):
+                raise ValueError(f"{k} must be a positive number, got {v!r}")
+        for k in ("nodes", "checkpoint_every"):
+            v = getattr(self, k)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+                raise ValueError(f"{k} must be a positive integer, got {v!r}")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        if self.solver not in SOLVERS or self.solver == "petsc":
+            choices = ", ".join(repr(s) for s in SOLVERS if s != "petsc")
+            raise ValueError(f"solver must be one of {choices} in 3D, got {self.solver!r}")
+        if not 0 < self.interface_z < self.height:
+            raise ValueError(f"interface_z must lie inside the box (0, {self.height}), got "
+                             f"{self.interface_z!r}")
+        if self.min_dt > self.max_dt:
+            raise ValueError(f"min_dt must not exceed max_dt ({self.max_dt!r}), got "
+                             f"{self.min_dt!r}")
+        if self.cfl > 1:
+            raise ValueError(f"cfl must not exceed 1, got {self.cfl!r}")
+        if self.solver_tol >= 1:
+            raise ValueError(f"solver_tol must be below 1, got {self.solver_tol!r}")
+        margin = 0.5 * self.plate_thickness
+        for axis, centre, extent, box in (("x", "plate_x", "plate_length", "width"),
+                                          ("y", "plate_y", "plate_width", "depth"),
+                                          ("z", "plate_z", "plate_thickness", "height")):
+            c, e, b = getattr(self, centre), getattr(self, extent), getattr(self, box)
+            if c - e / 2 < margin or c + e / 2 > b - margin:
+                raise ValueError(f"{centre} / {extent}: the plate spans {axis} = {c - e / 2:g} "
+                                 f".. {c + e / 2:g}, which is not inside the box (0, {b:g}) "
+                                 f"with a margin of {margin:g}")
+
+
+#: one line of help per parameter (the command line shows them)
+HELP_3D = {
+    "height": "box height (z)",
+    "width": "box width (x)",
+    "depth": "box depth (y)",
+    "interface_z": "height of the fluid layer interface above the bottom",
+    "eta_upper": "fluid viscosity above the interface",
+    "eta_lower": "fluid viscosity below the interface",
+    "plate_length": "plate length (x)",
+    "plate_width": "plate width (y)",
+    "plate_thickness": "plate thickness (z)",
+    "plate_x": "x of the plate centre",
+    "plate_y": "y of the plate centre",
+    "plate_z": "height of the plate centre above the bottom",
+    "plate_density": "density excess of the plate over the fluid",
+    "gravity": "gravitational acceleration (downward)",
+    "plate_viscosity": "plate viscosity (viscous plate: scalar-only memory)",
+    "nodes": "number of random interior nodes drawn",
+    "seed": "random seed of the node set",
+    "density_length": "node density ~ 1 / (1 + distance to the plate / density_length)^3",
+    "end_time": "end time",
+    "max_dt": "largest time step",
+    "min_dt": "smallest time step: a failing step is retried with half the time step down "
+              "to this one, then the run stops",
+    "cfl": "largest node displacement per step, as a fraction of the node's mean edge length",
+    "output_interval": "time between VTU outputs",
+    "solver_tol": "relative residual of the Stokes solver's iterations",
+    "solver": 'Stokes solver: "auto" (FGMRES with AMG in 3D), "fgmres", "schur", '
+              '"schur-amg", "minres" or "direct"',
+    "checkpoint_every": "write a checkpoint every this many steps",
+}

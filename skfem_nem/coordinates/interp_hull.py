@@ -1,0 +1,70 @@
+"""Which queries of a scattered-data interpolant lie inside the convex hull of the data.
+
+The coordinates raise for a point outside the hull; an interpolant in scipy's style gives
+those points a fill value instead. :class:`HullTest` decides by the half-spaces of the hull's
+facets (``scipy.spatial.ConvexHull``, unit outward normals), in 2D and 3D alike, with the
+package's hull policy (:mod:`skfem_nem.geometry.hull`): a point outside by less than
+``OUTSIDE_ROUNDOFF`` times the diagonal of the data's bounding box is on the hull (round-off
+of a point computed on it) and is moved onto it; farther points are outside. Points on the
+hull interpolate.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull
+
+from ..geometry.hull import OUTSIDE_ROUNDOFF
+
+__all__ = ["HullTest"]
+
+# products (queries x facets) per block of the distance evaluation: bounds the memory
+_BLOCK = 1 << 22
+
+
+class HullTest:
+    """Inside/outside tests against the convex hull of the (n, d) points ``p``."""
+
+    def __init__(self, p: np.ndarray):
+        eq = ConvexHull(p).equations
+        # merged facets of a triangulated hull repeat their plane
+        eq = np.unique(eq, axis=0)
+        self.normals = np.ascontiguousarray(eq[:, :-1])
+        self.offsets = eq[:, -1].copy()
+        self.tol = OUTSIDE_ROUNDOFF * float(np.linalg.norm(np.ptp(p, axis=0)))
+
+    def distance(self, q: np.ndarray) -> np.ndarray:
+        """(m,) largest signed distance of the points q (m, d) beyond a hull facet's plane
+        (<= 0 inside, > 0 outside)."""
+        m, nf = q.shape[0], self.offsets.shape[0]
+        out = np.full(m, -np.inf)
+        step = max(1, _BLOCK // max(m, 1))
+        for f0 in range(0, nf, step):
+            dist = q @ self.normals[f0:f0 + step].T + self.offsets[f0:f0 + step]
+            np.maximum(out, dist.max(axis=1), out=out)
+        return out
+
+    def inside(self, q: np.ndarray):
+        """``(rows, points)``: the indices of the points q (m, d) that are inside the hull or
+        on it (to round-off), and those points, the ones just outside moved onto the hull."""
+        dist = self.distance(q)
+        rows = np.flatnonzero(dist <= self.tol)
+        pts = q[rows]
+        near = np.flatnonzero(dist[rows] > 0.0)
+        if near.size:
+            pts[near] = self._onto_hull(pts[near])
+        return rows, pts
+
+    def _onto_hull(self, q: np.ndarray) -> np.ndarray:
+        """Points just outside moved onto the hull: projected onto the plane they are
+        farthest beyond, repeated (near a hull edge or vertex a projection can leave the
+        point beyond a neighbouring facet by round-off)."""
+        q = q.copy()
+        for _ in range(2 * q.shape[1]):
+            dist = q @ self.normals.T + self.offsets
+            f = dist.argmax(axis=1)
+            d = dist[np.arange(q.shape[0]), f]
+            beyond = d > 0.0
+            if not beyond.any():
+                break
+            q[beyond] -= d[beyond, None] * self.normals[f[beyond]]
+        return q

@@ -11,14 +11,30 @@ hull interpolate.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial import ConvexHull
 
 from ..geometry.hull import OUTSIDE_ROUNDOFF
 
 __all__ = ["HullTest"]
 
-# products (queries x facets) per block of the distance evaluation: bounds the memory
-_BLOCK = 1 << 22
+
+@njit(cache=True)
+def _beyond(q, normals, offsets, tol, out):
+    """``out[j]``: the largest signed distance of q[j] beyond a facet's plane, or the first
+    one found above ``tol`` (then the point is outside, whatever the others)."""
+    d = q.shape[1]
+    for j in range(q.shape[0]):
+        best = -np.inf
+        for f in range(offsets.shape[0]):
+            s = offsets[f]
+            for k in range(d):
+                s += normals[f, k] * q[j, k]
+            if s > best:
+                best = s
+                if s > tol:
+                    break
+        out[j] = best
 
 
 class HullTest:
@@ -33,14 +49,12 @@ class HullTest:
         self.tol = OUTSIDE_ROUNDOFF * float(np.linalg.norm(np.ptp(p, axis=0)))
 
     def distance(self, q: np.ndarray) -> np.ndarray:
-        """(m,) largest signed distance of the points q (m, d) beyond a hull facet's plane
-        (<= 0 inside, > 0 outside)."""
-        m, nf = q.shape[0], self.offsets.shape[0]
-        out = np.full(m, -np.inf)
-        step = max(1, _BLOCK // max(m, 1))
-        for f0 in range(0, nf, step):
-            dist = q @ self.normals[f0:f0 + step].T + self.offsets[f0:f0 + step]
-            np.maximum(out, dist.max(axis=1), out=out)
+        """(m,) signed distance of the points q (m, d) beyond the hull: the largest over the
+        facets' planes (<= 0 inside), or, for points outside by more than the round-off
+        tolerance, the first distance above it."""
+        out = np.empty(q.shape[0])
+        _beyond(np.ascontiguousarray(q, dtype=np.float64), self.normals, self.offsets,
+                self.tol, out)
         return out
 
     def inside(self, q: np.ndarray):

@@ -86,7 +86,7 @@ class NearestInterpolant:
         self.d = p.shape[1]
 
     def __call__(self, q, gradient: bool):
-        idx = self.tree.query(q)[1]
+        idx = self.tree.query(q, workers=-1)[1]
         out = self.values[idx]
         grad = (np.zeros(out.shape + (self.d,), dtype=out.dtype) if gradient else None)
         return out, grad

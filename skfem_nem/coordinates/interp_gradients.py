@@ -2,7 +2,7 @@
 
 :func:`estimate_gradients` fits, at each data point x_i, the quadratic Taylor polynomial
 ``f_j - f_i = g . u_j + u_j^T H u_j / 2`` (``u_j = x_j - x_i``) to the values at its
-neighbours by weighted least squares (weights ``1 / |u_j|^2``) and returns ``g``: exact for
+neighbours by weighted least squares (weights ``1 / |u_j|^4``) and returns ``g``: exact for
 quadratic data, second-order accurate for smooth data. The neighbours are the Delaunay
 neighbours (the natural neighbours of the data point), extended by their own neighbours (two
 rings) where there are fewer than twice the unknowns (d + d(d + 1)/2: 5 in 2D, 9 in 3D):
@@ -76,21 +76,46 @@ def fit_gradients(p, values, A) -> np.ndarray:
 
 
 def _fit_block(p, values, A, start, stop, counts, d):
+    """Gradients at the points start..stop-1: each point's weighted least-squares problem
+    (rows scaled by sqrt(w) = (h / |u|)^2, columns equilibrated), padded to the block's largest
+    neighbour count and solved by one stacked SVD; where the quadratic terms are not
+    determined (fewer neighbours than unknowns, or a degenerate neighbourhood) by the linear
+    fit, still exact for linear data."""
     e0, e1 = A.indptr[start], A.indptr[stop]
-    rows = np.repeat(np.arange(start, stop), counts[start:stop])
-    cols = A.indices[e0:e1]
-    u = p[cols] - p[rows]
-    r2 = (u * u).sum(axis=1)
-    h = np.sqrt(np.add.reduceat(r2, A.indptr[start:stop] - e0) / counts[start:stop])
-    s = u / h[rows - start, None]
-    w = 1.0 / (r2 / h[rows - start] ** 2)
-    a = _design(s, d)                                                # (E, P)
+    cnt = counts[start:stop]
     ptr = A.indptr[start:stop] - e0
-    M = np.add.reduceat(w[:, None, None] * a[:, :, None] * a[:, None, :], ptr, axis=0)
-    rhs = np.add.reduceat((w[:, None] * a)[:, :, None] * (values[cols] - values[rows])[:, None, :],
-                          ptr, axis=0)                               # (B, P, K)
-    sol = np.linalg.pinv(M, rcond=1e-13) @ rhs
+    local = np.repeat(np.arange(stop - start), cnt)
+    pos = np.arange(e1 - e0) - np.repeat(ptr, cnt)
+    cols = A.indices[e0:e1]
+    u = p[cols] - p[local + start]
+    r = np.sqrt((u * u).sum(axis=1))
+    h = np.sqrt(np.add.reduceat(r * r, ptr) / cnt)                  # a length per point
+    s = u / h[local, None]
+    sw = ((h[local] / r) ** 2)[:, None]                              # sqrt of the weight
+    B, P = stop - start, d + d * (d + 1) // 2
+    M = np.zeros((B, int(cnt.max()), P))
+    M[local, pos] = _design(s, d) * sw
+    rhs = np.zeros((B, M.shape[1], values.shape[1]), dtype=values.dtype)
+    rhs[local, pos] = (values[cols] - values[local + start]) * sw
+    sol, rank = _solve(M, rhs)
+    low = np.flatnonzero(rank < P)
+    if low.size:
+        # too few or degenerate neighbours for the quadratic terms: the linear fit alone
+        sol[low, :d] = _solve(M[low, :, :d], rhs[low])[0]
     return np.swapaxes(sol[:, :d, :], 1, 2) / h[:, None, None]
+
+
+def _solve(M, rhs):
+    """Least-squares solutions (B, P, K) of the stacked systems M (B, k, P) x = rhs (B, k, K),
+    columns equilibrated, by SVD with singular values below 1e-12 of the largest dropped;
+    and the ranks (B,)."""
+    c = np.sqrt((M * M).sum(axis=1))
+    c[c == 0.0] = 1.0
+    U, S, Vt = np.linalg.svd(M / c[:, None, :], full_matrices=False)
+    keep = S > 1e-12 * S[:, :1]
+    Sinv = np.where(keep, 1.0 / np.where(keep, S, 1.0), 0.0)
+    sol = np.swapaxes(Vt, 1, 2) @ (Sinv[:, :, None] * (np.swapaxes(U, 1, 2) @ rhs))
+    return sol / c[:, :, None], keep.sum(axis=1)
 
 
 def estimate_gradients(points, values, method: str = "direct") -> np.ndarray:
@@ -106,7 +131,7 @@ def estimate_gradients(points, values, method: str = "direct") -> np.ndarray:
     method
         ``"direct"``: at each point, the weighted least-squares fit of the quadratic Taylor
         polynomial to the values at its Delaunay neighbours (two rings of them where one has
-        fewer than twice the unknowns), weights ``1 / distance^2``.
+        fewer than twice the unknowns), weights ``1 / distance^4``.
 
     Returns
     -------

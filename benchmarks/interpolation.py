@@ -1,9 +1,9 @@
 """Scattered-data interpolation: NaturalNeighbourInterpolator against scipy, in one run.
 
-2D: ``--points`` random points in the unit square (plus its corners, so that the grid lies
-in the hull), values of Franke's function, interpolated on a ``--grid`` x ``--grid`` grid of
-the square by each method of ``skfem_nem.NaturalNeighbourInterpolator`` and by scipy's
-``LinearNDInterpolator``, ``CloughTocher2DInterpolator`` and ``NearestNDInterpolator``.
+2D: ``--points`` random points in the unit square (its corners and random points on its
+sides among them, so that the grid lies in the hull), values of Franke's function,
+interpolated on a ``--grid`` x ``--grid`` grid of the square by each method of
+``skfem_nem.NaturalNeighbourInterpolator`` and by scipy's ``CloughTocher2DInterpolator`` and ``NearestNDInterpolator``.
 3D: ``--points-3d`` random points in the unit cube (plus its corners), ``--queries-3d``
 random queries inside, against scipy's linear and nearest interpolants and natinterp3d's
 Sibson interpolation when it is installed (``pip install natinterp3d``; optional).
@@ -17,7 +17,7 @@ load from numba's cache, or compilation on a fresh install, is printed apart). "
 queries.
 
     python benchmarks/interpolation.py [--points 100000] [--grid 1000]
-        [--points-3d 20000] [--queries-3d 100000] [--repeats 3] [--no-3d]
+        [--points-3d 20000] [--queries-3d 100000] [--repeats 2] [--no-3d]
 """
 import argparse
 import time
@@ -42,9 +42,18 @@ def smooth_3d(p):
 
 
 def cube_points(n, d, seed):
+    """n points: the corners of the unit square or cube, in 2D also sqrt(n) random points on
+    each side (on the hull every method is linear between the data on it), the rest random
+    inside."""
     rng = np.random.default_rng(seed)
     corners = np.array(np.meshgrid(*[[0.0, 1.0]] * d, indexing="ij")).reshape(d, -1).T
-    return np.r_[corners, rng.random((n - corners.shape[0], d))]
+    parts = [corners]
+    if d == 2:
+        s = rng.random((4, int(np.sqrt(n))))
+        parts += [np.c_[s[0], 0 * s[0]], np.c_[s[1], 1 + 0 * s[1]], np.c_[0 * s[2], s[2]],
+                  np.c_[1 + 0 * s[3], s[3]]]
+    k = sum(a.shape[0] for a in parts)
+    return np.r_[tuple(parts) + (rng.random((n - k, d)),)]
 
 
 def best(fn, repeats):
@@ -149,14 +158,16 @@ def main(argv=None):
     ap.add_argument("--grid", type=int, default=1000)
     ap.add_argument("--points-3d", type=int, default=20_000)
     ap.add_argument("--queries-3d", type=int, default=100_000)
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--no-3d", action="store_true", help="skip the 3D study")
     a = ap.parse_args(argv)
+    t0 = time.perf_counter()
     load = kernel_load()
     lines = [f"One-time numba kernel load (first calls on a small set): {load:.2f} s", ""]
     lines += study_2d(a.points, a.grid, a.repeats)
     if not a.no_3d:
         lines += [""] + study_3d(a.points_3d, a.queries_3d, a.repeats)
+    lines += ["", f"(whole run: {time.perf_counter() - t0:.0f} s)"]
     print("\n".join(lines))
 
 

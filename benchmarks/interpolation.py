@@ -3,7 +3,8 @@
 2D: ``--points`` random points in the unit square (its corners and random points on its
 sides among them, so that the grid lies in the hull), values of Franke's function,
 interpolated on a ``--grid`` x ``--grid`` grid of the square by each method of
-``skfem_nem.NaturalNeighbourInterpolator`` and by scipy's ``CloughTocher2DInterpolator`` and ``NearestNDInterpolator``.
+``skfem_nem.NaturalNeighbourInterpolator`` and by scipy's ``LinearNDInterpolator``,
+``CloughTocher2DInterpolator`` and ``NearestNDInterpolator``.
 3D: ``--points-3d`` random points in the unit cube (plus its corners), ``--queries-3d``
 random queries inside, against scipy's linear and nearest interpolants and natinterp3d's
 Sibson interpolation when it is installed (``pip install natinterp3d``; optional).

@@ -75,7 +75,7 @@ def check_values(values, n: int):
 
 
 def check_gradients(gradients, n: int, trailing, d: int, dtype):
-    """The nodal gradients (n, *trailing, d) as an (n, K, d) copy."""
+    """The nodal gradients ``(n, *trailing, d)`` as an (n, K, d) copy."""
     a = np.asarray(gradients)
     want = (n,) + tuple(trailing) + (d,)
     if a.shape != want:

@@ -1,5 +1,5 @@
-"""Sibson's C1 interpolant (Sibson 1980; Farin 1990, section 2): a blend of linear Taylor
-functions at the natural neighbours, with its exact gradient.
+"""Sibson's C1 interpolant (his "Z1", Sibson 1981): a blend of linear Taylor functions at the
+natural neighbours, with its exact gradient.
 
 With the Sibson coordinates ``lam_i`` of x, ``r_i = |x - x_i|``, the data ``f_i`` and
 gradients ``g_i`` at the natural neighbours and their Taylor functions

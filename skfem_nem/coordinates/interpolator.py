@@ -150,7 +150,7 @@ class NaturalNeighbourInterpolator:
 
     def __call__(self, *args):
         """The interpolant at the query points: one array ``xi`` of shape (..., d), or d
-        coordinate arrays ``x, y[, z]`` that broadcast; returns (..., *values.shape[1:]),
+        coordinate arrays ``x, y[, z]`` that broadcast; returns ``(..., *values.shape[1:])``,
         ``fill_value`` outside the convex hull."""
         xi = query_points(args, self._d)
         out, _ = self._run(xi.reshape(-1, self._d), False)
@@ -158,7 +158,7 @@ class NaturalNeighbourInterpolator:
 
     def gradient(self, *args):
         """The exact gradient of the interpolant at the query points (the forms of
-        ``__call__``): shape (..., *values.shape[1:], d), NaN outside the convex hull. NaN
+        ``__call__``): shape ``(..., *values.shape[1:], d)``, NaN outside the convex hull. NaN
         also where the gradient is undefined: for ``"sibson"`` and ``"laplace"`` at the data
         points and on the hull, for ``"sibson1"`` on the hull."""
         xi = query_points(args, self._d)

@@ -17,6 +17,9 @@ from .interp_input import check_values, triangulated
 
 __all__ = ["estimate_gradients", "neighbour_matrix", "fit_gradients"]
 
+# a quadratic fit whose (equilibrated) system is worse conditioned than this gives way to the
+# linear fit: its error on linear data would be about this times the round-off
+_ILL = 1e8
 # neighbour pairs per block of the normal equations (each holds a terms x terms matrix)
 _EDGES_PER_BLOCK = 1 << 17
 
@@ -79,8 +82,8 @@ def _fit_block(p, values, A, start, stop, counts, d):
     """Gradients at the points start..stop-1: each point's weighted least-squares problem
     (rows scaled by sqrt(w) = (h / |u|)^2, columns equilibrated), padded to the block's largest
     neighbour count and solved by one stacked SVD; where the quadratic terms are not
-    determined (fewer neighbours than unknowns, or a degenerate neighbourhood) by the linear
-    fit, still exact for linear data."""
+    determined (fewer neighbours than unknowns, or a system conditioned worse than 1e8: a
+    degenerate or very multi-scale neighbourhood) by the linear fit, exact for linear data."""
     e0, e1 = A.indptr[start], A.indptr[stop]
     cnt = counts[start:stop]
     ptr = A.indptr[start:stop] - e0
@@ -97,10 +100,10 @@ def _fit_block(p, values, A, start, stop, counts, d):
     M[local, pos] = _design(s, d) * sw
     rhs = np.zeros((B, M.shape[1], values.shape[1]), dtype=values.dtype)
     rhs[local, pos] = (values[cols] - values[local + start]) * sw
-    sol, rank = _solve(M, rhs)
-    low = np.flatnonzero(rank < P)
+    sol, cond = _solve(M, rhs)
+    low = np.flatnonzero(cond > _ILL)
     if low.size:
-        # too few or degenerate neighbours for the quadratic terms: the linear fit alone
+        # too few or nearly degenerate neighbours for the quadratic terms: the linear fit
         sol[low, :d] = _solve(M[low, :, :d], rhs[low])[0]
     return np.swapaxes(sol[:, :d, :], 1, 2) / h[:, None, None]
 
@@ -108,14 +111,16 @@ def _fit_block(p, values, A, start, stop, counts, d):
 def _solve(M, rhs):
     """Least-squares solutions (B, P, K) of the stacked systems M (B, k, P) x = rhs (B, k, K),
     columns equilibrated, by SVD with singular values below 1e-12 of the largest dropped;
-    and the ranks (B,)."""
+    and the condition numbers (B,) of the equilibrated systems (inf if rank-deficient)."""
     c = np.sqrt((M * M).sum(axis=1))
     c[c == 0.0] = 1.0
     U, S, Vt = np.linalg.svd(M / c[:, None, :], full_matrices=False)
     keep = S > 1e-12 * S[:, :1]
     Sinv = np.where(keep, 1.0 / np.where(keep, S, 1.0), 0.0)
     sol = np.swapaxes(Vt, 1, 2) @ (Sinv[:, :, None] * (np.swapaxes(U, 1, 2) @ rhs))
-    return sol / c[:, :, None], keep.sum(axis=1)
+    with np.errstate(divide="ignore"):
+        cond = S[:, 0] / S[:, -1]
+    return sol / c[:, :, None], np.where(keep.sum(axis=1) < M.shape[2], np.inf, cond)
 
 
 def estimate_gradients(points, values, method: str = "direct") -> np.ndarray:

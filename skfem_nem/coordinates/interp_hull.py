@@ -46,7 +46,8 @@ class HullTest:
         eq = np.unique(eq, axis=0)
         self.normals = np.ascontiguousarray(eq[:, :-1])
         self.offsets = eq[:, -1].copy()
-        self.tol = OUTSIDE_ROUNDOFF * float(np.linalg.norm(np.ptp(p, axis=0)))
+        self.diagonal = float(np.linalg.norm(np.ptp(p, axis=0)))
+        self.tol = OUTSIDE_ROUNDOFF * self.diagonal
 
     def distance(self, q: np.ndarray) -> np.ndarray:
         """(m,) signed distance of the points q (m, d) beyond the hull: the largest over the
@@ -58,15 +59,16 @@ class HullTest:
         return out
 
     def inside(self, q: np.ndarray):
-        """``(rows, points)``: the indices of the points q (m, d) that are inside the hull or
-        on it (to round-off), and those points, the ones just outside moved onto the hull."""
+        """``(rows, points, distances)``: the indices of the points q (m, d) that are inside
+        the hull or on it (to round-off), those points (the ones just outside moved onto the
+        hull) and their signed distances beyond it (<= 0, ~0 on the hull)."""
         dist = self.distance(q)
         rows = np.flatnonzero(dist <= self.tol)
         pts = q[rows]
         near = np.flatnonzero(dist[rows] > 0.0)
         if near.size:
             pts[near] = self._onto_hull(pts[near])
-        return rows, pts
+        return rows, pts, dist[rows]
 
     def _onto_hull(self, q: np.ndarray) -> np.ndarray:
         """Points just outside moved onto the hull: projected onto the plane they are

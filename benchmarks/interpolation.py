@@ -11,7 +11,7 @@ Sibson interpolation when it is installed (``pip install natinterp3d``; optional
 
 Every triangulation is built once (the "triangulation" row; Qhull for scipy, the package's
 checked Delaunay triangulation for ours) and handed to each interpolator; "build" is the
-rest of the set-up (for ``sibson1`` and Clough-Tocher, the gradient estimate). Calls are
+rest of the set-up (for ``sibson1``, ``farin`` and Clough-Tocher, the gradient estimate). Calls are
 timed warm, best of ``--repeats``: a first small call loads the numba kernels (their one-time
 load from numba's cache, or compilation on a fresh install, is printed apart). "gradient" is
 ``itp.gradient`` (values and exact gradients); errors are against the exact function at the
@@ -76,8 +76,8 @@ def timed(fn):
 def kernel_load():
     """Seconds of the first calls of every method on a small set (numba's kernels loaded)."""
     t0 = time.perf_counter()
-    for d, methods in ((2, ["sibson", "laplace", "sibson1", "linear", "nearest"]),
-                       (3, ["sibson", "sibson1", "linear", "nearest"])):
+    for d, methods in ((2, ["sibson", "laplace", "sibson1", "farin", "linear", "nearest"]),
+                       (3, ["sibson", "sibson1", "farin", "linear", "nearest"])):
         p = cube_points(60, d, seed=1)
         for m in methods:
             itp = NaturalNeighbourInterpolator(p, p[:, 0], method=m)
@@ -107,7 +107,7 @@ def study_2d(n, grid, repeats):
     dl, t_qhull = timed(lambda: Delaunay(p))
     lines = [f"2D: {n:,} points, {grid} x {grid} = {grid * grid:,} grid queries", "", HEADER,
              f"| triangulation (ours / Qhull) | {t_tri:.3f} / {t_qhull:.3f} | | | | | |"]
-    for m in ("sibson", "laplace", "sibson1", "linear", "nearest"):
+    for m in ("sibson", "laplace", "sibson1", "farin", "linear", "nearest"):
         itp, tb = timed(lambda: NaturalNeighbourInterpolator(tri, f, method=m))
         v, tc = best(lambda: itp(x, y), repeats)
         _, tg = best(lambda: itp.gradient(x, y), repeats)
@@ -131,7 +131,7 @@ def study_3d(n, m, repeats):
     dl, t_qhull = timed(lambda: Delaunay(p))
     lines = [f"3D: {n:,} points, {m:,} random queries", "", HEADER,
              f"| triangulation (Qhull) | {t_qhull:.3f} | | | | | |"]
-    for meth in ("sibson", "sibson1", "linear", "nearest"):
+    for meth in ("sibson", "sibson1", "farin", "linear", "nearest"):
         itp, tb = timed(lambda: NaturalNeighbourInterpolator(dl, f, method=meth))
         v, tc = best(lambda: itp(q), repeats)
         _, tg = best(lambda: itp.gradient(q), repeats)

@@ -3,10 +3,11 @@
 Franke's test function, sampled at 800 random points of the unit square (and along its
 sides, so that the hull is the square), is interpolated on a 201 x 201 grid with
 ``NaturalNeighbourInterpolator``: Sibson's and Laplace's natural-neighbour interpolants,
-Sibson's C1 interpolant (``"sibson1"``, from gradients estimated at the data points) and
-piecewise-linear interpolation on the same Delaunay triangles; scipy's Clough-Tocher
-interpolant (C1, cubic on each triangle) for comparison. The C1 interpolants are the most
-accurate here; the linear one shows its kinks along the triangle edges in the contours.
+Sibson's and Farin's C1 interpolants (``"sibson1"``, ``"farin"``, from gradients estimated at
+the data points) and piecewise-linear interpolation on the same Delaunay triangles; scipy's
+Clough-Tocher interpolant (C1, cubic on each triangle) for comparison. The C1 interpolants
+are the most accurate here; the linear one shows its kinks along the triangle edges in the
+contours.
 The exact gradients of the interpolants (``itp.gradient``) are compared with Franke's.
 """
 from pathlib import Path
@@ -40,7 +41,7 @@ tri = Triangulation(points)                     # built once, shared by the meth
 
 gx, gy = np.meshgrid(np.linspace(0, 1, 201), np.linspace(0, 1, 201))
 exact = franke(gx, gy)
-METHODS = ["sibson", "laplace", "sibson1", "linear"]
+METHODS = ["sibson", "laplace", "sibson1", "farin", "linear"]
 fields, interpolants = {}, {}
 for method in METHODS:
     interpolants[method] = NaturalNeighbourInterpolator(tri, values, method=method)
@@ -69,7 +70,7 @@ def visualize(path=FIGURE):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(2, 3, figsize=(13, 9), constrained_layout=True)
+    fig, ax = plt.subplots(2, 4, figsize=(17, 9), constrained_layout=True)
     ax[0, 0].contourf(gx, gy, exact, levels=20, cmap="viridis")
     ax[0, 0].plot(points[:, 0], points[:, 1], ".", ms=2, color="w")
     ax[0, 0].set_title(f"Franke's function\nand the {len(points)} data points")
@@ -78,9 +79,10 @@ def visualize(path=FIGURE):
                       vmin=-0.02, vmax=0.02)
         a.contour(gx, gy, field, levels=12, colors="k", linewidths=0.4)
         a.set_title(f"{name}\nerror max {errors[name]:.1e}, rms {rms[name]:.1e}")
-    fig.colorbar(im, ax=ax[:, 2], shrink=0.6, label="interpolant - exact")
+    fig.colorbar(im, ax=ax[:, 3], shrink=0.6, label="interpolant - exact")
     for a in ax.ravel():
         a.set_aspect("equal")
+    ax[1, 3].set_axis_off()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=80)
     plt.close(fig)

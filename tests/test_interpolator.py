@@ -424,7 +424,8 @@ def test_benchmark_smoke(capsys):
     bench.main(["--points", "2000", "--grid", "60", "--points-3d", "600", "--queries-3d", "500",
                 "--repeats", "1"])
     out = capsys.readouterr().out
-    assert "| sibson |" in out and "LinearNDInterpolator" in out and "3D" in out
+    assert "| sibson |" in out and "| farin |" in out and "LinearNDInterpolator" in out
+    assert "3D" in out
 
 
 # --------------------------------------------------------------------------
@@ -436,12 +437,13 @@ def test_ex24_scattered_interpolation(tmp_path):
     # the C1 interpolants are the accurate ones (measured rms 5.4e-4 and 5.6e-4), the C0 ones
     # and the linear one comparable with each other (3.9e-3 to 4.2e-3)
     assert ex.rms["sibson1"] < 7e-4 and ex.rms["sibson1"] < 1.1 * ex.rms["Clough-Tocher (scipy)"]
+    assert ex.rms["farin"] < 7e-4
     for name in ("sibson", "laplace", "linear"):
         assert 2e-3 < ex.rms[name] < 6e-3
     assert ex.grad_rms["sibson1"] < 0.3 * ex.grad_rms["linear"]       # 0.041 vs 0.23
     fig = ex.visualize(tmp_path / "ex24.png")
     assert (tmp_path / "ex24.png").exists()
-    panels = fig.axes[1:6]
+    panels = fig.axes[1:7]
     for a, name in zip(panels, ex.fields):
         (img,) = a.get_images()
         np.testing.assert_allclose(img.get_array(), ex.fields[name] - ex.exact)

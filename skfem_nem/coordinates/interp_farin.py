@@ -7,6 +7,7 @@ at its natural neighbours,
     f(x) = sum_{i,j,k} b_ijk lam_i lam_j lam_k          (all ordered triples)
     b_iii = f_i,   b_iij = f_i + (x_j - x_i) . g_i / 3
     b_ijk = (b_iij + b_iik + b_jji + b_jjk + b_kki + b_kkj) / 4 - (f_i + f_j + f_k) / 6
+                                                        (i, j, k distinct)
 
 interpolates the values and the gradients, is C1 wherever the Sibson coordinates are, and
 reproduces every quadratic when the gradients are exact (Sibson's C1 interpolant,

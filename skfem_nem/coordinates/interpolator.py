@@ -16,6 +16,7 @@ interpolation (:mod:`~skfem_nem.coordinates.interp_simplex`); the hull test in
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import Delaunay
 
 from ..geometry.triangulation import Triangulation
 from .interp_farin import FarinInterpolant
@@ -115,10 +116,10 @@ class NaturalNeighbourInterpolator:
                              f"{method!r}")
         if not (isinstance(chunk, (int, np.integer)) and chunk > 0):
             raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
-        self.points = np.array(points.points if hasattr(points, "points") else
-                               points.nodes if isinstance(points, Triangulation) else points,
-                               dtype=np.float64, copy=True)
         p, tri, self._offset, self._scale = triangulated(points, bool(rescale))
+        given = (points.nodes if isinstance(points, Triangulation) else
+                 points.points if isinstance(points, Delaunay) else points)
+        self.points = np.array(given, dtype=np.float64, copy=True)
         n, d = p.shape
         if d not in METHODS[method]:
             raise ValueError(f"method {method!r} works in {' and '.join(map(str, METHODS[method]))}"

@@ -462,3 +462,13 @@ def test_3d_gradients_next_to_the_hull_are_nan():
         np.testing.assert_allclose(g[1], b, atol=1e-8)
     g = NaturalNeighbourInterpolator(p, p @ b, method="linear").gradient(q)
     np.testing.assert_allclose(g, np.broadcast_to(b, g.shape), atol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["sibson", "farin", "linear"])
+def test_rescale_3d(method):
+    p = data(120, d=3, seed=16) * np.array([1.0, 1e3, 1e-3])
+    b = np.array([2.0, -1e-3, 4e2])
+    q = inside(40, d=3) * np.array([1.0, 1e3, 1e-3])
+    itp = NaturalNeighbourInterpolator(p, 1.0 + p @ b, method=method, rescale=True)
+    np.testing.assert_allclose(itp(q), 1.0 + q @ b, rtol=1e-11)
+    np.testing.assert_allclose(itp.gradient(q), np.broadcast_to(b, q.shape), rtol=1e-7)

@@ -27,7 +27,12 @@ def barycentric(p, simplices, s, q):
     S = simplices[s]
     v0 = p[S[:, 0]]
     edges = p[S[:, 1:]] - v0[:, None, :]                  # (m, d, d), row k: edge to vertex k+1
-    inv = np.linalg.inv(np.swapaxes(edges, 1, 2))         # mu = inv (q - v0)
+    if p.shape[1] == 2:                                   # the 2 x 2 inverse in closed form
+        (a, b), (c, e) = edges[:, 0].T, edges[:, 1].T     # columns of E^T: (a, b), (c, e)
+        det = a * e - b * c
+        inv = np.stack([np.stack([e, -c], 1), np.stack([-b, a], 1)], 1) / det[:, None, None]
+    else:
+        inv = np.linalg.inv(np.swapaxes(edges, 1, 2))     # mu = inv (q - v0)
     mu = np.einsum("mij,mj->mi", inv, q - v0)
     lam = np.concatenate([1.0 - mu.sum(axis=1, keepdims=True), mu], axis=1)
     dlam = np.concatenate([-inv.sum(axis=1, keepdims=True), inv], axis=1)
@@ -49,8 +54,9 @@ class LinearInterpolant:
 
     def _locate(self, q):
         if self.two_d:
-            return natural_neighbour_coordinates(self.triangulation, q, undefined="nan",
-                                                 return_triangles=True)[1]
+            # the walk of the 2D area method (Laplace's coordinates: the cheaper kind)
+            return natural_neighbour_coordinates(self.triangulation, q, kind="laplace",
+                                                 undefined="nan", return_triangles=True)[1]
         s = np.asarray(self.triangulation.find_simplex(q), dtype=np.int64)
         lost = np.flatnonzero(s < 0)
         if lost.size:

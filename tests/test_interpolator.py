@@ -472,3 +472,17 @@ def test_rescale_3d(method):
     itp = NaturalNeighbourInterpolator(p, 1.0 + p @ b, method=method, rescale=True)
     np.testing.assert_allclose(itp(q), 1.0 + q @ b, rtol=1e-11)
     np.testing.assert_allclose(itp.gradient(q), np.broadcast_to(b, q.shape), rtol=1e-7)
+
+
+@pytest.mark.parametrize("method", METHODS_3D)
+def test_fill_value_and_hull_3d(method):
+    p = data(150, d=3, seed=17)
+    f = linear(p)
+    q = np.array([[0.3, 0.6, 0.0], [1.0, 0.2, 0.7], [0.5, 1.0, 1.0], [1.0, 1.0, 1.0],
+                  [0.4, 0.5, 0.5], [0.3, 0.6, -1e-7], [1.2, 0.5, 0.5]])
+    v = NaturalNeighbourInterpolator(p, f, method=method, fill_value=-1.0)(q)
+    np.testing.assert_array_equal(v[5:], -1.0)
+    if method != "nearest":
+        np.testing.assert_allclose(v[:5], linear(q[:5]), atol=1e-12)
+    g = NaturalNeighbourInterpolator(p, f, method=method).gradient(q)
+    assert np.isnan(g[5:]).all() and np.isfinite(g[4]).all()

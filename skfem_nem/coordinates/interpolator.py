@@ -50,7 +50,8 @@ class NaturalNeighbourInterpolator:
     points
         (n, d) data points, d = 2 or 3; or, to reuse a triangulation, a
         :class:`~skfem_nem.Triangulation` (2D) or a ``scipy.spatial.Delaunay`` (2D or 3D) of
-        them. The triangulation is built (or adopted) once, here.
+        them. The triangulation is built (or adopted) once, here; do not change a
+        ``Triangulation`` while interpolators use it (one that gains nodes is an error).
     values
         (n, ...) data values, real or complex; trailing dimensions are interpolated together.
     method

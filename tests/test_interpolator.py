@@ -486,3 +486,20 @@ def test_fill_value_and_hull_3d(method):
         np.testing.assert_allclose(v[:5], linear(q[:5]), atol=1e-12)
     g = NaturalNeighbourInterpolator(p, f, method=method).gradient(q)
     assert np.isnan(g[5:]).all() and np.isfinite(g[4]).all()
+
+
+def test_c1_at_the_data_points():
+    """Around a data point the gradients of the C1 interpolants tend to the data's gradient
+    from every direction (like r); Sibson's C0-at-the-nodes interpolant keeps its kink."""
+    p = data(300, seed=18)
+    f = np.sin(3 * p[:, 0]) * np.cos(2 * p[:, 1])
+    i = int(np.argmin(((p - 0.5) ** 2).sum(axis=1)))
+    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    ring = np.c_[np.cos(ang), np.sin(ang)]
+    for method in ("sibson1", "farin"):
+        itp = NaturalNeighbourInterpolator(p, f, method=method)
+        spread = [np.abs(itp.gradient(p[i] + r * ring) - itp.gradients[i]).max()
+                  for r in (1e-3, 1e-5)]
+        assert spread[1] < 1e-3 and spread[1] < spread[0] / 30, (method, spread)
+    g = NaturalNeighbourInterpolator(p, f).gradient(p[i] + 1e-5 * ring)
+    assert np.ptp(g, axis=0).max() > 0.05

@@ -9,11 +9,13 @@ at its natural neighbours,
     b_ijk = (b_iij + b_iik + b_jji + b_jjk + b_kki + b_kkj) / 4 - (f_i + f_j + f_k) / 6
                                                         (i, j, k distinct)
 
-interpolates the values and the gradients, is C1 wherever the Sibson coordinates are, and
-reproduces every quadratic when the gradients are exact (Sibson's C1 interpolant,
-:mod:`~skfem_nem.coordinates.interp_sibson1`, only spherical quadratics). The triple sum is
-never formed: with ``sum_i lam_i = 1`` it collapses to one sum over the neighbours with the
-row sums ``S2 = sum lam_j^2``, ``X1 = sum lam_j x_j`` and ``X2 = sum lam_j^2 x_j``,
+interpolates the values and the gradients, is C1 inside the hull (at a data point too: the
+derivatives of the cubic there, ``3 (b_iij - b_iii)``, combine the coordinates' derivatives
+into ``g_i`` whatever their kink), and reproduces every quadratic when the gradients are
+exact (Sibson's C1 interpolant, :mod:`~skfem_nem.coordinates.interp_sibson1`, only spherical
+quadratics). The triple sum is never formed: with ``sum_i lam_i = 1`` it collapses to one sum
+over the neighbours with the row sums ``S2 = sum lam_j^2``, ``X1 = sum lam_j x_j`` and
+``X2 = sum lam_j^2 x_j``,
 
     f = sum_i f_i T_i + lam_i^2 g_i . (X1 - x_i) + lam_i g_i . W_i / 2
     Q_i = (1 - lam_i)^2 - S2 + lam_i^2,   T_i = lam_i^3 + 3 lam_i^2 (1 - lam_i) + lam_i Q_i

@@ -3,7 +3,8 @@
 Layers as sub-packages, bottom to top; a lower layer never imports a higher one:
 
 - :mod:`skfem_nem.geometry`: exact predicates, the Delaunay triangulation, meshes, node sets;
-- :mod:`skfem_nem.coordinates`: Sibson and Laplace coordinates (2D area method, n-D recursion);
+- :mod:`skfem_nem.coordinates`: Sibson and Laplace coordinates (2D area method, n-D recursion),
+  scattered-data interpolation on them;
 - :mod:`skfem_nem.basis`: NEM trial functions inside scikit-fem's assembly, consistent
   integration by gradient smoothing;
 - :mod:`skfem_nem.parallel`: solvers on PETSc over MPI (optional petsc4py);
@@ -16,7 +17,8 @@ This module only re-exports the public names.
 from .basis import (ElementNaturalNeighbour, ElementNaturalNeighbour2, ElementTetNaturalNeighbour,
                     NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
                     restore_scikit_fem_assembly)
-from .coordinates import laplace_coordinates, natural_neighbour_coordinates, sibson_coordinates
+from .coordinates import (NaturalNeighbourInterpolator, estimate_gradients, laplace_coordinates,
+                          natural_neighbour_coordinates, sibson_coordinates)
 from .evolution import LagrangianMesh, LagrangianMesh3D
 from .geometry import Triangulation, delaunay_mesh
 
@@ -35,6 +37,8 @@ __all__ = [
     "sibson_coordinates",
     "laplace_coordinates",
     "natural_neighbour_coordinates",
+    "NaturalNeighbourInterpolator",
+    "estimate_gradients",
     "restore_scikit_fem_assembly",
     "__version__",
 ]

@@ -11,7 +11,8 @@ import pytest
 import skfem_nem
 
 DOCUMENTED = ["delaunay_mesh", "NaturalNeighbourBasis", "sibson_coordinates", "Triangulation",
-              "LagrangianMesh", "ElementNaturalNeighbour2"]
+              "LagrangianMesh", "ElementNaturalNeighbour2", "NaturalNeighbourInterpolator",
+              "estimate_gradients"]
 
 
 def _own_tests(name):

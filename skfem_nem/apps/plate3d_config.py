@@ -60,7 +60,7 @@ class Plate3DConfig:
     #: node density ~ 1 / (1 + distance to the plate / density_length)^3
     density_length: float = 0.15
     #: end time
-    end_time: float = 300.0
+    end_time: float = 250.0
     #: largest time step
     max_dt: float = 50.0
     #: smallest time step: a step the nodes cannot make (Qhull would lose a node) is

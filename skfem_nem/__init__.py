@@ -18,7 +18,8 @@ from .basis import (ElementNaturalNeighbour, ElementNaturalNeighbour2, ElementTe
                     NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
                     restore_scikit_fem_assembly)
 from .coordinates import (NaturalNeighbourInterpolator, estimate_gradients, laplace_coordinates,
-                          natural_neighbour_coordinates, sibson_coordinates)
+                          natural_neighbour_coordinates, natural_neighbour_to_grid,
+                          sibson_coordinates)
 from .evolution import LagrangianMesh, LagrangianMesh3D
 from .geometry import Triangulation, delaunay_mesh
 
@@ -39,6 +40,7 @@ __all__ = [
     "natural_neighbour_coordinates",
     "NaturalNeighbourInterpolator",
     "estimate_gradients",
+    "natural_neighbour_to_grid",
     "restore_scikit_fem_assembly",
     "__version__",
 ]

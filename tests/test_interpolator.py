@@ -503,3 +503,26 @@ def test_c1_at_the_data_points():
         assert spread[1] < 1e-3 and spread[1] < spread[0] / 30, (method, spread)
     g = NaturalNeighbourInterpolator(p, f).gradient(p[i] + 1e-5 * ring)
     assert np.ptp(g, axis=0).max() > 0.05
+
+
+def test_natural_neighbour_to_grid_as_metpy_calls_it():
+    """MetPy's signature: 1D data arrays and a meshgrid; the interpolator's values on the
+    grid, NaN outside the hull, and shapes checked by name."""
+    from skfem_nem import natural_neighbour_to_grid
+    rng = np.random.default_rng(3)
+    xp, yp = rng.random(200), rng.random(200)
+    z = np.sin(3 * xp) * yp
+    gx, gy = np.meshgrid(np.linspace(-0.1, 1.1, 25), np.linspace(-0.1, 1.1, 19))
+    g = natural_neighbour_to_grid(xp, yp, z, gx, gy)
+    assert g.shape == gx.shape
+    ref = NaturalNeighbourInterpolator(np.c_[xp, yp], z)(np.stack([gx, gy], axis=-1))
+    np.testing.assert_array_equal(np.isnan(g), np.isnan(ref))
+    np.testing.assert_allclose(g[~np.isnan(g)], ref[~np.isnan(ref)], rtol=0, atol=1e-14)
+    assert np.isnan(g[0, 0]) and not np.isnan(g[9, 12])
+    lin = natural_neighbour_to_grid(xp, yp, 2 * xp - yp, gx, gy, method="linear")
+    inside = ~np.isnan(lin)
+    np.testing.assert_allclose(lin[inside], (2 * gx - gy)[inside], atol=1e-12)
+    with pytest.raises(ValueError, match="xp, yp and variable"):
+        natural_neighbour_to_grid(xp, yp[:-1], z, gx, gy)
+    with pytest.raises(ValueError, match="grid_x and grid_y"):
+        natural_neighbour_to_grid(xp, yp, z, gx, gy[:-1])

@@ -28,7 +28,7 @@ from .interp_natural import NaturalInterpolant
 from .interp_sibson1 import Sibson1Interpolant
 from .interp_simplex import LinearInterpolant, NearestInterpolant
 
-__all__ = ["NaturalNeighbourInterpolator", "METHODS"]
+__all__ = ["NaturalNeighbourInterpolator", "METHODS", "natural_neighbour_to_grid"]
 
 # method -> the dimensions it works in
 METHODS = {"sibson": (2, 3), "laplace": (2,), "sibson1": (2, 3), "farin": (2, 3),
@@ -208,3 +208,30 @@ class NaturalNeighbourInterpolator:
     def __repr__(self) -> str:
         return (f"NaturalNeighbourInterpolator({self._n} points in {self._d}D, "
                 f"values {self.values.shape[1:]}, method={self.method!r})")
+
+
+def natural_neighbour_to_grid(xp, yp, variable, grid_x, grid_y, method: str = "sibson"):
+    """Scattered 2D data on a grid, as MetPy's ``natural_neighbor_to_grid``.
+
+    ``xp``, ``yp``, ``variable``: (n,) the data points' coordinates and values;
+    ``grid_x``, ``grid_y``: the grid's coordinates (same shape, as ``np.meshgrid`` gives).
+    Returns the values on the grid (that shape), NaN outside the points' convex hull.
+    ``method`` as :class:`NaturalNeighbourInterpolator`'s (Sibson's by default, which is
+    MetPy's method).
+
+    >>> import numpy as np
+    >>> from skfem_nem import natural_neighbour_to_grid
+    >>> x, y = np.meshgrid(np.linspace(0, 1, 3), np.linspace(0, 1, 3))
+    >>> gx, gy = np.meshgrid([0.25, 0.75], [0.5])
+    >>> natural_neighbour_to_grid(x.ravel(), y.ravel(), (x + 2 * y).ravel(), gx, gy).round(12)
+    array([[1.25, 1.75]])
+    """
+    xp, yp, z = (np.asarray(a) for a in (xp, yp, variable))
+    if not (xp.ndim == yp.ndim == z.ndim == 1 and xp.size == yp.size == z.size):
+        raise ValueError(f"xp, yp and variable must be 1D arrays of one length, got shapes "
+                         f"{xp.shape}, {yp.shape} and {z.shape}")
+    gx, gy = np.asarray(grid_x, dtype=float), np.asarray(grid_y, dtype=float)
+    if gx.shape != gy.shape:
+        raise ValueError(f"grid_x and grid_y must have one shape, got {gx.shape} and "
+                         f"{gy.shape}")
+    return NaturalNeighbourInterpolator(np.c_[xp, yp], z, method=method)(gx, gy)

@@ -28,23 +28,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .interp_natural import coordinates_of
+from .interp_natural import BlendedInterpolant, coordinates_of, row_sums
 
 __all__ = ["FarinInterpolant"]
 
 
-def _rowsum(indptr, a):
-    return np.add.reduceat(a, indptr[:-1], axis=0)
 
-
-class FarinInterpolant:
+class FarinInterpolant(BlendedInterpolant):
     """Farin's C1 interpolant of ``values`` (n, K) with nodal ``gradients`` (n, K, d)."""
-
-    def __init__(self, triangulation, p, values, gradients):
-        self.triangulation = triangulation
-        self.p = p
-        self.values = values
-        self.gradients = gradients
 
     def __call__(self, q, gradient: bool):
         K, d = self.values.shape[1], self.p.shape[1]
@@ -56,16 +47,16 @@ class FarinInterpolant:
         indptr, cols, lam = Phi.indptr, Phi.indices, Phi.data
         rows = np.repeat(np.arange(q.shape[0]), np.diff(indptr))
         x, F, G = self.p[cols], self.values[cols], self.gradients[cols]
-        S2 = _rowsum(indptr, lam * lam)[rows]
-        X1 = _rowsum(indptr, lam[:, None] * x)[rows]
-        X2 = _rowsum(indptr, (lam * lam)[:, None] * x)[rows]
+        S2 = row_sums(indptr, lam * lam)[rows]
+        X1 = row_sums(indptr, lam[:, None] * x)[rows]
+        X2 = row_sums(indptr, (lam * lam)[:, None] * x)[rows]
         Q = (1 - lam) ** 2 - S2 + lam * lam
         T = lam ** 3 + 3 * lam * lam * (1 - lam) + lam * Q
         W = ((1 - lam)[:, None] * (X1 - lam[:, None] * x) - (X2 - (lam * lam)[:, None] * x)
              - x * Q[:, None])
         terms = (F * T[:, None] + (lam * lam)[:, None] * np.einsum("ekd,ed->ek", G, X1 - x)
                  + 0.5 * lam[:, None] * np.einsum("ekd,ed->ek", G, W))
-        f = _rowsum(indptr, terms)
+        f = row_sums(indptr, terms)
         if not gradient:
             return f, None
         grad = np.empty(f.shape + (d,), dtype=f.dtype)
@@ -79,9 +70,9 @@ class FarinInterpolant:
 
 def _directional(indptr, rows, lam, ld, x, F, G, X1, Q, W):
     """Derivative (m, K) of the interpolant when the coordinates change by ``ld`` (nnz,)."""
-    S2d = _rowsum(indptr, 2 * lam * ld)[rows]
-    X1d = _rowsum(indptr, ld[:, None] * x)[rows]
-    X2d = _rowsum(indptr, (2 * lam * ld)[:, None] * x)[rows]
+    S2d = row_sums(indptr, 2 * lam * ld)[rows]
+    X1d = row_sums(indptr, ld[:, None] * x)[rows]
+    X2d = row_sums(indptr, (2 * lam * ld)[:, None] * x)[rows]
     Qd = -2 * (1 - lam) * ld - S2d + 2 * lam * ld
     Td = 3 * lam * lam * ld + 3 * (2 * lam * ld * (1 - lam) - lam * lam * ld) + ld * Q + lam * Qd
     Wd = (-ld[:, None] * (X1 - lam[:, None] * x) + (1 - lam)[:, None] * (X1d - ld[:, None] * x)
@@ -91,4 +82,4 @@ def _directional(indptr, rows, lam, ld, x, F, G, X1, Q, W):
              + (lam * lam)[:, None] * np.einsum("ekd,ed->ek", G, X1d)
              + 0.5 * ld[:, None] * np.einsum("ekd,ed->ek", G, W)
              + 0.5 * lam[:, None] * np.einsum("ekd,ed->ek", G, Wd))
-    return _rowsum(indptr, terms)
+    return row_sums(indptr, terms)

@@ -13,7 +13,23 @@ import numpy as np
 
 from .dispatch import natural_neighbour_coordinates
 
-__all__ = ["NaturalInterpolant", "coordinates_of"]
+__all__ = ["BlendedInterpolant", "NaturalInterpolant", "coordinates_of", "row_sums"]
+
+
+def row_sums(indptr, a):
+    """Sums of the entries a (nnz, ...) over the CSR rows (no row is empty)."""
+    return np.add.reduceat(a, indptr[:-1], axis=0)
+
+
+class BlendedInterpolant:
+    """The state of a C1 interpolant: the triangulation, the data points p (n, d), their
+    ``values`` (n, K) and nodal ``gradients`` (n, K, d), blended by the coordinates."""
+
+    def __init__(self, triangulation, p, values, gradients):
+        self.triangulation = triangulation
+        self.p = p
+        self.values = values
+        self.gradients = gradients
 
 
 def coordinates_of(triangulation, q, gradient: bool, kind: str = "sibson"):

@@ -22,24 +22,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .interp_natural import coordinates_of
+from .interp_natural import BlendedInterpolant, coordinates_of, row_sums
 
 __all__ = ["Sibson1Interpolant"]
 
 
-def _rowsum(indptr, a):
-    """Sums of the entries a (nnz, ...) over the CSR rows (no row is empty)."""
-    return np.add.reduceat(a, indptr[:-1], axis=0)
 
-
-class Sibson1Interpolant:
+class Sibson1Interpolant(BlendedInterpolant):
     """Sibson's C1 interpolant of ``values`` (n, K) with nodal ``gradients`` (n, K, d)."""
-
-    def __init__(self, triangulation, p, values, gradients):
-        self.triangulation = triangulation
-        self.p = p
-        self.values = values
-        self.gradients = gradients
 
     def __call__(self, q, gradient: bool):
         if not q.shape[0]:
@@ -60,11 +50,11 @@ class Sibson1Interpolant:
         V, G = self.values[cols], self.gradients[cols]              # (nnz, K), (nnz, K, d)
         zeta_i = V + np.einsum("ekd,ed->ek", G, u)
         gam = lam / r
-        Gam = _rowsum(indptr, gam)
-        f0 = _rowsum(indptr, lam[:, None] * V)
-        zeta = _rowsum(indptr, gam[:, None] * zeta_i) / Gam[:, None]
-        alpha = _rowsum(indptr, lam * r) / Gam
-        beta = _rowsum(indptr, lam * r * r)
+        Gam = row_sums(indptr, gam)
+        f0 = row_sums(indptr, lam[:, None] * V)
+        zeta = row_sums(indptr, gam[:, None] * zeta_i) / Gam[:, None]
+        alpha = row_sums(indptr, lam * r) / Gam
+        beta = row_sums(indptr, lam * r * r)
         wsum = alpha + beta
         wsum[at_node] = 1.0
         f = (alpha[:, None] * f0 + beta[:, None] * zeta) / wsum[:, None]
@@ -84,13 +74,13 @@ def _gradient(indptr, u, r, lam, glam, V, G, zeta_i, gam, Gam, f0, zeta, alpha, 
     """The gradient (m, K, d) of the blend, factor by factor (see the module docstring)."""
     ur = u / r[:, None]                                             # grad r_i
     dgam = glam / r[:, None] - (lam / r / r)[:, None] * ur          # grad (lam_i / r_i)
-    dGam = _rowsum(indptr, dgam)                                    # (m, d)
-    dZ = _rowsum(indptr, zeta_i[:, :, None] * dgam[:, None, :] + gam[:, None, None] * G)
+    dGam = row_sums(indptr, dgam)                                    # (m, d)
+    dZ = row_sums(indptr, zeta_i[:, :, None] * dgam[:, None, :] + gam[:, None, None] * G)
     dzeta = (dZ - zeta[:, :, None] * dGam[:, None, :]) / Gam[:, None, None]
-    dA = _rowsum(indptr, glam * r[:, None] + lam[:, None] * ur)
+    dA = row_sums(indptr, glam * r[:, None] + lam[:, None] * ur)
     dalpha = (dA - alpha[:, None] * dGam) / Gam[:, None]            # (m, d)
-    dbeta = _rowsum(indptr, glam * (r * r)[:, None] + 2.0 * lam[:, None] * u)
-    df0 = _rowsum(indptr, V[:, :, None] * glam[:, None, :])         # (m, K, d)
+    dbeta = row_sums(indptr, glam * (r * r)[:, None] + 2.0 * lam[:, None] * u)
+    df0 = row_sums(indptr, V[:, :, None] * glam[:, None, :])         # (m, K, d)
     num = (f0[:, :, None] * dalpha[:, None, :] + alpha[:, None, None] * df0
            + zeta[:, :, None] * dbeta[:, None, :] + beta[:, None, None] * dzeta
            - f[:, :, None] * (dalpha + dbeta)[:, None, :])

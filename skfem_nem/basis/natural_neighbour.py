@@ -46,6 +46,7 @@ from .plotting import DEFAULT_NREFS, refined_values, visuals_call
 from .projection import (field_values, l2_project, normalize_elements, normalize_facets,
                          positions_in, projection_dofs, stencil_dofs)
 from .groups import GroupBasis, restrict_field
+from .hull_gradients import one_sided_gradients
 from .stencils import fill_group, stencil_union
 from . import updates
 from .smoothing import smoothed_functions, value_rule, vertex_points
@@ -721,34 +722,11 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
         return (3 * j[:, None] + d.argmin(axis=0)).ravel()
 
     def _fix_undefined(self, pts, Phi, D, dx, elems):
-        # gradients on the hull: one-sided limit, evaluated just inside
-        import scipy.sparse as sp
-        dim = pts.shape[1]
-        finite = np.ones(Phi.shape[0], dtype=bool)
-        for Dk in D:
-            finite &= np.isfinite(np.asarray(Dk.sum(axis=1)).ravel())
-        bad = np.flatnonzero(~finite)
+        # gradients on the hull: one-sided limits (basis.hull_gradients)
         nq = self.dx.shape[1]
-        n = np.asarray(self.normals)  # (dim, nf, nq)
-        nrm = n.transpose(1, 2, 0).reshape(-1, dim)[bad]
-        h = np.asarray(self.mesh_parameters()).reshape(-1)[bad]
-        inner = pts[bad] - 1e-7 * h[:, None] * nrm
-        _, D2 = self._coordinates(inner, gradient=True, undefined="raise",
-                                  hint=np.repeat(self._geom.tind, nq)[bad])
-        keep = sp.diags(finite.astype(float))
-        E = sp.csr_matrix((np.ones(bad.size), (bad, np.arange(bad.size))),
-                          shape=(Phi.shape[0], bad.size))
-        out = []
-        for Dk, Dk2 in zip(D, D2):
-            Dk = keep @ Dk
-            Dk.data[~np.isfinite(Dk.data)] = 0.0
-            out.append(Dk + E @ Dk2)
-        # one sparsity pattern for values and gradients: the union of the
-        # neighbours of the point and of the point just inside
-        pattern = (abs(Phi) + sum(abs(Dk) for Dk in out)).tocsr()
-        pattern.data[:] = 1.0
-        pattern.sort_indices()
-        return _on_pattern(Phi, pattern), [_on_pattern(Dk, pattern) for Dk in out]
+        return one_sided_gradients(self._coordinates, pts, Phi, D, np.asarray(self.normals),
+                                   np.asarray(self.mesh_parameters()),
+                                   np.repeat(self._geom.tind, nq))
 
     def default_parameters(self):
         return {"x": self.global_coordinates(), "h": self.mesh_parameters(), "n": self.normals}
@@ -767,17 +745,3 @@ class NaturalNeighbourFacetBasis(_NaturalNeighbourBasisBase):
             "n": restrict_field(self.normals, elems)}
         return g
 
-
-def _on_pattern(A, pattern):
-    """A's values on the (superset) sparsity pattern of ``pattern``, same index order."""
-    A = A.tocsr()
-    A.sort_indices()
-    out = pattern.copy()
-    out.data = np.zeros(out.nnz)
-    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    # position of each entry of A inside the pattern (both sorted row-major)
-    key_p = np.repeat(np.arange(out.shape[0]), np.diff(out.indptr)) * out.shape[1] + out.indices
-    key_a = rows * A.shape[1] + A.indices
-    pos = np.searchsorted(key_p, key_a)
-    out.data[pos] = A.data
-    return out

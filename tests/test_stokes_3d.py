@@ -11,6 +11,7 @@ from skfem_nem.models.analytic3d import (Manufactured3D, Sinker, haberman_sayre,
 from skfem_nem.models.stokes import (assemble_stokes, inf_sup_constant, outline_flux,
                                      solve_stokes, stokes_spaces, wall_dofs)
 from skfem_nem.models.stokes_amg import rigid_modes
+from skfem_nem.models.stokes_walls import boundary_flux
 
 
 @pytest.fixture(scope="module")
@@ -115,6 +116,37 @@ def test_flat_tetrahedra_carry_no_bubble():
     p_ = sol.pressure_at_nodes()
     ref = g @ m.p
     assert np.abs((p_ - p_.mean()) - (ref - ref.mean())).max() < 1e-10
+
+
+def test_flat_tetrahedra_on_a_wall_keep_the_boundary_term_finite():
+    """Nodes on a wall in a square lattice (four by four cocircular): Qhull spans flat
+    tetrahedra of four wall nodes, whose faces lie on the hull. The boundary term of the
+    divergence takes their normals and pressure traces from the faces themselves (the
+    tetrahedra's inverse mapping is NaN), and a 3D plate whose nodes slid along the bottom
+    wall into such a pattern stopped with NaN in the pressure iterations; the hydrostatic
+    state is exact, and the term equals the faces' exact flux of a linear field."""
+    p = box_nodes_3d(150, (1, 1, 1), seed=0, boundary_spacing=0.25)
+    g = np.linspace(0, 1, 6)
+    X, Y = np.meshgrid(g, g)
+    m = delaunay_mesh(np.vstack([p[p[:, 2] > 0], np.c_[X.ravel(), Y.ravel(), 0 * X.ravel()]]))
+    P = m.p.T[m.t.T]
+    vol = np.abs(np.einsum("kd,kd->k", P[:, 1] - P[:, 0],
+                           np.cross(P[:, 2] - P[:, 0], P[:, 3] - P[:, 0]))) / 6
+    flat = np.flatnonzero((vol == 0) & (m.p[2, m.t] == 0).all(axis=0))
+    assert np.isin(m.f2t[0, m.boundary_facets()], flat).any()
+    S = stokes_spaces(m)
+    F = boundary_flux(S)
+    assert np.isfinite(F.data).all()
+    # oint (u . n) ds = 0 for u = (x, y, -2 z); oint q (u . n) ds for q = 1 and u = (0, 0, 1)
+    # is the area of top minus bottom, 0; for u = (x, 0, 0), q = 1: the volume, 1
+    ones = np.ones(S.pbasis.N)
+    u = np.zeros(S.ubasis.N)
+    u[S.ubasis.dofs.nodal_dofs[0]] = m.p[0]
+    assert abs(ones @ F @ u - 1.0) < 1e-12
+    gv = np.array([0.3, -0.2, -1.0])
+    sol = solve_stokes(S, lambda x: 1 + 9 * x[2], lambda x: gv[:, None, None] + 0 * x,
+                       solver="direct")
+    assert np.isfinite(sol.u).all() and np.abs(sol.u).max() < 1e-11
 
 
 def test_walls_by_name(mesh, spaces):

@@ -236,7 +236,10 @@ def _zero_flat_gradients(basis) -> None:
     """Gradients 0 on the flat tetrahedra of ``basis`` (zero volume: Qhull's, between
     co-spherical or co-planar nodes), where scikit-fem's inverse mapping gives NaN: they
     carry no weight, and 0 times NaN would spoil the assembled sums."""
-    if basis is None or not hasattr(basis, "basis") or not hasattr(basis, "dx"):
+    if basis is None or isinstance(basis, NaturalNeighbourBasis) or \
+            not hasattr(basis, "basis") or not hasattr(basis, "dx"):
+        # (the natural-neighbour gradients are zero there already, and reading its
+        # ``basis`` would build the dense per-element arrays assembly never needs)
         return
     flat = np.flatnonzero(~(np.asarray(basis.dx).sum(axis=-1) > 0))
     if flat.size == 0:

@@ -142,21 +142,42 @@ def _face_flux(spaces: stokes_bases.StokesSpaces, faces: np.ndarray) -> sp.csr_m
                                     intorder=FACE_ORDER, coordinates=ub.coordinates)
     fb = FacetBasis(mesh, pb.elem, facets=faces, intorder=FACE_ORDER)
     nf, nq = fb.dx.shape
-    rows = np.asarray(fb.element_dofs)                           # (3, nf) pressure dofs
+    corners = mesh.facets[:, faces]                              # (3, nf) the faces' nodes
+    lam, n = _face_frames(mesh, corners, np.asarray(fb.global_coordinates().value))
     points = np.arange(nf * nq).reshape(nf, nq)
-    Q = sp.csr_matrix((pb.N, nf * nq))
-    for k in range(rows.shape[0]):
-        val = np.asarray(fb.basis[k][0].value) * fb.dx          # (nf, nq)
-        Q = Q + sp.csr_matrix((val.ravel(), (np.repeat(rows[k], nq), points.ravel())),
-                              shape=(pb.N, nf * nq))
+    pn = np.asarray(pb.dofs.nodal_dofs[0])
+    Q = sp.csr_matrix(((lam * fb.dx).ravel(), (np.repeat(pn[corners], nq, axis=1).ravel(),
+                                               np.tile(points, (3, 1)).ravel())),
+                      shape=(pb.N, nf * nq))
     Phi = nb.values_matrix                                       # (nf nq, n nodes)
-    n = np.asarray(fb.normals).reshape(3, -1)
     nd = ub.dofs.nodal_dofs
     out = sp.csr_matrix((pb.N, ub.N))
     for c in range(3):
-        Fc = (Q @ sp.diags(n[c]) @ Phi).tocoo()
+        Fc = (Q @ sp.diags(np.repeat(n[c], nq)) @ Phi).tocoo()
         out = out + sp.csr_matrix((Fc.data, (Fc.row, nd[c, Fc.col])), shape=(pb.N, ub.N))
     return out.tocsr()
+
+
+def _face_frames(mesh, corners: np.ndarray, x: np.ndarray) -> tuple:
+    """The barycentric coordinates (3, nf, nq) of the points x (3, nf, nq) in their boundary
+    faces ``corners`` (3, nf) -- the P1 pressure's trace there -- and the faces' outward
+    unit normals (3, nf), from the faces alone. Not from the tetrahedra behind them:
+    Qhull gives flat tetrahedra of nodes on one wall (zero volume), whose inverse mapping
+    (and so scikit-fem's facet normals and trace values) is NaN. A hull is convex: the
+    mean of the nodes lies inside every face's plane."""
+    a, b, c = (mesh.p[:, corners[k]] for k in range(3))
+    e1, e2 = b - a, c - a
+    n = np.cross(e1, e2, axis=0)
+    n /= np.linalg.norm(n, axis=0)
+    n *= np.where(np.einsum("ij,ij->j", n, a - mesh.p.mean(axis=1)[:, None]) < 0, -1.0, 1.0)
+    # x - a = s e1 + t e2 (the 2 x 2 normal equations of the face's frame)
+    r = x - a[:, :, None]
+    g11, g12, g22 = (np.einsum("ij,ij->j", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
+    r1, r2 = np.einsum("ij,ijk->jk", e1, r), np.einsum("ij,ijk->jk", e2, r)
+    det = (g11 * g22 - g12 ** 2)[:, None]
+    s = (g22[:, None] * r1 - g12[:, None] * r2) / det
+    t = (g11[:, None] * r2 - g12[:, None] * r1) / det
+    return np.stack([1.0 - s - t, s, t]), n
 
 
 def outline_flux(spaces: stokes_bases.StokesSpaces, outline: np.ndarray) -> sp.csr_matrix:

@@ -51,7 +51,24 @@ gallery_examples_dir = str(HERE.parent / "examples")
 gallery_figures_dir = str(HERE / "figures")
 gallery_output_dir = str(HERE / "gallery")
 
-html_theme = "alabaster"
+# pydata-sphinx-theme: the page's own contents go into the left sidebar under the site
+# navigation, so that the article takes the rest of the width (the default right-hand column
+# leaves about 60 columns of code at 1280 px); _static/custom.css lets the article use that
+# width and keeps code blocks and tables scrolling inside themselves
+html_theme = "pydata_sphinx_theme"
 html_title = f"skfem-nem {release}"
-html_theme_options = {"description": "The Natural Element Method for scikit-fem",
-                      "fixed_sidebar": True}
+html_static_path = ["_static"]
+html_css_files = ["custom.css"]
+html_theme_options = {
+    "navbar_align": "left",
+    "secondary_sidebar_items": [],
+    "show_toc_level": 2,
+    "navigation_with_keys": False,
+    "footer_start": ["copyright"],
+    "footer_end": ["sphinx-version"],
+}
+html_sidebars = {
+    "**": ["sidebar-nav-bs", "page-toc"],
+    "index": [],
+    "gallery/index": [],
+}

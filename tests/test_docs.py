@@ -58,6 +58,26 @@ def test_kept_figures_are_shown(pages):
     assert "../figures/smoothing_cells.png" in pages["ex12_smoothing.rst"]
 
 
+def test_index_shows_a_card_per_example(pages):
+    """The gallery index is a grid of cards: each example's thumbnail and title, in a group."""
+    gallery = _gallery()
+    index = pages["index.rst"]
+    assert index.count(".. container:: nem-gallery") == len(gallery.gallery_groups(EXAMPLES))
+    for example in EXAMPLES:
+        assert re.search(rf"^      :doc:`[^`<]+ <{example.stem}>`$", index, re.M), example.stem
+        first = gallery.example_figures(example.stem, DOCS / "figures")[0]
+        assert (f"      .. image:: thumbs/{first.name}\n"
+                f"         :target: {example.stem}.html\n") in index, example.stem
+    grouped = [s for _, stems in gallery.GROUPS for s in stems]
+    assert sorted(grouped) == [p.stem for p in EXAMPLES], "an example outside the groups"
+
+
+def test_ungrouped_example_still_shown(tmp_path):
+    (tmp_path / "ex99_new.py").write_text('"""A new example.\n\nIt does a thing."""\n')
+    index = _gallery().gallery_pages(tmp_path, tmp_path, tmp_path / "gallery")["index.rst"]
+    assert "More examples" in index and ":doc:`A new example <ex99_new>`" in index
+
+
 def test_example_without_docstring_is_named(tmp_path):
     (tmp_path / "ex99_bare.py").write_text("x = 1\n")
     with pytest.raises(ValueError, match="ex99_bare.py"):

@@ -5,6 +5,11 @@ example draws when one is kept under ``docs/figures`` (``<example stem>*.png``, 
 :data:`FIGURE_NAMES`), and the code as a literal include. The examples are not run: several take
 minutes, and the figures in ``docs/figures`` are the ones the project keeps up to date.
 
+The index is a grid of cards, one per example, grouped by subject (:data:`GROUPS`): the
+example's first figure as a thumbnail over its one-line title. The cards are plain
+reStructuredText containers styled by ``_static/custom.css``; the thumbnails are small copies of
+the figures, written into ``gallery/thumbs/`` when the builder starts.
+
 The pages are written into ``gallery/`` of the documentation source when the builder starts
 (only files whose text changed are rewritten, so incremental builds stay incremental).
 :func:`gallery_pages` builds the text without Sphinx, for the tests.
@@ -17,6 +22,25 @@ from pathlib import Path
 
 #: figures whose name does not start with the example's stem
 FIGURE_NAMES = {"ex12_smoothing": ["smoothing_cells.png"]}
+
+#: the gallery index's groups, in order: (heading, example stems); an example in no group is
+#: shown under "More examples" at the end
+GROUPS = [
+    ("Interpolation and the basis functions",
+     ["ex01_interpolation", "ex24_scattered_interpolation", "ex12_smoothing", "ex13_interfaces"]),
+    ("NEM against P1 and P2 finite elements",
+     ["ex02_poisson", "ex04_nem_vs_fem", "ex14_point_source", "ex19_adaptive_lshape",
+      "ex03_cantilever", "ex18_elastic_modes", "ex17_heat", "ex15_subdomains",
+      "ex16_integral_condition", "ex21_quadratic"]),
+    ("Stokes flow and rheology",
+     ["ex07_solcx", "ex08_sinking_block", "ex09_viscoelastic_buildup", "ex11_prandtl_punch"]),
+    ("Evolving meshes",
+     ["ex05_shear_flow", "ex20_local_update", "ex10_lagrangian_fem_fails"]),
+    ("3D", ["ex06_poisson_3d", "ex22_settling_sphere", "ex23_sinking_sphere_3d"]),
+]
+
+#: width in pixels of the thumbnails on the gallery index
+THUMB_WIDTH = 480
 
 
 def example_summary(path: Path) -> tuple[str, str]:
@@ -69,6 +93,32 @@ def example_page(path: Path, figures_dir: Path, output_dir: Path) -> str:
     return "\n".join(parts)
 
 
+def _card(path: Path, figures_dir: Path, output_dir: Path) -> str:
+    """One card of the index: the thumbnail of the example's first figure and its title."""
+    title, _ = example_summary(path)
+    lines = ["   .. container:: nem-card\n"]
+    figures = example_figures(path.stem, figures_dir)
+    if figures:
+        lines.append(f"      .. image:: thumbs/{figures[0].name}\n"
+                     f"         :target: {path.stem}.html\n"
+                     f"         :alt: figure of {path.name}\n")
+    text = title.replace("``", "").replace("`", "")  # no markup inside the role's text
+    lines.append(f"      :doc:`{text} <{path.stem}>`\n")
+    return "\n".join(lines)
+
+
+def gallery_groups(examples: list[Path]) -> list[tuple[str, list[Path]]]:
+    """The examples in the index's groups (:data:`GROUPS`), the others in a last group."""
+    by_stem = {p.stem: p for p in examples}
+    groups = [(heading, [by_stem[s] for s in stems if s in by_stem])
+              for heading, stems in GROUPS]
+    grouped = {s for _, stems in GROUPS for s in stems}
+    rest = [p for p in examples if p.stem not in grouped]
+    if rest:
+        groups.append(("More examples", rest))
+    return [(heading, members) for heading, members in groups if members]
+
+
 def gallery_pages(examples_dir: Path, figures_dir: Path, output_dir: Path) -> dict[str, str]:
     """All gallery pages, ``{file name: reStructuredText}``: ``index.rst`` and one per example.
 
@@ -82,13 +132,34 @@ def gallery_pages(examples_dir: Path, figures_dir: Path, output_dir: Path) -> di
         raise ValueError(f"no example scripts (*.py) in {examples_dir}")
     pages = {f"{p.stem}.rst": example_page(p, figures_dir, output_dir) for p in examples}
     lines = [_heading("Examples gallery", "="),
-             "Runnable scripts in ``examples/`` of the repository, from scattered-data "
-             "interpolation to the sinking plate on a classical mesh. Each page shows what the "
-             "example computes, the figure it draws (where one is kept) and its code.\n",
-             ".. toctree::\n   :maxdepth: 1\n"]
+             "Runnable scripts in ``examples/`` of the repository. Click a picture to see what "
+             "the example computes, its figure and its code.\n"]
+    for heading, members in gallery_groups(examples):
+        lines.append(_heading(heading, "-"))
+        lines.append(".. container:: nem-gallery\n")
+        lines += [_card(p, figures_dir, output_dir) for p in members]
+    lines.append(".. toctree::\n   :hidden:\n   :maxdepth: 1\n")
     lines += [f"   {p.stem}" for p in examples]
     pages["index.rst"] = "\n".join(lines) + "\n"
     return pages
+
+
+def write_thumbnails(examples_dir: Path, figures_dir: Path, output_dir: Path) -> None:
+    """Small copies of each example's first figure in ``output_dir/thumbs`` (a thumbnail is
+    rewritten only when its figure is newer)."""
+    from matplotlib import image
+
+    thumbs = Path(output_dir) / "thumbs"
+    thumbs.mkdir(parents=True, exist_ok=True)
+    for path in sorted(Path(examples_dir).glob("*.py")):
+        figures = example_figures(path.stem, figures_dir)
+        if not figures:
+            continue
+        target = thumbs / figures[0].name
+        if target.exists() and target.stat().st_mtime >= figures[0].stat().st_mtime:
+            continue
+        width = image.imread(figures[0]).shape[1]
+        image.thumbnail(str(figures[0]), str(target), scale=min(1.0, THUMB_WIDTH / width))
 
 
 def write_gallery(app) -> None:
@@ -104,6 +175,7 @@ def write_gallery(app) -> None:
         target = out / name
         if not target.exists() or target.read_text(encoding="utf-8") != text:
             target.write_text(text, encoding="utf-8")
+    write_thumbnails(cfg.gallery_examples_dir, cfg.gallery_figures_dir, out)
 
 
 def setup(app):

@@ -217,21 +217,40 @@ def _summed_tet(ubasis, G, Wsum, X, Ainv, parallel) -> sp.csr_matrix:
 
 
 def _bubble_matrices(ubasis, bbasis, X, Ainv) -> tuple:
-    """``(A_bb^-1, A_bb^-1 A_bn)`` as sparse matrices on the bubble dofs."""
+    """``(A_bb^-1, A_bb^-1 A_bn)`` as sparse matrices on the bubble dofs; the second is
+    written in place by :func:`_inverse_times_coupling`, without ``A_bn`` or a product
+    (their index arrays took nine times the entries' memory, the peak of the assembly)."""
     ptr, sten = ubasis.stencil_ptr, ubasis.stencil_nodes
     ne = ptr.size - 1
-    S = np.diff(ptr)
     bd = np.asarray(bbasis.element_dofs)                     # (3, ne)
     Ainv_m = sp.csr_matrix((Ainv.ravel(), (np.repeat(bd.T, 3, axis=1).ravel(),
                                            np.tile(bd.T, (1, 3)).ravel())),
                            shape=(bbasis.N, bbasis.N))
-    # A_bn row-major (3 x 3 S) per tetrahedron: rows (e, c), columns 3 sten + d
-    e_of = np.repeat(np.arange(ne), 9 * S)
-    local = np.arange(9 * int(ptr[-1])) - np.repeat(9 * ptr[:-1], 9 * S)
-    c, rest = local // np.repeat(3 * S, 9 * S), local % np.repeat(3 * S, 9 * S)
-    cols = 3 * sten[ptr[e_of] + rest // 3] + rest % 3
-    Abn = sp.csr_matrix((X, (bd[c, e_of], cols)), shape=(bbasis.N, ubasis.N))
-    return Ainv_m, (Ainv_m @ Abn).tocsr()
+    nnz = 9 * int(ptr[-1])
+    idt = index_dtype(ubasis.N, nnz)
+    indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
+    _inverse_times_coupling(ptr, sten, X, Ainv, indices, data)
+    indptr = np.zeros(3 * ne + 1, dtype=idt)
+    indptr[1:] = np.cumsum(np.repeat(3 * np.diff(ptr), 3))
+    if bbasis.N != 3 * ne or not np.array_equal(bd.T.ravel(), np.arange(3 * ne)):
+        raise ValueError("the bubble basis must number its dofs 3 e + c (tetrahedron e, "
+                         "component c), as ElementVector(ElementTetBubble()) does")
+    return Ainv_m, sp.csr_matrix((data, indices, indptr), shape=(3 * ne, ubasis.N))
+
+
+@njit(cache=True)
+def _inverse_times_coupling(ptr, sten, X, Ainv, indices, data):
+    """Rows (e, c) of ``A_bb,e^-1 A_bn,e`` in CSR order: tetrahedron e's three rows of
+    3 S entries each, columns ``3 sten + d`` (``X`` holds ``A_bn,e`` row-major)."""
+    for e in range(ptr.shape[0] - 1):
+        s0 = ptr[e]
+        S3 = 3 * (ptr[e + 1] - s0)
+        o = 9 * s0
+        for c in range(3):
+            for k in range(S3):
+                indices[o + c * S3 + k] = 3 * sten[s0 + k // 3] + k % 3
+                data[o + c * S3 + k] = (Ainv[e, c, 0] * X[o + k] + Ainv[e, c, 1] * X[o + S3 + k]
+                                        + Ainv[e, c, 2] * X[o + 2 * S3 + k])
 
 
 def divergence_tet(ubasis, pbasis) -> sp.csr_matrix:

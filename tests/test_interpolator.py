@@ -436,7 +436,7 @@ def test_franke_c1_against_clough_tocher():
     their estimated gradients the C1 interpolants beat Clough-Tocher's max error on F2, F4 and
     F6 only (its mean error on F6 only); from Clough-Tocher's own gradients Sibson's C1
     interpolant beats its max error on all six, and from exact gradients Farin's beats its
-    mean error on all six, by 2-4 times: the gradient estimate is what falls behind."""
+    mean error on all six, by 1.7 to 4.6 times: the gradient estimate is what falls behind."""
     bench = load_benchmark("interpolation")
     p = bench.franke_points()
     assert p.shape == (100, 2) and p.min() < 0 and p.max() > 1   # the hull sticks out a little

@@ -146,7 +146,7 @@ def lshape_nodes(n, seed=0):
     grid of cell centres with the corner (1/2, 1/2) on its lines, so that the nodes near the
     corner, in units of h, are the same at every size (see CORNER_PATCH). Returns the
     nodes, the outline's segments and a point in the notch."""
-    from nonconvex import _distance, _inside, outline
+    from nonconvex import distance, inside, outline
 
     corners = np.array([[0, 0], [1, 0], [1, .5], [.5, .5], [.5, 1], [0, 1]], float)
     m = max(CORNER_PATCH + 1, round(0.5 / np.sqrt(0.75 / n)))
@@ -154,7 +154,7 @@ def lshape_nodes(n, seed=0):
     bnd, seg = outline(corners, h * (1 + SPACING_ROUNDOFF))
     i, j = np.meshgrid(np.arange(-m, m), np.arange(-m, m), indexing="ij")  # from the corner
     q = 0.5 + h * (np.stack([i, j], -1) + 0.5 + _corner_jitter(m, seed)).reshape(-1, 2)
-    q = q[_inside(corners, q) & (_distance(corners, q) > CLEARANCE * h)]
+    q = q[inside(corners, q) & (distance(corners, q) > CLEARANCE * h)]
     return np.concatenate([bnd, q]), seg, np.array([[.75, .75]])
 
 

@@ -71,17 +71,17 @@ def outline(corners, h):
     return p, np.column_stack([np.arange(n), (np.arange(n) + 1) % n])
 
 
-def _inside(corners, q):
+def inside(corners, q):
     """Even-odd rule: (m,) True for the points q inside the polygon."""
-    inside = np.zeros(q.shape[0], dtype=bool)
+    result = np.zeros(q.shape[0], dtype=bool)
     for a, b in zip(corners, np.roll(corners, -1, axis=0)):
         cross = (a[1] > q[:, 1]) != (b[1] > q[:, 1])
         xs = a[0] + (q[:, 1] - a[1]) * (b[0] - a[0]) / np.where(b[1] != a[1], b[1] - a[1], 1)
-        inside ^= cross & (q[:, 0] < xs)
-    return inside
+        result ^= cross & (q[:, 0] < xs)
+    return result
 
 
-def _distance(corners, q):
+def distance(corners, q):
     d = np.full(q.shape[0], np.inf)
     for a, b in zip(corners, np.roll(corners, -1, axis=0)):
         ab = b - a
@@ -107,7 +107,7 @@ def domain(name, n, seed=0):
     rng = np.random.default_rng(seed)
     g = np.arange(h / 2, 1, h)
     q = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2) + rng.uniform(-.3, .3, (g.size ** 2, 2)) * h
-    q = q[_inside(corners, q) & (_distance(corners, q) > 0.4 * h)]
+    q = q[inside(corners, q) & (distance(corners, q) > 0.4 * h)]
     return np.concatenate([bnd, q]), seg, np.array([hole])
 
 

@@ -20,15 +20,15 @@ triangulation, :mod:`skfem_nem.geometry.constrained`); empty by default.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import Delaunay, QhullError
 
 from .constrained import (check_segments, edge_keys, insert_segments, pair_keys,
                           recover_segments, segment_through, segments_of, sorted_segments,
                           split_key, triangle_edge_keys)
-from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, exact_hull, first_fold,
-                         grow_cavity, insert_vertex, lawson, locate_many, orientations,
-                         segment_key, split_in_three)
+from .delaunay2d import (adjacency, circumcircle_table, count_non_delaunay, grow_cavity,
+                         insert_vertex, lawson, locate_many, orientations, segment_key,
+                         split_in_three)
 from .predicates import incircle_sign, orient2d
+from .qhull_start import qhull_start
 from .stars import delaunay_ears, delete_rows, fan_of, link_star, star_of
 
 __all__ = ["Triangulation", "validate_nodes", "unused_nodes"]
@@ -133,7 +133,7 @@ class Triangulation:
         self.segment_keys = np.empty(0, dtype=np.int64)
         self.segment_source = np.empty(0, dtype=np.int64)
         if triangles is None:
-            T, N = self._qhull(p)
+            T, N = qhull_start(p)
         else:
             T = np.array(triangles, dtype=np.int64, copy=True, order="C")
             if T.ndim != 2 or T.shape[1] != 3:
@@ -170,95 +170,6 @@ class Triangulation:
             self._changed()
 
     # -- construction -------------------------------------------------------
-    @staticmethod
-    def _qhull(p):
-        ctr = p.mean(axis=0)
-        try:
-            d = Delaunay(p - ctr)
-        except QhullError as err:
-            o = np.empty(1)
-            q = p - ctr
-            i = int(np.argmax(np.abs(q).sum(1)))
-            # all collinear?  check exactly against the two extreme nodes
-            j = int(np.argmax(((q - q[i]) ** 2).sum(1)))
-            coll = True
-            for k in range(p.shape[0]):
-                orientations(p, np.array([[i, j, k]], dtype=np.int64), o)
-                if o[0] != 0.0:
-                    coll = False
-                    break
-            if coll:
-                raise ValueError(
-                    f"all {p.shape[0]} nodes are collinear (e.g. nodes {i} and {j} "
-                    f"span the line): no 2D triangulation exists") from None
-            raise ValueError(f"Qhull failed to triangulate the nodes: {err}") from None
-        # nodes Qhull dropped as "coplanar" (closer to another node than its
-        # tolerance) are inserted afterwards with exact predicates
-        T, N = Triangulation._checked(p, d.simplices, d.neighbors)
-        if T is None:
-            # Qhull folded triangles in a cluster of nearly coincident nodes:
-            # triangulate a thinned node set (all hull vertices kept), insert
-            # the rest exactly
-            T, N = Triangulation._thinned(p)
-        return T, N
-
-    @staticmethod
-    def _checked(p, simplices, neighbors):
-        """Orient Qhull's triangles CCW, drop flat hull triangles, and check
-        that the result is a valid (fold-free) triangulation; (None, None) if not."""
-        T = np.ascontiguousarray(simplices, dtype=np.int64)
-        N = np.ascontiguousarray(neighbors, dtype=np.int64)
-        orient = np.empty(T.shape[0])
-        orientations(p, T, orient)
-        keep = orient != 0.0
-        neg = orient < 0
-        T[neg] = T[neg][:, [0, 2, 1]]
-        N[neg] = N[neg][:, [0, 2, 1]]
-        if not keep.all():
-            # Qhull can leave flat triangles along collinear hull runs: drop them
-            # and rebuild the adjacency
-            T = np.ascontiguousarray(T[keep])
-            try:
-                N = adjacency(T, p.shape[0])
-            except ValueError:
-                return None, None
-        if first_fold(T, N) >= 0:
-            return None, None
-        return T, N
-
-    @staticmethod
-    def _thinned(p):
-        from scipy.spatial import cKDTree
-        n = p.shape[0]
-        on_hull = np.zeros(n, dtype=bool)
-        on_hull[exact_hull(p, np.lexsort((p[:, 1], p[:, 0])))] = True
-        delta = 1e-6 * np.hypot(*np.ptp(p, axis=0))
-        drop = np.zeros(n, dtype=bool)
-        for i, j in cKDTree(p).query_pairs(delta, output_type="ndarray"):
-            if drop[i] or drop[j]:
-                continue
-            if not on_hull[j]:
-                drop[j] = True
-            elif not on_hull[i]:
-                drop[i] = True
-        kept = np.flatnonzero(~drop)
-        ctr = p[kept].mean(axis=0)
-        d = Delaunay(p[kept] - ctr)
-        T, N = Triangulation._checked(p[kept], d.simplices, d.neighbors)
-        if T is None:
-            # folds Qhull makes along hull runs collinear to round-off: a fan over the
-            # exact hull's vertices; the caller inserts every other node exactly
-            return Triangulation._hull_fan(p)
-        return np.ascontiguousarray(kept[T]), N
-
-    @staticmethod
-    def _hull_fan(p):
-        """Triangles fanning out from one vertex of the exact convex hull (strictly convex
-        vertices only, counter-clockwise), and their neighbours."""
-        h = exact_hull(p, np.lexsort((p[:, 1], p[:, 0])))
-        T = np.ascontiguousarray(np.c_[np.full(h.size - 2, h[0]), h[1:-1], h[2:]])
-        return T, adjacency(T, p.shape[0])
-
     @classmethod
     def from_triangles(cls, nodes, triangles, make_delaunay: bool = True) -> "Triangulation":
         """Build from an existing triangulation of the nodes (see class docs)."""

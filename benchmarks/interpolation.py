@@ -20,8 +20,10 @@ queries.
 Franke's six test functions (Franke 1979, as in Renka and Brown's TOMS Algorithm 792 tests):
 100 data points in the unit square (Franke's own set, or ``--franke-points random``), max and
 mean errors on the 33 x 33 grid at the grid points inside the data's hull, every 2D method
-beside scipy's linear and Clough-Tocher interpolants. MetPy (optional: ``pip install metpy``
-or the ``bench`` extra):
+beside scipy's linear and Clough-Tocher interpolants, and the C1 methods from other
+gradients (the "direct" estimate, Clough-Tocher's, exact). The gradient estimates on the
+``--points`` set: seconds and errors of each, against scipy's global estimate.
+MetPy (optional: ``pip install metpy`` or the ``bench`` extra):
 its ``natural_neighbor_to_grid`` against ours on ``--metpy-points`` random points and a
 ``--metpy-grid`` square grid (MetPy takes about a minute for the defaults), and on a grid
 through lattice data.
@@ -38,7 +40,7 @@ from scipy.interpolate import (CloughTocher2DInterpolator, LinearNDInterpolator,
                                NearestNDInterpolator)
 from scipy.spatial import Delaunay
 
-from skfem_nem import NaturalNeighbourInterpolator, Triangulation
+from skfem_nem import NaturalNeighbourInterpolator, Triangulation, estimate_gradients
 
 
 def franke(x, y):
@@ -228,13 +230,15 @@ def franke_errors(p, k):
     values["scipy LinearND"] = LinearNDInterpolator(dl, f)(x, y)
     ct = CloughTocher2DInterpolator(dl, f)
     values["scipy CloughTocher2D"] = ct(x, y)
-    # the C1 interpolants from other gradients: Clough-Tocher's (scipy's global estimate,
-    # its interpolant's attribute ``grad``) and the exact ones (central differences, exact to
+    # the C1 interpolants (by default from the "global" gradient estimate) from other
+    # gradients: the "direct" estimate, Clough-Tocher's (scipy's global estimate, its
+    # interpolant's attribute ``grad``) and the exact ones (central differences, exact to
     # about 1e-10)
     h = 1e-6
     exact = np.c_[fk(p[:, 0] + h, p[:, 1]) - fk(p[:, 0] - h, p[:, 1]),
                   fk(p[:, 0], p[:, 1] + h) - fk(p[:, 0], p[:, 1] - h)] / (2 * h)
-    for label, g in (("Clough-Tocher's", getattr(ct, "grad", None)), ("exact", exact)):
+    for label, g in (("direct", estimate_gradients(tri, f, method="direct")),
+                     ("Clough-Tocher's", getattr(ct, "grad", None)), ("exact", exact)):
         for m in ("sibson1", "farin") if g is not None else ():
             values[f"{m}, {label} gradients"] = NaturalNeighbourInterpolator(
                 tri, f, method=m, gradients=np.reshape(g, (-1, 2)))(x, y)
@@ -257,6 +261,31 @@ def study_franke(which="franke"):
     for name in names:
         cells = [f"{e[name][0]:.2e} / {e[name][1]:.2e}" for e, _ in errors]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def gradient_costs(n, repeats):
+    """Seconds and errors of the gradient estimates at n random points (seed 0) of the unit
+    square, Franke's function: ``estimate_gradients``' methods and scipy's global estimate
+    (the set-up of ``CloughTocher2DInterpolator``, its default tolerance), all on one
+    prebuilt triangulation each (markdown lines)."""
+    p = cube_points(n, 2, seed=0)
+    f = franke(p[:, 0], p[:, 1])
+    h = 1e-6
+    exact = np.c_[franke(p[:, 0] + h, p[:, 1]) - franke(p[:, 0] - h, p[:, 1]),
+                  franke(p[:, 0], p[:, 1] + h) - franke(p[:, 0], p[:, 1] - h)] / (2 * h)
+    tri, dl = Triangulation(p), Delaunay(p)
+    estimate_gradients(Triangulation(p[:50]), f[:50], method="global")     # kernels loaded
+    lines = [f"Gradient estimates: {n:,} points, Franke's function", "",
+             "| estimate | seconds | rms error | max error |", "|---|---|---|---|"]
+    runs = [(f"estimate_gradients {m!r}", lambda m=m: estimate_gradients(tri, f, method=m))
+            for m in ("direct", "global")]
+    runs.append(("scipy CloughTocher2DInterpolator (global)",
+                 lambda: np.reshape(CloughTocher2DInterpolator(dl, f).grad, (-1, 2))))
+    for name, fn in runs:
+        g, t = best(fn, repeats)
+        e = np.abs(g - exact)
+        lines.append(f"| {name} | {t:.3f} | {np.sqrt(np.mean(e ** 2)):.2e} | {e.max():.2e} |")
     return lines
 
 
@@ -352,6 +381,7 @@ def main(argv=None):
     if not a.no_3d:
         lines += [""] + study_3d(a.points_3d, a.queries_3d, a.repeats)
     lines += [""] + study_franke(a.franke_points)
+    lines += [""] + gradient_costs(a.points, a.repeats)
     if not a.no_metpy:
         lines += [""] + compare_metpy(a.metpy_points, a.metpy_grid)
         lines += [""] + metpy_through_data()

@@ -20,7 +20,7 @@ from scipy.spatial import Delaunay
 
 from ..geometry.triangulation import Triangulation
 from .interp_farin import FarinInterpolant
-from .interp_gradients import fit_gradients, neighbour_matrix
+from .interp_gradients import nodal_gradients
 from .interp_hull import HullTest
 from .interp_input import (check_fill_value, check_gradients, check_values, query_points,
                            triangulated)
@@ -149,8 +149,7 @@ class NaturalNeighbourInterpolator:
         if self.method == "nearest":
             return NearestInterpolant(p, V)
         if gradients is None:
-            S = tri.triangles if self._d == 2 else tri.simplices
-            G = fit_gradients(p, V, neighbour_matrix(self._n, S))
+            G = nodal_gradients(p, tri, V)
         else:
             G = check_gradients(gradients, self._n, self._trailing, self._d, V.dtype)
             if self._scale is not None:

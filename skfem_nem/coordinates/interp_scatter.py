@@ -75,10 +75,11 @@ def _power(vx, vy, ox, oy):
 @njit(cache=True, inline="always", error_model="numpy")
 def _terms(g, qx, qy):
     """``(inside, A_a, A_b, A_c)``: whether the query (qx, qy) is in the circumcircle of the
-    triangle of geometry g (``R[t, :13]`` as scalars) and, if so, its terms
-    A_a = S D^2 / (e_ab e_ca) etc. (see the module's docstring). Scalars in and out: numba
-    inlines this into the loop as well as hand-written code (not so a function that writes
-    to arrays: the kernel ran at half the speed)."""
+    triangle of geometry g (``R[t, :16]`` as scalars) and, if so, its terms
+    A_a = S D^2 / (e_ab e_ca) etc. (see the module's docstring); NaN terms (a flag) for a
+    query on a hull edge by the package's rule (the area method gives it the edge's linear
+    weights). Scalars in and out: numba inlines this into the loop as well as hand-written
+    code (not so a function that writes to arrays: the kernel ran at half the speed)."""
     ax, ay = g[0] - qx, g[1] - qy
     D = _power(ax, ay, g[6], g[7])
     if not D > 0:
@@ -89,9 +90,10 @@ def _terms(g, qx, qy):
     if nb < NEAR_VERTEX * na or nc < NEAR_VERTEX * na:  # rare: a branch, not a select
         D = _power(bx, by, g[8], g[9]) if nb <= nc else _power(cx, cy, g[10], g[11])
     # e_ab has the same bits in both triangles at the edge ab
-    qab = D / (ax * by - ay * bx)
-    qbc = D / (bx * cy - by * cx)
-    qca = D / (cx * ay - cy * ax)
+    eab, ebc, eca = ax * by - ay * bx, bx * cy - by * cx, cx * ay - cy * ax
+    if eab <= g[13] or ebc <= g[14] or eca <= g[15]:
+        return True, np.nan, np.nan, np.nan
+    qab, qbc, qca = D / eab, D / ebc, D / eca
     return True, g[12] * qab * qca, g[12] * qab * qbc, g[12] * qbc * qca
 
 
@@ -105,8 +107,8 @@ def _triangle(R, t, Qs, start, lay, r0, r1, acc):
     x0, y0, hx, hy, nx, gm = lay
     # the record as scalars, loaded once (stores to acc could alias R)
     g = (R[t, 0], R[t, 1], R[t, 2], R[t, 3], R[t, 4], R[t, 5], R[t, 6], R[t, 7], R[t, 8],
-         R[t, 9], R[t, 10], R[t, 11], R[t, 12])
-    bx0, bx1, by0, by1 = R[t, 13], R[t, 14], R[t, 15], R[t, 16]
+         R[t, 9], R[t, 10], R[t, 11], R[t, 12], R[t, 13], R[t, 14], R[t, 15])
+    bx0, bx1, by0, by1 = R[t, 16], R[t, 17], R[t, 18], R[t, 19]
     r2 = g[6] * g[6] + g[7] * g[7]
     cx, cy = g[0] + g[6], g[1] + g[7]
     K = acc.shape[1] - 2

@@ -13,10 +13,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..geometry.hull import HULL_TOLERANCE
+
 __all__ = ["TriangleRecords", "bounds", "query_layout", "RECORD_VALUES"]
 
 # the values at a record's vertices a, b, c start at this column (see :func:`_records`)
-RECORD_VALUES = 17
+RECORD_VALUES = 20
 
 # records of triangles whose clipped disk is more than TALL cells (of the records' grid)
 # high are kept in a list of their own, so that the others of a band of queries are found
@@ -66,8 +68,10 @@ def _records(P, T, N, CC, V, lo, hi):
     empty, in the order of their boxes' centres on a grid of cells of ``side`` from ``lo``,
     about one triangle per cell, row by row (so that consecutive triangles meet the same
     queries): vertices a, b, c (6), the circumcentre minus each (6), S = cross(b - a, c - a),
-    the clipped box (4), the values at a, b, c (3 K). Rows ``rowstart[j]:rowstart[j + 1]``
-    are the grid row j; ``tall`` are the rows whose box is more than TALL cells high."""
+    for the edges ab, bc, ca the least cross(a - x, b - x) etc. of a query not on the hull
+    (HULL_TOLERANCE |ab|^2 at a hull edge, the package's rule, else -inf) (3), the clipped
+    box (4), the values at a, b, c (3 K). Rows ``rowstart[j]:rowstart[j + 1]`` are the grid
+    row j; ``tall`` are the rows whose box is more than TALL cells high."""
     nt, K = T.shape[0], V.shape[1]
     box = np.empty((nt, 4))
     nc = max(1, int(np.sqrt(nt)))
@@ -87,7 +91,7 @@ def _records(P, T, N, CC, V, lo, hi):
     for c in range(nc * nc):
         count[c + 1] += count[c]
     rowstart = count[::nc].copy()
-    R = np.empty((count[nc * nc], 17 + 3 * K))
+    R = np.empty((count[nc * nc], RECORD_VALUES + 3 * K))
     for t in range(nt):
         if cell[t] < 0:
             continue
@@ -100,11 +104,15 @@ def _records(P, T, N, CC, V, lo, hi):
             R[r, 6 + 2 * k] = CC[t, 0] + (P[a, 0] - P[v, 0])
             R[r, 7 + 2 * k] = CC[t, 1] + (P[a, 1] - P[v, 1])
             for j in range(K):
-                R[r, 17 + k * K + j] = V[v, j]
+                R[r, RECORD_VALUES + k * K + j] = V[v, j]
+            # edge k + 1, k + 2 of the record (ab, bc, ca) is opposite vertex k + 2
+            u, w = T[t, k], T[t, (k + 1) % 3]
+            R[r, 13 + k] = -np.inf if N[t, (k + 2) % 3] >= 0 else HULL_TOLERANCE * (
+                (P[w, 0] - P[u, 0]) ** 2 + (P[w, 1] - P[u, 1]) ** 2)
         R[r, 12] = ((R[r, 2] - R[r, 0]) * (R[r, 5] - R[r, 1])
                     - (R[r, 3] - R[r, 1]) * (R[r, 4] - R[r, 0]))
-        R[r, 13:17] = box[t]
-    tall = np.flatnonzero(R[:, 16] - R[:, 15] > TALL * side)
+        R[r, 16:20] = box[t]
+    tall = np.flatnonzero(R[:, 19] - R[:, 18] > TALL * side)
     return R, rowstart, tall, side
 
 
@@ -237,7 +245,7 @@ class TriangleRecords:
             P, triangulation.triangles, triangulation.neighbours,
             np.ascontiguousarray(triangulation.circumcircles[:, :2]),
             np.ascontiguousarray(V, dtype=np.float64), P.min(axis=0), P.max(axis=0))
-        self.Y = np.ascontiguousarray(self.R[:, 15:17])
+        self.Y = np.ascontiguousarray(self.R[:, 18:20])
 
     def count_near(self, q) -> int:
         """How many records the band lists of the points q (m, 2) look at: those of the

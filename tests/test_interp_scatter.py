@@ -233,6 +233,15 @@ def test_scope():
     assert scatter_applies(Triangulation.from_triangles(kite, [[0, 1, 2], [1, 0, 3]]))
 
 
+def test_no_queries_and_no_values():
+    p = square(30, 13)
+    tri = Triangulation(p)
+    v, bad = SibsonScatter(tri, np.ones((len(p), 2)))(np.empty((0, 2)))
+    assert v.shape == (0, 2) and bad.size == 0
+    v, bad = SibsonScatter(tri, np.ones((len(p), 0)))(np.full((5, 2), 0.5))
+    assert v.shape == (5, 0) and bad.size == 0
+
+
 # --------------------------------------------------------------------------
 # the interpolator
 # --------------------------------------------------------------------------

@@ -30,8 +30,9 @@ Flagged queries
     The terms grow as 1 / e_ab as x nears the line of the edge ab (within the circle: the
     edge itself, or a or b), and those of the two triangles at the edge cancel. Queries whose
     terms cancel too much (see ``DEN_MIN``), with a zero divisor (on an edge, at a data
-    point) or on the hull side of nothing are returned as flagged; the caller recomputes them
-    by the area method.
+    point) or on a hull edge by the package's rule (``HULL_TOLERANCE``: the area method
+    gives them the edge's linear weights) are returned as flagged; the caller recomputes
+    them by the area method.
 """
 from __future__ import annotations
 
@@ -40,7 +41,8 @@ import numpy as np
 from numba import njit, prange
 
 from ..geometry.triangulation import Triangulation
-from .interp_scatter_layout import RECORD_VALUES, TriangleRecords, query_layout
+from .interp_scatter_layout import (RECORD_VALUES, TALL, TriangleRecords, query_layout,
+                                    record_range)
 
 __all__ = ["SibsonScatter", "scatter_applies"]
 
@@ -73,12 +75,13 @@ def _power(vx, vy, ox, oy):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _terms(g, qx, qy):
+def _terms(g, qx, qy, hull):
     """``(inside, A_a, A_b, A_c)``: whether the query (qx, qy) is in the circumcircle of the
     triangle of geometry g (``R[t, :16]`` as scalars) and, if so, its terms
     A_a = S D^2 / (e_ab e_ca) etc. (see the module's docstring); NaN terms (a flag) for a
     query on a hull edge by the package's rule (the area method gives it the edge's linear
-    weights). Scalars in and out: numba inlines this into the loop as well as hand-written
+    weights) if the triangle has one (``hull``: a loop invariant, which the compiler takes
+    out of the loop). Scalars in and out: numba inlines this into the loop as well as hand-written
     code (not so a function that writes to arrays: the kernel ran at half the speed)."""
     ax, ay = g[0] - qx, g[1] - qy
     D = _power(ax, ay, g[6], g[7])
@@ -91,7 +94,7 @@ def _terms(g, qx, qy):
         D = _power(bx, by, g[8], g[9]) if nb <= nc else _power(cx, cy, g[10], g[11])
     # e_ab has the same bits in both triangles at the edge ab
     eab, ebc, eca = ax * by - ay * bx, bx * cy - by * cx, cx * ay - cy * ax
-    if eab <= g[13] or ebc <= g[14] or eca <= g[15]:
+    if hull and (eab <= g[13] or ebc <= g[14] or eca <= g[15]):
         return True, np.nan, np.nan, np.nan
     qab, qbc, qca = D / eab, D / ebc, D / eca
     return True, g[12] * qab * qca, g[12] * qab * qbc, g[12] * qbc * qca
@@ -109,6 +112,7 @@ def _triangle(R, t, Qs, start, lay, r0, r1, acc):
     g = (R[t, 0], R[t, 1], R[t, 2], R[t, 3], R[t, 4], R[t, 5], R[t, 6], R[t, 7], R[t, 8],
          R[t, 9], R[t, 10], R[t, 11], R[t, 12], R[t, 13], R[t, 14], R[t, 15])
     bx0, bx1, by0, by1 = R[t, 16], R[t, 17], R[t, 18], R[t, 19]
+    hull = g[13] > -np.inf or g[14] > -np.inf or g[15] > -np.inf
     r2 = g[6] * g[6] + g[7] * g[7]
     cx, cy = g[0] + g[6], g[1] + g[7]
     K = acc.shape[1] - 2
@@ -125,7 +129,7 @@ def _triangle(R, t, Qs, start, lay, r0, r1, acc):
         if c0 > c1:
             continue
         for s in range(start[r * nx + c0], start[r * nx + c1 + 1]):
-            inside, wa, wb, wc = _terms(g, Qs[s, 0], Qs[s, 1])
+            inside, wa, wb, wc = _terms(g, Qs[s, 0], Qs[s, 1], hull)
             if not inside:
                 continue
             if K == 1:  # scalar values (most calls): loaded once, out of the loop
@@ -153,16 +157,25 @@ def _finish(acc, s0, s1, order, out, bad):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _scatter(R, first, tris, Qs, start, lay, ny, rows, order, acc, out, bad):
-    """Every listed triangle onto the queries of its band, then their values (bands in
-    parallel: each writes only its own queries' rows of ``acc``, ``out`` and ``bad``)."""
-    nx = lay[4]
-    for bnd in prange(first.shape[0] - 1):
+def _scatter(R, rowstart, tall, ylo, side, Qs, start, lay, ny, rows, order, acc, out, bad):
+    """The triangles near each band of ``rows`` bucket rows onto its queries, then their
+    values (bands in parallel: each writes only its own queries' rows of ``acc``, ``out``
+    and ``bad``). A band looks at the tall records and those of the records' grid rows near
+    it; a triangle spanning bands is scattered by each onto its own rows."""
+    y0, hy, nx = lay[1], lay[3], lay[4]
+    ntall = tall.shape[0]
+    for bnd in prange(-(-ny // rows)):
         r0, r1 = bnd * rows, min(ny, (bnd + 1) * rows) - 1
         s0, s1 = start[r0 * nx], start[(r1 + 1) * nx]
         acc[s0:s1] = 0.0
-        for j in range(first[bnd], first[bnd + 1]):
-            _triangle(R, tris[j], Qs, start, lay, r0, r1, acc)
+        yb0, yb1 = y0 + r0 * hy, y0 + (r1 + 1) * hy
+        j0, j1 = record_range(rowstart, ylo, side, yb0, yb1)
+        for i in range(ntall + rowstart[j1] - rowstart[j0]):
+            t = tall[i] if i < ntall else rowstart[j0] + i - ntall
+            if R[t, 19] < yb0 or R[t, 18] > yb1 or \
+                    (i >= ntall and R[t, 19] - R[t, 18] > TALL * side):
+                continue    # not this band's, or listed among the tall ones
+            _triangle(R, t, Qs, start, lay, r0, r1, acc)
         _finish(acc, s0, s1, order, out, bad)
 
 
@@ -177,6 +190,7 @@ class SibsonScatter:
         V = np.c_[values.real, values.imag] if self.complex else values
         self.records = TriangleRecords(triangulation, V)
         self.width = V.shape[1]
+        self.dtype = complex if self.complex else float
 
     @property
     def bytes_per_query(self) -> int:
@@ -192,16 +206,17 @@ class SibsonScatter:
         (m, K), and the indices of the queries it leaves to the caller (their rows are
         NaN)."""
         q = np.ascontiguousarray(q, dtype=np.float64)
+        if not (q.shape[0] and self.width):
+            return np.zeros((q.shape[0], self.K), self.dtype), np.empty(0, np.int64)
         Qs, start, order, lay, ny = query_layout(q)
-        nbands = max(1, min(ny, BANDS_PER_THREAD * numba.get_num_threads()))
-        rows = -(-ny // nbands)
-        first, tris = self.records.band_lists(lay[1], lay[3], ny, rows, -(-ny // rows))
+        rows = -(-ny // max(1, min(ny, BANDS_PER_THREAD * numba.get_num_threads())))
         m = q.shape[0]
         acc, out = np.empty((m, self.width + 2)), np.empty((m, self.width))
         bad = np.empty(m, np.bool_)
         with numba.parallel_chunksize(1):
-            _scatter(self.records.R, first, tris, Qs, start, lay, ny, rows, order, acc, out,
-                     bad)
+            rec = self.records
+            _scatter(rec.R, rec.rowstart, rec.tall, rec.ylo, rec.side, Qs, start, lay, ny,
+                     rows, order, acc, out, bad)
         if self.complex:
             out = out[:, :self.K] + 1j * out[:, self.K:]
         return out, np.flatnonzero(bad)

@@ -5,8 +5,8 @@ over the queries in its circumcircle. The triangles are stored as records (geome
 and the box of the disk's part that can hold queries), in the order of a grid of about one
 triangle per cell, row by row; the queries are sorted into a bucket grid of about one query
 per bucket (a regular grid of queries in ``np.meshgrid``'s order is its own and is not
-sorted), whose rows the threads take in bands, each band with the list of the triangles
-that reach it.
+sorted), whose rows the threads take in bands, each band looking at the triangles of the
+records' grid rows near it.
 """
 from __future__ import annotations
 
@@ -15,7 +15,8 @@ from numba import njit
 
 from ..geometry.hull import HULL_TOLERANCE
 
-__all__ = ["TriangleRecords", "bounds", "query_layout", "RECORD_VALUES"]
+__all__ = ["TriangleRecords", "bounds", "query_layout", "record_range", "RECORD_VALUES",
+           "TALL"]
 
 # the values at a record's vertices a, b, c start at this column (see :func:`_records`)
 RECORD_VALUES = 20
@@ -168,38 +169,6 @@ def _regular_grid(Q, tol):
 
 
 @njit(cache=True)
-def _band_lists(Y, rowstart, tall, ylo, side, y0, hy, ny, rows, nbands):
-    """The triangles (rows of the records, whose clipped boxes span Y[t, 0] <= y <= Y[t, 1])
-    whose clipped disk meets each band of ``rows`` bucket rows (of height hy from y0), as CSR
-    (``first``, ``tris``); a triangle spanning bands is in each. Only the tall ones and those
-    of the records' grid rows near the queries' are looked at."""
-    nc = rowstart.shape[0] - 1
-    j0 = min(nc, max(0, int((y0 - ylo) / side) - TALL - 1))
-    j1 = min(nc, max(0, int((y0 + ny * hy - ylo) / side) + TALL + 2))
-    ntall = tall.shape[0]
-    first = np.zeros(nbands + 1, np.int64)
-    for pass_ in range(2):
-        tris = np.empty(first[nbands], np.int64)
-        fill = first[:-1].copy()
-        for i in range(ntall + rowstart[j1] - rowstart[j0]):
-            t = tall[i] if i < ntall else rowstart[j0] + i - ntall
-            if i >= ntall and Y[t, 1] - Y[t, 0] > TALL * side:
-                continue  # listed among the tall ones
-            r0 = max(0, int((Y[t, 0] - y0) / hy))
-            r1 = min(ny - 1, int((Y[t, 1] - y0) / hy))
-            for b in range(r0 // rows, min(nbands - 1, r1 // rows) + 1):
-                if pass_ == 0:
-                    first[b + 1] += 1
-                else:
-                    tris[fill[b]] = t
-                    fill[b] += 1
-        if pass_ == 0:
-            for b in range(nbands):
-                first[b + 1] += first[b]
-    return first, tris
-
-
-@njit(cache=True)
 def bounds(Q):
     """(xmin, ymin, xmax, ymax) of the points Q (m, 2), m > 0."""
     x0, y0, x1, y1 = Q[0, 0], Q[0, 1], Q[0, 0], Q[0, 1]
@@ -207,7 +176,6 @@ def bounds(Q):
         x0, x1 = min(x0, Q[i, 0]), max(x1, Q[i, 0])
         y0, y1 = min(y0, Q[i, 1]), max(y1, Q[i, 1])
     return x0, y0, x1, y1
-
 
 
 def query_layout(q):
@@ -232,11 +200,21 @@ def query_layout(q):
     return Qs, start, order, (x0, y0, h, h, nx, 0.0), ny
 
 
+@njit(cache=True)
+def record_range(rowstart, ylo, side, y0, y1):
+    """``(j0, j1)``: the records' grid rows j0 <= j < j1 holding every record, not a tall
+    one, whose box meets y0 <= y <= y1 (its centre is within TALL / 2 cells of the box's
+    ends; a cell more for round-off)."""
+    nc = rowstart.shape[0] - 1
+    j0 = min(nc, max(0, int((y0 - ylo) / side) - TALL - 1))
+    j1 = min(nc, max(0, int((y1 - ylo) / side) + TALL + 2))
+    return j0, j1
+
+
 class TriangleRecords:
     """The records of the triangles of a :class:`~skfem_nem.Triangulation` with the values V
-    (n, K) (real) at its nodes: ``R`` (see :func:`_records`), their boxes' y ranges ``Y``
-    (compact, for the band lists) and the records' grid (``rowstart``, ``tall``, ``side``
-    from ``ylo``)."""
+    (n, K) (real) at its nodes: ``R`` (see :func:`_records`) and their grid (``rowstart``,
+    ``tall``, ``side`` from ``ylo``)."""
 
     def __init__(self, triangulation, V):
         P = triangulation.nodes
@@ -245,18 +223,10 @@ class TriangleRecords:
             P, triangulation.triangles, triangulation.neighbours,
             np.ascontiguousarray(triangulation.circumcircles[:, :2]),
             np.ascontiguousarray(V, dtype=np.float64), P.min(axis=0), P.max(axis=0))
-        self.Y = np.ascontiguousarray(self.R[:, 18:20])
 
     def count_near(self, q) -> int:
-        """How many records the band lists of the points q (m, 2) look at: those of the
-        grid rows their y range spans (and the tall ones)."""
+        """How many records the scatter looks at for the points q (m, 2): those of the grid
+        rows near their y range (see :func:`record_range`) and the tall ones."""
         _, lo, _, hi = bounds(q)
-        nc = self.rowstart.shape[0] - 1
-        j0, j1 = (min(nc, max(0, int((y - self.ylo) / self.side) + k))
-                  for y, k in ((lo, -TALL - 1), (hi, TALL + 2)))
+        j0, j1 = record_range(self.rowstart, self.ylo, self.side, lo, hi)
         return int(self.rowstart[j1] - self.rowstart[j0]) + self.tall.size
-
-    def band_lists(self, y0, hy, ny, rows, nbands):
-        """The records meeting each band of ``rows`` bucket rows (see :func:`_band_lists`)."""
-        return _band_lists(self.Y, self.rowstart, self.tall, self.ylo, self.side, y0, hy, ny,
-                           rows, nbands)

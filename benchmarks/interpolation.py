@@ -29,7 +29,7 @@ its ``natural_neighbor_to_grid`` against ours on ``--metpy-points`` random point
 through lattice data.
 
     python benchmarks/interpolation.py [--points 100000] [--grid 1000]
-        [--points-3d 20000] [--queries-3d 100000] [--repeats 2] [--no-3d]
+        [--points-3d 20000] [--queries-3d 100000] [--repeats 2] [--no-3d] [--scatter-only]
         [--franke-points franke|random] [--metpy-points 10000] [--metpy-grid 100] [--no-metpy]
 """
 import argparse
@@ -360,6 +360,55 @@ def metpy_through_data(k=11, grid=21):
             f"gives NaN at {ours_nan}"]
 
 
+def study_scatter(n, grid, repeats):
+    """Sibson's values on the grid, by the scatter over the triangles (the default for large
+    2D batches) and by the per-query coordinates it replaced, against scipy's
+    LinearNDInterpolator: wall and CPU seconds of warm calls (best of ``repeats``), the first
+    call apart (it builds the scatter's triangle records), the kernels' one-time load or
+    compilation apart."""
+    import numba
+    from skfem_nem.coordinates import interp_natural
+    load = timed(lambda: NaturalNeighbourInterpolator(cube_points(60, 2, 1), np.ones(60))(
+        *np.meshgrid(np.linspace(0.1, 0.9, 110), np.linspace(0.1, 0.9, 100))))[1]
+    p = cube_points(n, 2, seed=0)
+    f = franke(p[:, 0], p[:, 1])
+    x, y = np.meshgrid(np.linspace(0, 1, grid), np.linspace(0, 1, grid))
+    tri, t_tri = timed(lambda: Triangulation(p))
+    dl, t_qhull = timed(lambda: Delaunay(p))
+
+    def cpu_best(fn):
+        c = np.inf
+        for _ in range(repeats):
+            c0 = time.process_time()
+            fn()
+            c = min(c, time.process_time() - c0)
+        return c
+
+    def measure(make, warm=False):
+        itp, tb = timed(make)
+        if warm:        # scipy's first call sets up its point location (excluded, as above)
+            itp(x[:2, :2], y[:2, :2])
+        v, first = timed(lambda: itp(x, y))
+        _, tc = best(lambda: itp(x, y), repeats)
+        return f"{tb:.3f} | {first:.3f} | {tc:.3f} | {cpu_best(lambda: itp(x, y)):.3f}", v
+
+    ours, v = measure(lambda: NaturalNeighbourInterpolator(tri, f))
+    scipy_row, _ = measure(lambda: LinearNDInterpolator(dl, f), warm=True)
+    saved = interp_natural.SCATTER_MIN
+    interp_natural.SCATTER_MIN = 1 << 62          # every query by its coordinates
+    try:
+        gather, vg = measure(lambda: NaturalNeighbourInterpolator(tri, f))
+    finally:
+        interp_natural.SCATTER_MIN = saved
+    return [f"Sibson's values, {n:,} points to a {grid} x {grid} grid ({numba.get_num_threads()}"
+            f" numba threads; kernels' first load or compilation {load:.2f} s; triangulation "
+            f"ours {t_tri:.3f} s, Qhull {t_qhull:.3f} s)", "",
+            "| | build s | first call s | call s | call CPU s |", "|---|---|---|---|---|",
+            f"| sibson (scatter) | {ours} |", f"| sibson (coordinates per query) | {gather} |",
+            f"| scipy LinearNDInterpolator | {scipy_row} |", "",
+            f"(scatter against coordinates: max difference {np.nanmax(np.abs(v - vg)):.1e})"]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=100_000)
@@ -373,11 +422,17 @@ def main(argv=None):
     ap.add_argument("--metpy-points", type=int, default=10_000)
     ap.add_argument("--metpy-grid", type=int, default=100)
     ap.add_argument("--no-metpy", action="store_true", help="skip the MetPy comparison")
+    ap.add_argument("--scatter-only", action="store_true",
+                    help="only the table of Sibson's values by the scatter against scipy")
     a = ap.parse_args(argv)
+    if a.scatter_only:
+        print("\n".join(study_scatter(a.points, a.grid, a.repeats)))
+        return
     t0 = time.perf_counter()
     load = kernel_load()
     lines = [f"One-time numba kernel load (first calls on a small set): {load:.2f} s", ""]
     lines += study_2d(a.points, a.grid, a.repeats)
+    lines += [""] + study_scatter(a.points, a.grid, a.repeats)
     if not a.no_3d:
         lines += [""] + study_3d(a.points_3d, a.queries_3d, a.repeats)
     lines += [""] + study_franke(a.franke_points)

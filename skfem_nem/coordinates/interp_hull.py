@@ -64,11 +64,13 @@ class HullTest:
         hull) and their signed distances beyond it (<= 0, ~0 on the hull)."""
         dist = self.distance(q)
         rows = np.flatnonzero(dist <= self.tol)
-        pts = q[rows]
-        near = np.flatnonzero(dist[rows] > 0.0)
+        every = rows.size == q.shape[0]
+        pts, dist = (q, dist) if every else (q[rows], dist[rows])
+        near = np.flatnonzero(dist > 0.0)
         if near.size:
+            pts = pts.copy() if every else pts
             pts[near] = self._onto_hull(pts[near])
-        return rows, pts, dist[rows]
+        return rows, pts, dist
 
     def _onto_hull(self, q: np.ndarray) -> np.ndarray:
         """Points just outside moved onto the hull: projected onto the plane they are

@@ -111,7 +111,9 @@ def query_points(args, d: int) -> np.ndarray:
                          f"coordinate arrays; got {len(args)} arguments")
     if xi.dtype.kind not in "biuf":
         raise ValueError(f"query points must be real numbers, got dtype {xi.dtype}")
-    xi = xi.astype(np.float64)
+    xi = xi.astype(np.float64, copy=len(args) == 1)     # stacked: our own array already
+    if np.isfinite(xi).all():
+        return xi
     bad = ~np.isfinite(xi).all(axis=-1)
     if bad.any():
         first = tuple(int(k) for k in np.argwhere(bad)[0])

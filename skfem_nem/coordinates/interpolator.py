@@ -74,7 +74,9 @@ class NaturalNeighbourInterpolator:
         (with respect to the original, unscaled coordinates). Only for those methods.
     chunk
         Queries are evaluated in chunks of this many points, so that memory stays bounded
-        for any number of queries.
+        for any number of queries. (Sibson's values of a large 2D batch, which need less
+        memory per query than the coordinates, go in chunks of up to ~128 MB of work space
+        if that is more points.)
 
     Attributes
     ----------
@@ -143,7 +145,7 @@ class NaturalNeighbourInterpolator:
     def _method(self, p, tri, V, gradients):
         """The evaluator of the method on points inside the hull (rescaled coordinates)."""
         if self.method in ("sibson", "laplace"):
-            return NaturalInterpolant(tri, V, self.method)
+            return NaturalInterpolant(tri, V, self.method, self._chunk)
         if self.method == "linear":
             return LinearInterpolant(p, tri, V)
         if self.method == "nearest":
@@ -189,19 +191,24 @@ class NaturalNeighbourInterpolator:
         m, K = q.shape[0], int(np.prod(self._trailing, dtype=np.int64))
         out = np.full((m, K), self.fill_value, dtype=self._dtype)
         grad = np.full((m, K, self._d), np.nan, dtype=self._dtype) if gradient else None
-        for c0 in range(0, m, self._chunk):
-            qc = q[c0:c0 + self._chunk]
+        step = self._chunk
+        if not gradient and isinstance(self._evaluate, NaturalInterpolant):
+            step = self._evaluate.chunk_size(m)
+        for c0 in range(0, m, step):
+            qc = q[c0:c0 + step]
             if self._scale is not None:
                 qc = (qc - self._offset) / self._scale
             rows, pts, dist = self._hull.inside(qc)
             if not rows.size:
                 continue
             v, g = self._evaluate(pts, gradient)
-            out[c0 + rows] = v
+            # all inside: a slice, not a fancy index (a copy less of a large batch)
+            at = slice(c0, c0 + rows.size) if rows.size == qc.shape[0] else c0 + rows
+            out[at] = v
             if gradient:
                 if self._d == 3 and self.method not in ("linear", "nearest"):
                     g[dist > -NEAR_HULL_3D * self._hull.diagonal] = np.nan
-                grad[c0 + rows] = g if self._scale is None else g / self._scale
+                grad[at] = g if self._scale is None else g / self._scale
         return out, grad
 
     def __repr__(self) -> str:

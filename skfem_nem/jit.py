@@ -18,7 +18,9 @@ def serial_twin(kernel, **options):
     entry (whichever compiled first wins). The twin is the same code under
     the qualified name ``<name>_serial``. ``options`` go to ``njit``.
     """
-    f = kernel.py_func
+    f = getattr(kernel, "py_func", None)
+    if f is None:  # NUMBA_DISABLE_JIT=1 (debugging in Python): the kernel is plain Python
+        return kernel
     g = types.FunctionType(f.__code__, f.__globals__, f.__name__ + "_serial",
                            f.__defaults__, f.__closure__)
     g.__qualname__ = f.__qualname__ + "_serial"

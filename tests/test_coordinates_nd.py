@@ -151,3 +151,67 @@ def test_scipy_delaunay_in_2d_works_with_both_methods():
     A = sibson_coordinates(tri, q)
     B = sibson_coordinates(tri, q, method="lasserre")
     assert abs(A - B).max() < 1e-12 and abs(A - sibson_coordinates(p, q)).max() == 0.0
+
+
+def _lattice_wall_box():
+    """Random nodes in the unit cube whose bottom face is a 6 x 6 lattice (its squares'
+    corners co-circular: Qhull spans flat tetrahedra of four of them, on the wall)."""
+    from skfem_nem import delaunay_mesh
+    from skfem_nem.geometry import box_nodes_3d
+    p = box_nodes_3d(150, (1, 1, 1), seed=0, boundary_spacing=0.25)
+    g = np.linspace(0, 1, 6)
+    X, Y = np.meshgrid(g, g)
+    return delaunay_mesh(np.vstack([p[p[:, 2] > 0], np.c_[X.ravel(), Y.ravel(), 0 * X.ravel()]]))
+
+
+def test_flat_tetrahedra_in_a_hull_plane_are_sealed_off(monkeypatch):
+    """The flat tetrahedra of wall nodes are found (exactly those with their four nodes on
+    the wall), none of a cube lattice's interior flat ones is, and cutting them off the
+    adjacency leaves every coordinate and gradient as it was (the region no longer grows
+    across the wall, which is all that changes)."""
+    import skfem_nem.coordinates.lasserre as lasserre
+    from skfem_nem.geometry.delaunay_nd import hull_plane_flats
+    from skfem_nem.geometry.meshes import adopt
+    tri = adopt(_lattice_wall_box(), "lasserre")
+    p, S = tri.points, tri.simplices
+    found = hull_plane_flats(p, S, np.unique(tri.convex_hull))
+    vol = np.abs(np.linalg.det(p[S[:, 1:]] - p[S[:, :1]]))
+    on_wall = np.flatnonzero((vol == 0) & (p[S][:, :, 2] == 0).all(axis=1))
+    assert on_wall.size > 0 and np.array_equal(np.sort(found), on_wall)
+    g = np.linspace(0, 1, 4)
+    lattice = np.array(np.meshgrid(g, g, g)).reshape(3, -1).T
+    d = Delaunay(lattice)
+    L = lattice[d.simplices]
+    flat = np.flatnonzero(np.abs(np.linalg.det(L[:, 1:] - L[:, :1])) < 1e-12)
+    flagged = hull_plane_flats(lattice, d.simplices, np.unique(d.convex_hull))
+    V = lattice[d.simplices[flagged]]                    # (k, 4, 3)
+    on_a_face = ((V == 0).all(axis=1) | (V == 1).all(axis=1)).any(axis=1)
+    assert on_a_face.all() and 0 < flagged.size < flat.size   # the others cross the cube
+    q = np.random.default_rng(1).random((600, 3))
+    q[:200, 2] *= 0.05                                   # many next to the lattice wall
+    A, dA = natural_neighbour_coordinates(tri, q, gradient=True, method="lasserre")
+    monkeypatch.setattr(lasserre, "sealed_neighbours",
+                        lambda p, tri: np.array(tri.neighbors, dtype=np.int64))
+    B, dB = natural_neighbour_coordinates(tri, q, gradient=True, method="lasserre")
+    assert abs(A - B).max() < 1e-13
+    assert max(abs(a - b).max() for a, b in zip(dA, dB)) < 1e-10
+
+
+def test_a_wall_of_flat_tetrahedra_does_not_stall_the_3d_basis():
+    """The nodes of a 3D sinking plate pressed onto the bottom wall (1,900 nodes, 163 of
+    them on the wall): Qhull makes 308 flat tetrahedra there. The conflict regions of the
+    smoothed basis' points grew across them into co-spherical clusters whose cells took the
+    general recursion, and the basis took hours; with them sealed off it is built, and its
+    values are a partition of unity with linear precision away from the wall."""
+    from skfem_nem import ElementNaturalNeighbour, NaturalNeighbourBasis, delaunay_mesh
+    from pathlib import Path
+    nodes = np.load(Path(__file__).parent / "data" / "plate3d_wall_nodes.npz")["nodes"]
+    m = delaunay_mesh(nodes)
+    P = m.p.T[m.t.T]
+    assert np.count_nonzero(np.abs(np.linalg.det(P[:, 1:] - P[:, :1])) == 0) >= 300
+    b = NaturalNeighbourBasis(m, ElementNaturalNeighbour())
+    Phi = b.values_matrix
+    x = b.global_coordinates().value.reshape(3, -1).T
+    assert abs(Phi.sum(axis=1).A1 - 1).max() < 1e-12
+    away = x[:, 2] > 1e-6
+    assert abs(Phi @ m.p.T - x)[away].max() < 1e-10

@@ -54,7 +54,8 @@ from scipy.spatial import cKDTree
 from .batch import check_queries, compress, index_dtype, raise_outside, raise_undefined
 from ..geometry.hull import FACET_PLANE, HULL_TOLERANCE
 from ..geometry.status import ON_HULL, OUTSIDE, OVERFLOW, UNBOUNDED
-from ..geometry.delaunay_nd import check_delaunay, check_nodes, delaunay_of, triangulate
+from ..geometry.delaunay_nd import (check_delaunay, check_nodes, delaunay_of, sealed_neighbours,
+                                    triangulate)
 from ..geometry.nodesets import morton_order
 from ..geometry.simplices_nd import FLAT, circumcentre_cache, facet_planes
 from .lasserre_query import query_batch, query_batch_serial
@@ -258,7 +259,7 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
         tri = triangulate(p)
     m, n = q.shape[0], p.shape[0]
     S = np.ascontiguousarray(tri.simplices, dtype=np.int64)
-    NB = np.ascontiguousarray(tri.neighbors, dtype=np.int64)
+    NB = sealed_neighbours(p, tri)
     # start each walk from a simplex at the nearest node (scipy's find_simplex
     # is avoided: its first call computes barycentric transforms through
     # LAPACK, which is very slow with a multithreaded BLAS)

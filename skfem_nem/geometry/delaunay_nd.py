@@ -4,15 +4,26 @@ Lasserre's volume recursion (:mod:`skfem_nem.coordinates.lasserre`) and the Dela
 (:mod:`skfem_nem.geometry.meshes`) need a triangulation in which every node is a vertex: Qhull
 silently drops nodes that nearly coincide, which would leave a node without a basis function.
 This module builds it and says which node is lost, rather than letting that surface later.
+
+Qhull's triangulated output (``Qt``) also keeps flat simplices of co-spherical nodes. Those
+that lie in a plane of the hull (nodes on a box's wall, four of them co-circular) are no part
+of the domain: :func:`sealed_neighbours` cuts them off the adjacency, so that a query inside
+sees their faces as hull facets rather than growing its conflict region across the wall.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
+from .hull import FACET_PLANE
+from .simplices_nd import FLAT
 from .triangulation import unused_nodes, validate_nodes
 
-__all__ = ["delaunay_of", "check_nodes", "triangulate", "check_delaunay"]
+# flat simplices tested against the hull nodes in blocks of this many (bounds the memory)
+_PLANE_BLOCK = 256
+
+__all__ = ["delaunay_of", "check_nodes", "triangulate", "check_delaunay", "sealed_neighbours",
+           "hull_plane_flats"]
 
 
 def check_nodes(nodes):
@@ -59,3 +70,37 @@ def delaunay_of(p) -> Delaunay:
     tri = triangulate(p)
     check_delaunay(tri, p)
     return tri
+
+
+def hull_plane_flats(p: np.ndarray, simplices: np.ndarray, hull_nodes: np.ndarray) -> np.ndarray:
+    """The flat simplices (volume determinant below :data:`FLAT` times the product of the edges
+    from the first vertex, as the kernels decide) whose nodes lie in a supporting plane of the
+    hull: every hull node on one side of it, within :data:`FACET_PLANE` times the diameter.
+    ``hull_nodes``: the hull's vertices (Qhull's, which leave out nodes inside a hull facet:
+    a plane is a supporting one if the extreme nodes are on one side)."""
+    S = np.asarray(simplices)
+    E = p[S[:, 1:]] - p[S[:, :1]]                            # (ns, d, d) edges from vertex 0
+    scale = np.prod(np.linalg.norm(E, axis=2), axis=1)
+    flat = np.flatnonzero(np.abs(np.linalg.det(E)) <= FLAT * scale)
+    if flat.size == 0:
+        return flat
+    tol = FACET_PLANE * np.ptp(p, axis=0).max()
+    X = p[S[flat]] - p[S[flat]].mean(axis=1, keepdims=True)
+    normal = np.linalg.svd(X)[2][:, -1]                      # (k, d) the planes' normals
+    keep = np.zeros(flat.size, dtype=bool)
+    H = p[hull_nodes]
+    for b in range(0, flat.size, _PLANE_BLOCK):
+        blk = slice(b, b + _PLANE_BLOCK)
+        h = H @ normal[blk].T - np.einsum("kd,kd->k", p[S[flat[blk], 0]], normal[blk])
+        keep[blk] = (h.min(axis=0) >= -tol) | (h.max(axis=0) <= tol)
+    return flat[keep]
+
+
+def sealed_neighbours(p: np.ndarray, tri) -> np.ndarray:
+    """``tri.neighbors`` with the flat simplices in hull planes (:func:`hull_plane_flats`)
+    replaced by -1: their neighbours' faces there are hull facets."""
+    NB = np.array(tri.neighbors, dtype=np.int64)
+    flats = hull_plane_flats(p, tri.simplices, np.unique(np.asarray(tri.convex_hull)))
+    if flats.size:
+        NB[np.isin(NB, flats)] = -1
+    return NB

@@ -215,3 +215,16 @@ def test_a_wall_of_flat_tetrahedra_does_not_stall_the_3d_basis():
     assert abs(Phi.sum(axis=1).A1 - 1).max() < 1e-12
     away = x[:, 2] > 1e-6
     assert abs(Phi @ m.p.T - x)[away].max() < 1e-10
+
+
+def test_points_on_a_wall_stay_inside_next_to_nearly_flat_tetrahedra():
+    """The same plate two steps on: nodes 1e-11 above the bottom wall make tetrahedra nearly,
+    not exactly, in its plane. Sealed off, their neighbours' faces would be hull facets tilted
+    off the wall, and points on the wall (a figure's slice) came out outside the hull; only
+    exactly planar ones are sealed, and the wall's points interpolate."""
+    from pathlib import Path
+    nodes = np.load(Path(__file__).parent / "data" / "plate3d_wall_nodes.npz")["pressed"]
+    A, B = np.meshgrid(np.linspace(0, 4, 120), np.linspace(0, 1, 8))
+    x = np.c_[A.ravel(), np.ones(A.size), B.ravel()]      # the slice y = 1, bottom row z = 0
+    Phi = sibson_coordinates(nodes, x)
+    assert abs(Phi.sum(axis=1).A1 - 1).max() < 1e-12 and abs(Phi @ nodes - x).max() < 1e-10

@@ -6,8 +6,8 @@ silently drops nodes that nearly coincide, which would leave a node without a ba
 This module builds it and says which node is lost, rather than letting that surface later.
 
 Qhull's triangulated output (``Qt``) also keeps flat simplices of co-spherical nodes. Those
-that lie in a plane of the hull (nodes on a box's wall, four of them co-circular) are no part
-of the domain: :func:`sealed_neighbours` cuts them off the adjacency, so that a query inside
+that lie in a plane of the hull (3D: nodes on a box's wall, four of them co-circular) are no
+part of the domain: :func:`sealed_neighbours` cuts them off the adjacency, so that a query inside
 sees their faces as hull facets rather than growing its conflict region across the wall.
 """
 from __future__ import annotations
@@ -73,20 +73,32 @@ def delaunay_of(p) -> Delaunay:
 
 
 def hull_plane_flats(p: np.ndarray, simplices: np.ndarray, hull_nodes: np.ndarray) -> np.ndarray:
-    """The flat simplices (volume determinant below :data:`FLAT` times the product of the edges
-    from the first vertex, as the kernels decide) whose nodes lie in a supporting plane of the
-    hull: every hull node on one side of it, within :data:`FACET_PLANE` times the diameter.
-    ``hull_nodes``: the hull's vertices (Qhull's, which leave out nodes inside a hull facet:
-    a plane is a supporting one if the extreme nodes are on one side)."""
+    """The flat tetrahedra whose four nodes lie exactly (in floating point) in one plane that
+    supports the hull: every hull node on one side of it, within :data:`FACET_PLANE` times the
+    diameter. ``hull_nodes``: the hull's vertices (Qhull's, which leave out nodes inside a hull
+    facet; a plane supports the hull if the extreme nodes are on one side of it).
+
+    Exactly: the wall nodes a free-slip wall keeps (on ``z = 0``, say) are in its plane to
+    the last bit, and then so are the cross products and residuals below. A tetrahedron only
+    nearly in a wall's plane (a node 1e-11 above it) is left in: sealing it would make its
+    neighbour's face a hull facet tilted off the wall, behind which points on the wall would
+    be outside. Only in 3D (an empty array otherwise)."""
     S = np.asarray(simplices)
-    E = p[S[:, 1:]] - p[S[:, :1]]                            # (ns, d, d) edges from vertex 0
+    if p.shape[1] != 3:
+        return np.zeros(0, dtype=np.int64)
+    E = p[S[:, 1:]] - p[S[:, :1]]                            # (ns, 3, 3) edges from vertex 0
     scale = np.prod(np.linalg.norm(E, axis=2), axis=1)
     flat = np.flatnonzero(np.abs(np.linalg.det(E)) <= FLAT * scale)
     if flat.size == 0:
         return flat
+    E = E[flat]
+    crosses = np.stack([np.cross(E[:, i], E[:, j]) for i, j in ((0, 1), (0, 2), (1, 2))], 1)
+    pick = np.argmax(np.linalg.norm(crosses, axis=2), axis=1)
+    normal = crosses[np.arange(flat.size), pick]             # (k, 3) exact for a wall's nodes
+    planar = (np.einsum("kid,kd->ki", E, normal) == 0.0).all(axis=1)
+    flat, normal = flat[planar], normal[planar]
+    normal = normal / np.linalg.norm(normal, axis=1, keepdims=True)
     tol = FACET_PLANE * np.ptp(p, axis=0).max()
-    X = p[S[flat]] - p[S[flat]].mean(axis=1, keepdims=True)
-    normal = np.linalg.svd(X)[2][:, -1]                      # (k, d) the planes' normals
     keep = np.zeros(flat.size, dtype=bool)
     H = p[hull_nodes]
     for b in range(0, flat.size, _PLANE_BLOCK):

@@ -19,13 +19,15 @@ Problems (the error is the one each docs page reports):
   nodes): relative energy error;
 * Stokes 2D, Donea and Huerta's flow (no slip), NEM pair against Taylor-Hood: velocity L2;
 * Poisson 3D, ``examples/ex06_poisson_3d.py``: H1-seminorm error;
+* linear elasticity 3D on the unit cube, a smooth displacement vanishing on its faces
+  (``elasticity_3d``): H1-seminorm error;
 * Stokes 3D, ``Manufactured3D`` (viscosity ratio 20), NEM pair against Taylor-Hood:
   relative velocity L2.
 
 The tables of ``docs/choosing.md``.
 
     python benchmarks/choosing.py [--repeat 2] [--only poisson lshape elasticity stokes
-        poisson3d stokes3d]
+        poisson3d elasticity3d stokes3d]
 
 About 4 minutes on two cores (P1 has no stable Stokes pair here: "-").
 """
@@ -261,6 +263,63 @@ def stokes_3d(repeat, sizes=(300, 1000, 3000), th_sizes=(100, 300)):
     return out
 
 
+def _cube_field(x):
+    """s = sin(pi x) sin(pi y) sin(pi z), zero on the unit cube's faces, and its gradient."""
+    S = np.sin(np.pi * x)
+    C = np.cos(np.pi * x)
+    s = S[0] * S[1] * S[2]
+    g = np.pi * np.array([C[0] * S[1] * S[2], S[0] * C[1] * S[2], S[0] * S[1] * C[2]])
+    return s, g
+
+
+def _cube_force(x, lam, mu):
+    """-div sigma(u) for u = (s, s, s) (:func:`_cube_field`): (lam + mu) grad(div u) gives
+    -(lam + mu) sum_k d_j d_k s, and mu Laplace(u) gives 3 mu pi^2 s."""
+    S = np.sin(np.pi * x)
+    C = np.cos(np.pi * x)
+    s = S[0] * S[1] * S[2]
+    cross = np.pi ** 2 * np.array([
+        C[0] * C[1] * S[2] + C[0] * S[1] * C[2],
+        C[0] * C[1] * S[2] + S[0] * C[1] * C[2],
+        C[0] * S[1] * C[2] + S[0] * C[1] * C[2]])
+    return -(lam + mu) * (cross - np.pi ** 2 * s) + 3 * mu * np.pi ** 2 * s
+
+
+def elasticity_3d(repeat, sizes=(250, 700, 2000), p2_sizes=(100, 250, 700)):
+    """Linear elasticity on the unit cube (E = 1, nu = 0.3), u = (s, s, s) with s of
+    :func:`_cube_field`, clamped faces: H1-seminorm error of the displacement."""
+    from ex06_poisson_3d import cube_nodes
+    from skfem import ElementTetP1, ElementTetP2, LinearForm
+    from skfem.models.elasticity import lame_parameters, linear_elasticity
+
+    lam, mu = lame_parameters(1.0, 0.3)
+    stiffness = linear_elasticity(lam, mu)
+    load = LinearForm(lambda v, w: dot(_cube_force(w.x, lam, mu), v))
+
+    @Functional
+    def h1(w):
+        g = _cube_field(w.x)[1]
+        return sum(((w["u"].grad[i] - g) ** 2).sum(axis=0) for i in range(3))
+
+    out = {}
+    for m in ("NEM", "P1", "P2"):
+        out[m] = []
+        for n in (p2_sizes if m == "P2" else sizes):
+            mesh = delaunay_mesh(cube_nodes(n))
+            base = {"NEM": ElementNaturalNeighbour, "P1": ElementTetP1, "P2": ElementTetP2}[m]
+            elem = ElementVector(base())
+
+            def run():
+                b = (NaturalNeighbourBasis(mesh, elem) if m == "NEM"
+                     else Basis(mesh, elem, intorder=4))
+                return b, solve(*condense(stiffness.assemble(b), load.assemble(b),
+                                          D=b.get_dofs()))
+            sec, (b, u) = best_time(run, repeat)
+            eb = NaturalNeighbourBasis(mesh, elem, intorder=4) if m == "NEM" else b
+            out[m].append((mesh.nvertices, np.sqrt(h1.assemble(eb, u=eb.interpolate(u))), sec))
+    return out
+
+
 PROBLEMS = {
     "poisson": ("Poisson 2D, smooth, uniform nodes", "H1",
                 lambda r: poisson_2d("uniform", r)),
@@ -271,6 +330,7 @@ PROBLEMS = {
                    elasticity),
     "stokes": ("Stokes 2D, Donea-Huerta", "u L2", stokes_2d),
     "poisson3d": ("Poisson 3D, smooth", "H1", poisson_3d),
+    "elasticity3d": ("Elasticity 3D, smooth, clamped cube", "H1", elasticity_3d),
     "stokes3d": ("Stokes 3D, manufactured flow", "u L2",
                  stokes_3d),
 }

@@ -290,6 +290,27 @@ def test_lshape_corner_rate():
         assert abs(fine / coarse - CORNER_FACTOR) < CORNER_FACTOR_TOL, (m, fine / coarse)
 
 
+def test_elasticity_3d_force_is_minus_the_divergence_of_the_stress():
+    """benchmarks/choosing.py's 3D elasticity: its body force equals -div sigma(u) of its
+    displacement u = (s, s, s), by central differences of the stress at random points, and
+    P1's error falls as the nodes grow (the problem is the one solved)."""
+    bench = load_benchmark("choosing")
+    lam, mu = 0.7, 0.4
+    x = np.random.default_rng(0).random((3, 20)) * 0.8 + 0.1
+    h = 1e-4
+
+    def stress(y):
+        g = bench._cube_field(y)[1]                       # grad u_i = grad s for each i
+        eps = 0.5 * (g[None, :] + g[:, None])
+        return lam * np.trace(eps)[None, None] * np.eye(3)[:, :, None] + 2 * mu * eps
+
+    div = sum((stress(x + h * np.eye(3)[k][:, None])[:, k]
+               - stress(x - h * np.eye(3)[k][:, None])[:, k]) / (2 * h) for k in range(3))
+    assert np.abs(bench._cube_force(x, lam, mu) + div).max() < 1e-6
+    res = bench.elasticity_3d(1, sizes=(100, 400), p2_sizes=())
+    assert res["P1"][1][1] < 0.85 * res["P1"][0][1]
+
+
 # --------------------------------------------------------------------------
 # constrained_interfaces: sharp viscosity interfaces, NEM / C-NEM / Taylor-Hood
 # --------------------------------------------------------------------------

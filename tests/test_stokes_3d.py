@@ -149,6 +149,26 @@ def test_flat_tetrahedra_on_a_wall_keep_the_boundary_term_finite():
     assert np.isfinite(sol.u).all() and np.abs(sol.u).max() < 1e-11
 
 
+def test_faces_without_area_carry_no_boundary_term():
+    """The nodes of a 3D plate pressed onto its bottom wall: Qhull's hull there has 44
+    triangles of three collinear wall nodes (no area, no normal). They carry no weight in the
+    boundary term of the divergence (a run stopped at step 68 with NaN in the pressure
+    iterations), and the term gives the box's volume as the flux of u = (x, 0, 0)."""
+    from pathlib import Path
+    nodes = np.load(Path(__file__).parent / "data" / "plate3d_wall_nodes.npz")["nodes"]
+    m = delaunay_mesh(nodes)
+    F = m.p[:, m.facets[:, m.boundary_facets()]]
+    area = np.linalg.norm(np.cross(F[:, 1] - F[:, 0], F[:, 2] - F[:, 0], axis=0), axis=0)
+    assert np.count_nonzero(area == 0) > 0
+    S = stokes_spaces(m)
+    flux = boundary_flux(S)
+    assert np.isfinite(flux.data).all()
+    u = np.zeros(S.ubasis.N)
+    u[S.ubasis.dofs.nodal_dofs[0]] = m.p[0]
+    box = np.prod(np.ptp(m.p, axis=1))
+    assert abs(np.ones(S.pbasis.N) @ flux @ u - box) < 1e-10 * box
+
+
 def test_walls_by_name(mesh, spaces):
     """scikit-fem's default names of a box's faces: free slip fixes the normal
     component of the face's nodes, no slip all three."""

@@ -164,20 +164,24 @@ def _face_frames(mesh, corners: np.ndarray, x: np.ndarray) -> tuple:
     unit normals (3, nf), from the faces alone. Not from the tetrahedra behind them:
     Qhull gives flat tetrahedra of nodes on one wall (zero volume), whose inverse mapping
     (and so scikit-fem's facet normals and trace values) is NaN. A hull is convex: the
-    mean of the nodes lies inside every face's plane."""
+    mean of the nodes lies inside every face's plane. Faces without area (three collinear
+    nodes on a wall) get zeros: they carry no weight."""
     a, b, c = (mesh.p[:, corners[k]] for k in range(3))
     e1, e2 = b - a, c - a
     n = np.cross(e1, e2, axis=0)
-    n /= np.linalg.norm(n, axis=0)
+    length = np.linalg.norm(n, axis=0)
+    # a face of three collinear wall nodes has no area, so no weight and no normal: zeros
+    face = length > 0
+    n = np.where(face, n / np.where(face, length, 1.0), 0.0)
     n *= np.where(np.einsum("ij,ij->j", n, a - mesh.p.mean(axis=1)[:, None]) < 0, -1.0, 1.0)
     # x - a = s e1 + t e2 (the 2 x 2 normal equations of the face's frame)
     r = x - a[:, :, None]
     g11, g12, g22 = (np.einsum("ij,ij->j", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
     r1, r2 = np.einsum("ij,ijk->jk", e1, r), np.einsum("ij,ijk->jk", e2, r)
-    det = (g11 * g22 - g12 ** 2)[:, None]
-    s = (g22[:, None] * r1 - g12[:, None] * r2) / det
-    t = (g11[:, None] * r2 - g12[:, None] * r1) / det
-    return np.stack([1.0 - s - t, s, t]), n
+    det = np.where(face, g11 * g22 - g12 ** 2, 1.0)[:, None]
+    s = np.where(face[:, None], (g22[:, None] * r1 - g12[:, None] * r2) / det, 0.0)
+    t = np.where(face[:, None], (g11[:, None] * r2 - g12[:, None] * r1) / det, 0.0)
+    return np.stack([np.where(face[:, None], 1.0 - s - t, 0.0), s, t]), n
 
 
 def outline_flux(spaces: stokes_bases.StokesSpaces, outline: np.ndarray) -> sp.csr_matrix:

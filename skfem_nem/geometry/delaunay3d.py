@@ -18,7 +18,7 @@ from .predicates3d import orient3d_sign
 
 __all__ = ["Delaunay3D", "insertion_order"]
 
-BRIO_MIN_ROUND = 4096  # the first (smallest) round of the biased randomised insertion order
+BRIO_MIN_ROUND = 1024  # the first (smallest) round of the biased randomised insertion order
 
 
 def insertion_order(p, seed=0):
@@ -123,12 +123,20 @@ def _find(P, S, NB, q, order, out):
 def _beyond(P, S, t, i, x, y, z):
     """Whether (x, y, z) lies strictly beyond the face of tet t opposite slot i: the tet
     with that vertex replaced by the point is negatively oriented."""
-    v = [S[t, 0], S[t, 1], S[t, 2], S[t, 3]]
-    c = [P[v[0]], P[v[1]], P[v[2]], P[v[3]]]
-    pt = np.array((x, y, z))
-    c[i] = pt
-    return orient3d_sign(c[0][0], c[0][1], c[0][2], c[1][0], c[1][1], c[1][2],
-                         c[2][0], c[2][1], c[2][2], c[3][0], c[3][1], c[3][2]) < 0.0
+    v0, v1, v2, v3 = S[t, 0], S[t, 1], S[t, 2], S[t, 3]
+    if i == 0:
+        o = orient3d_sign(x, y, z, P[v1, 0], P[v1, 1], P[v1, 2], P[v2, 0], P[v2, 1],
+                          P[v2, 2], P[v3, 0], P[v3, 1], P[v3, 2])
+    elif i == 1:
+        o = orient3d_sign(P[v0, 0], P[v0, 1], P[v0, 2], x, y, z, P[v2, 0], P[v2, 1],
+                          P[v2, 2], P[v3, 0], P[v3, 1], P[v3, 2])
+    elif i == 2:
+        o = orient3d_sign(P[v0, 0], P[v0, 1], P[v0, 2], P[v1, 0], P[v1, 1], P[v1, 2],
+                          x, y, z, P[v3, 0], P[v3, 1], P[v3, 2])
+    else:
+        o = orient3d_sign(P[v0, 0], P[v0, 1], P[v0, 2], P[v1, 0], P[v1, 1], P[v1, 2],
+                          P[v2, 0], P[v2, 1], P[v2, 2], x, y, z)
+    return o < 0.0
 
 
 @njit(cache=True)

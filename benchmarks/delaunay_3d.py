@@ -1,0 +1,73 @@
+"""3D Delaunay tetrahedralisation: the package's own (exact predicates) against scipy's Qhull.
+
+Prints a markdown table, one run: random points in the unit cube (2e4, 1e5 and, with
+``--large``, 1e6) and a jittered cubic lattice (every cell nearly cospherical, where the
+exact stages work hardest), seed 0. Both are timed warm, best of ``--repeat``; our one-time
+numba compilation (or cache load) is printed apart. "same" says whether the two produced the
+same set of tetrahedra (expected on generic input; on the jittered lattice the difference
+is only Qhull's handling of nearly cospherical cells, our output is checked to be
+positively oriented).
+
+    python benchmarks/delaunay_3d.py [--repeat 3] [--large]
+"""
+import argparse
+import time
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+from skfem_nem.geometry.delaunay3d import Delaunay3D
+
+
+def random_points(n, seed=0):
+    return np.random.default_rng(seed).random((n, 3))
+
+
+def jittered_lattice(k, jitter=1e-9, seed=0):
+    """(k + 1)**3 lattice points moved by up to ``jitter`` times the spacing."""
+    g = np.arange(k + 1, dtype=float) / k
+    p = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    return p + jitter / k * np.random.default_rng(seed).uniform(-1, 1, p.shape)
+
+
+def best(fn, repeat):
+    out, t = None, np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        t = min(t, time.perf_counter() - t0)
+    return out, t
+
+
+def same(a, b):
+    def key(s):
+        return set(map(tuple, np.sort(s, axis=1).tolist()))
+    return key(a) == key(b)
+
+
+def row(name, p, repeat):
+    ours, t_ours = best(lambda: Delaunay3D(p), repeat)
+    qhull, t_qhull = best(lambda: Delaunay(p), repeat)
+    return (f"| {name} | {p.shape[0]:,} | {ours.simplices.shape[0]:,} | {t_ours:.3f} | "
+            f"{t_qhull:.3f} | {t_qhull / t_ours:.2f} | "
+            f"{'yes' if same(ours.simplices, qhull.simplices) else 'no'} |")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--large", action="store_true", help="also 1e6 random points")
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    Delaunay3D(random_points(100, seed=1))
+    print(f"compilation / cache load: {time.perf_counter() - t0:.2f} s\n")
+    print("| points | n | tets (ours) | ours [s] | Qhull [s] | Qhull / ours | same |")
+    print("|---|---|---|---|---|---|---|")
+    sizes = [20_000, 100_000] + ([1_000_000] if a.large else [])
+    for n in sizes:
+        print(row("random", random_points(n), a.repeat), flush=True)
+    print(row("jittered lattice 40^3", jittered_lattice(40), a.repeat), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -38,7 +38,7 @@ _GROW = 1.5  # growth factor of the flat arrays
 _TETS_PER_POINT = 7  # initial capacity: a random 3D Delaunay has about 6.5 tets per point
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _o3(P, a, b, c, d):
     return orient3d_sign(P[a, 0], P[a, 1], P[a, 2], P[b, 0], P[b, 1], P[b, 2],
                          P[c, 0], P[c, 1], P[c, 2], P[d, 0], P[d, 1], P[d, 2])
@@ -81,7 +81,7 @@ def _perturbed_inside(P, a, b, c, d, q):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def finite_conflict(P, T, t, q):
     """Whether point q lies inside the (perturbed) circumsphere of the finite tet t."""
     a, b, c, d = T[t, 0], T[t, 1], T[t, 2], T[t, 3]
@@ -93,7 +93,7 @@ def finite_conflict(P, T, t, q):
     return _perturbed_inside(P, a, b, c, d, q)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _conflict(P, G, T, N, t, q):
     """Whether tet t (finite or ghost) is destroyed by inserting point q."""
     if T[t, 3] != G:
@@ -104,7 +104,7 @@ def _conflict(P, G, T, N, t, q):
     return finite_conflict(P, T, N[t, 3], q)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _substituted(P, T, t, i, q):
     """Orientation of the finite tet t with its vertex in slot i replaced by point q."""
     v0, v1, v2, v3 = T[t, 0], T[t, 1], T[t, 2], T[t, 3]

@@ -3,14 +3,23 @@
 Prints a markdown table, one run: random points in the unit cube (2e4, 1e5 and, with
 ``--large``, 1e6) and a jittered cubic lattice (every cell nearly cospherical, where the
 exact stages work hardest), seed 0. Both are timed warm, best of ``--repeat``; our one-time
-numba compilation (or cache load) is printed apart. "same" says whether the two produced the
-same set of tetrahedra (expected on generic input; on the jittered lattice the difference
-is only Qhull's handling of nearly cospherical cells, our output is checked to be
-positively oriented).
+numba cost is printed apart: the first call in this process (a cache load once compiled)
+and, in a fresh process with an empty numba cache, import plus first call (the
+compilation). "same" says whether the two produced the same set of tetrahedra: expected on
+generic input; on the jittered lattice nearly cospherical cells are split differently
+(Qhull decides them in floating point, ours by exact signs; tests/test_delaunay3d.py checks
+ours for empty spheres).
+
+On two busy cores, 2e4 random points took 0.20 s against Qhull's 0.69 s, 1e6 points 9.8 s
+against 37 s.
 
     python benchmarks/delaunay_3d.py [--repeat 3] [--large]
 """
 import argparse
+import os
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -53,6 +62,19 @@ def row(name, p, repeat):
             f"{'yes' if same(ours.simplices, qhull.simplices) else 'no'} |")
 
 
+def cold_start():
+    """Seconds for import and a first call in a fresh process with an empty numba cache."""
+    code = ("import time; t = time.perf_counter(); import numpy as np; "
+            "from skfem_nem.geometry.delaunay3d import Delaunay3D; "
+            "Delaunay3D(np.random.default_rng(1).random((100, 3))); "
+            "print(time.perf_counter() - t)")
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             env=env, check=True)
+    return float(out.stdout.split()[-1])
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
@@ -60,7 +82,8 @@ def main(argv=None):
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     Delaunay3D(random_points(100, seed=1))
-    print(f"compilation / cache load: {time.perf_counter() - t0:.2f} s\n")
+    print(f"first call in this process: {time.perf_counter() - t0:.2f} s; "
+          f"fresh process, empty numba cache (compilation): {cold_start():.1f} s\n")
     print("| points | n | tets (ours) | ours [s] | Qhull [s] | Qhull / ours | same |")
     print("|---|---|---|---|---|---|---|")
     sizes = [20_000, 100_000] + ([1_000_000] if a.large else [])

@@ -160,6 +160,30 @@ def test_box_with_lattice_faces():
     check_tetrahedralisation(p, d)
 
 
+SPHERE_425 = [(x, y, z) for x in range(-20, 21) for y in range(-20, 21) for z in range(-20, 21)
+              if x * x + y * y + z * z == 425]
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e8])
+def test_all_points_cospherical(offset):
+    """336 lattice points of one sphere: every tetrahedron has the same circumsphere."""
+    p = np.array(SPHERE_425, dtype=float) + offset
+    d = Delaunay3D(p)
+    check_tetrahedralisation(p, d)
+    assert (_max_insphere(p, d.simplices) == 0).all()
+
+
+def test_coplanar_layers_and_a_cylinder():
+    """Points on two parallel planes; points on circles stacked on a line (cocircular and
+    coplanar subsets everywhere)."""
+    rng = np.random.default_rng(0)
+    layers = np.vstack([np.c_[rng.random((80, 2)), np.full(80, z)] for z in (0.0, 1.0)])
+    check_tetrahedralisation(layers, Delaunay3D(layers))
+    a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    cyl = np.c_[np.cos(a).repeat(5), np.sin(a).repeat(5), np.tile(np.arange(5.0), 24)]
+    check_tetrahedralisation(cyl, Delaunay3D(cyl))
+
+
 def test_box_nodes_3d():
     p = box_nodes_3d(300, seed=2)
     check_tetrahedralisation(p, Delaunay3D(p))

@@ -36,6 +36,8 @@ from .predicates3d import insphere_sign, orient3d_sign
 OK, DUPLICATE, FLAT = 0, 1, 2  # build status codes
 _GROW = 1.5  # growth factor of the flat arrays
 _TETS_PER_POINT = 7  # initial capacity: a random 3D Delaunay has about 6.5 tets per point
+_KEY_BASE = 1 << 31  # edge key lo * _KEY_BASE + hi (vertex indices below 2**31)
+_HASH_MULT = 0x9E3779B97F4A7C15 >> 1  # Fibonacci hashing (odd, fits an int64)
 
 
 @njit(cache=True, inline="always")
@@ -190,44 +192,51 @@ def _boundary_faces(N, stamp, conf, it, cav, ncav):
     return n
 
 
+@njit(cache=True, inline="always")
+def _edge_of(T, nt, i, j):
+    """The two vertices of tet nt other than those in slots i and j, in increasing order."""
+    u = -1
+    v = -1
+    for m in range(4):
+        if m != i and m != j:
+            if u < 0:
+                u = T[nt, m]
+            else:
+                v = T[nt, m]
+    return min(u, v), max(u, v)
+
+
 @njit(cache=True)
-def _link_around(T, N, q, new, qslot, nnew, vhead, ent):
-    """Neighbours among the new tets, all sharing q: the face of a new tet opposite slot j
-    contains q and an edge (u, v) of the cavity boundary, shared by exactly one other new
-    tet; matched through per-vertex lists ``vhead`` (reset on return) of entries ``ent``
-    rows (other vertex, tet, slot, next)."""
-    nent = 0
+def _link_around(T, N, new, qslot, nnew, keys, vals, used):
+    """Neighbours among the new tets, all sharing the new point: the face of a new tet
+    opposite slot j contains the point and an edge (u, v) of the cavity boundary, shared by
+    exactly one other new tet. Matched through a small open-addressing table (``keys`` all
+    -1 on entry and on return; its size a power of two above four times the entries), which
+    stays in cache, unlike a table indexed by vertex."""
+    mask = keys.shape[0] - 1
+    nused = 0
     for k in range(nnew):
         nt = new[k]
         i = qslot[k]
         for j in range(4):
             if j == i:
                 continue
-            u = -1
-            v = -1
-            for m in range(4):
-                if m != i and m != j:
-                    if u < 0:
-                        u = T[nt, m]
-                    else:
-                        v = T[nt, m]
-            lo, hi = min(u, v), max(u, v)
-            e = vhead[lo]
-            while e >= 0 and ent[e, 0] != hi:
-                e = ent[e, 3]
-            if e >= 0:
-                N[nt, j] = ent[e, 1]
-                N[ent[e, 1], ent[e, 2]] = nt
+            lo, hi = _edge_of(T, nt, i, j)
+            key = lo * _KEY_BASE + hi
+            h = ((key * _HASH_MULT) >> 20) & mask
+            while keys[h] >= 0 and keys[h] != key:
+                h = (h + 1) & mask
+            if keys[h] == key:
+                other = vals[h]
+                N[nt, j] = other >> 2
+                N[other >> 2, other & 3] = nt
             else:
-                ent[nent, 0] = hi
-                ent[nent, 1] = nt
-                ent[nent, 2] = j
-                ent[nent, 3] = vhead[lo]
-                vhead[lo] = nent
-                nent += 1
-    for k in range(nnew):
-        for j in range(4):
-            vhead[T[new[k], j]] = -1
+                keys[h] = key
+                vals[h] = 4 * nt + j
+                used[nused] = h
+                nused += 1
+    for k in range(nused):
+        keys[used[k]] = -1
 
 
 @njit(cache=True)
@@ -377,8 +386,9 @@ def build(P, order):
     cav = np.empty(64, np.int32)
     new = np.empty(64, np.int32)
     qslot = np.empty(64, np.int32)
-    ent = np.empty((192, 4), np.int32)
-    vhead = np.full(n + 1, -1, np.int32)
+    keys = np.full(256, -1, np.int64)
+    vals = np.empty(256, np.int64)
+    used = np.empty(256, np.int64)
     last, seed = 0, 12345
     for k in range(1, n):
         if k == k1 or k == k2 or k == k3:
@@ -395,9 +405,15 @@ def build(P, order):
         if nb > new.shape[0]:
             new = np.empty(2 * nb, np.int32)
             qslot = np.empty(2 * nb, np.int32)
-            ent = np.empty((6 * nb, 4), np.int32)
+        if 8 * nb > keys.shape[0]:  # 3 nb / 2 entries, load factor below 1/5
+            size = keys.shape[0]
+            while size < 8 * nb:
+                size *= 2
+            keys = np.full(size, -1, np.int64)
+            vals = np.empty(size, np.int64)
+            used = np.empty(size, np.int64)
         nfree, ntet, nnew = _retriangulate(T, N, stamp, conf, k, cav, ncav, q, free,
                                            nfree, ntet, new, qslot)
-        _link_around(T, N, q, new, qslot, nnew, vhead, ent)
+        _link_around(T, N, new, qslot, nnew, keys, vals, used)
         last = new[0]
     return T, N, ntet, OK, -1, -1

@@ -78,6 +78,10 @@ def check_tetrahedralisation(p, d, brute=True):
         assert (_max_insphere(p, S) <= 0).all(), "empty circumspheres"
 
 
+def tet_set(d):
+    return set(map(tuple, np.sort(d.simplices, axis=1).tolist()))
+
+
 def same_as_qhull(p, d):
     q = Delaunay(p)
     return set(map(tuple, np.sort(d.simplices, axis=1))) == \
@@ -123,6 +127,8 @@ def test_snapped_to_a_coarse_grid(n, seed, k, h, offset):
         return
     d = Delaunay3D(p)
     check_tetrahedralisation(p, d)
+    # ties are broken by a perturbation, not by the insertion order: unique result
+    assert tet_set(Delaunay3D(p, seed=seed + 1)) == tet_set(d)
 
 
 @pytest.mark.parametrize("k", [2, 3, 5])
@@ -203,6 +209,11 @@ def test_find_simplex():
         assert orient3d(*a, *b, *x, *e) >= 0 and orient3d(*a, *b, *c, *x) >= 0
     vt = d.vertex_to_simplex
     assert all(i in d.simplices[vt[i]] for i in range(p.shape[0]))
+    indptr, indices = d.vertex_neighbor_vertices
+    ref_ptr, ref_ind = Delaunay(p).vertex_neighbor_vertices
+    for k in range(p.shape[0]):
+        assert np.array_equal(indices[indptr[k]:indptr[k + 1]],
+                              np.sort(ref_ind[ref_ptr[k]:ref_ptr[k + 1]]))
     assert np.array_equal(d.find_simplex(p[:1]), d.find_simplex(p[0][None]))
 
 

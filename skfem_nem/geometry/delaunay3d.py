@@ -5,7 +5,7 @@ coordinates that use it, gives flat tetrahedra for cospherical nodes (lattices),
 adjacency of our own to update by flips when nodes move. :class:`Delaunay3D` inserts the points
 with exact predicates (:mod:`.delaunay3d_build`) in a spatially coherent order and exposes what
 the 3D code paths read from scipy's object: ``points``, ``simplices``, ``neighbors``,
-``vertex_to_simplex``, ``convex_hull`` and ``find_simplex``.
+``vertex_to_simplex``, ``vertex_neighbor_vertices``, ``convex_hull`` and ``find_simplex``.
 """
 from __future__ import annotations
 
@@ -92,6 +92,17 @@ class Delaunay3D:
         out = np.full(self.npoints, -1, np.int32)
         out[self.simplices.ravel()] = np.repeat(np.arange(self.nsimplex, dtype=np.int32), 4)
         return out
+
+    @property
+    def vertex_neighbor_vertices(self):
+        """``(indptr, indices)``: the Delaunay neighbours of point k are
+        ``indices[indptr[k]:indptr[k + 1]]`` (sorted), as in scipy."""
+        S = self.simplices.astype(np.int64)
+        pairs = np.array([(i, j) for i in range(4) for j in range(4) if i != j])
+        a, b = S[:, pairs[:, 0]].ravel(), S[:, pairs[:, 1]].ravel()
+        key = np.unique(a * self.npoints + b)
+        indptr = np.searchsorted(key // self.npoints, np.arange(self.npoints + 1))
+        return indptr.astype(np.int32), (key % self.npoints).astype(np.int32)
 
     @property
     def convex_hull(self):

@@ -190,6 +190,18 @@ def test_coplanar_layers_and_a_cylinder():
     check_tetrahedralisation(cyl, Delaunay3D(cyl))
 
 
+@pytest.mark.parametrize("scale", [1.0, 1.0 / 119])
+def test_moment_curve(scale):
+    """Points (t, t**2, t**3) have a quadratic number of Delaunay tetrahedra: the flat arrays,
+    the cavity and the edge table all grow."""
+    t = np.arange(120.0) * scale
+    p = np.c_[t, t * t, t ** 3]
+    d = Delaunay3D(p)
+    assert d.nsimplex > 7 * p.shape[0] + 64  # beyond the initial capacity
+    check_tetrahedralisation(p, d)
+    assert same_as_qhull(p, d)
+
+
 def test_box_nodes_3d():
     p = box_nodes_3d(300, seed=2)
     check_tetrahedralisation(p, Delaunay3D(p))

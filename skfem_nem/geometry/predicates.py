@@ -70,7 +70,8 @@ Discrete & Computational Geometry 18:305-363 (1997).
    component, which carries the exact sign and approximates the expansion to
    within an ulp, is scaled back and returned.  This stage is not adaptive
    and uses small scratch arrays; it is reached only for (nearly) degenerate
-   inputs.
+   inputs.  The error-free transformations and the expansion arithmetic are
+   shared with the 3D predicates and live in :mod:`.expansions`.
 
 All floating-point code relies on IEEE 754 double precision with
 round-to-nearest-even and no fused multiply-add contraction, which is what
@@ -83,13 +84,26 @@ import math
 import numpy as np
 from numba import njit
 
+from .expansions import (
+    approximate,
+    bracket,
+    expansion_sum,
+    fast_two_sum,
+    rescale_exponent,
+    scale_exponent,
+    scale_expansion,
+    two_diff,
+    two_product,
+    two_sum,
+    unscale,
+)
+
 __all__ = ["orient2d", "incircle", "orient2d_sign", "incircle_sign",
            "ORIENT2D_REL_ERROR", "INCIRCLE_REL_ERROR"]
 
 # -- constants ---------------------------------------------------------------
 
 _EPS = 2.0 ** -53  # unit roundoff: half an ulp of 1.0
-_SPLITTER = 2.0 ** 27 + 1.0  # Veltkamp splitter for 53-bit significands
 
 # Shewchuk's stage-A error bounds (1997, section 4).
 _CCW_ERRBOUND_A = (3.0 + 16.0 * _EPS) * _EPS
@@ -116,195 +130,11 @@ _DD_ACCEPT = 2.0 ** 51
 _TINY = 2.0 ** -900
 _HUGE = 2.0 ** 1000
 
-_SMALLEST_SUBNORMAL = 5e-324
-
 # Upper bounds on the number of components of the exact expansions.
 _BRACKET_LEN = 4  # [pq] = px*qy - qx*py
 _MINOR_LEN = 3 * _BRACKET_LEN  # sum of three brackets: a 3x3 orientation
 _LIFTED_LEN = 8 * _MINOR_LEN  # (x*x + y*y) * minor
 _INCIRCLE_LEN = 4 * _LIFTED_LEN  # the full 4x4 determinant
-
-
-# -- error-free transformations ----------------------------------------------
-
-@njit(cache=True)
-def _two_sum(a, b):
-    """Return ``(x, y)`` with ``x = fl(a + b)`` and ``x + y = a + b`` exactly."""
-    x = a + b
-    b_virtual = x - a
-    a_virtual = x - b_virtual
-    return x, (a - a_virtual) + (b - b_virtual)
-
-
-@njit(cache=True)
-def _fast_two_sum(a, b):
-    """As :func:`_two_sum`, valid when ``|a| >= |b|`` (or ``a`` has the larger
-    exponent)."""
-    x = a + b
-    return x, b - (x - a)
-
-
-@njit(cache=True)
-def _two_diff(a, b):
-    """Return ``(x, y)`` with ``x = fl(a - b)`` and ``x + y = a - b`` exactly."""
-    x = a - b
-    b_virtual = a - x
-    a_virtual = x + b_virtual
-    return x, (a - a_virtual) + (b_virtual - b)
-
-
-@njit(cache=True)
-def _split(a):
-    """Veltkamp split: ``a = hi + lo`` with both halves of at most 26 bits."""
-    c = _SPLITTER * a
-    hi = c - (c - a)
-    return hi, a - hi
-
-
-@njit(cache=True)
-def _two_product_presplit(a, b, b_hi, b_lo):
-    """Dekker's product ``x + y = a * b`` with ``b`` already split."""
-    x = a * b
-    a_hi, a_lo = _split(a)
-    err = ((x - a_hi * b_hi) - a_lo * b_hi) - a_hi * b_lo
-    return x, a_lo * b_lo - err
-
-
-@njit(cache=True)
-def _two_product(a, b):
-    """Return ``(x, y)`` with ``x = fl(a * b)`` and ``x + y = a * b`` exactly."""
-    b_hi, b_lo = _split(b)
-    return _two_product_presplit(a, b, b_hi, b_lo)
-
-
-@njit(cache=True)
-def _two_two_diff(a1, a0, b1, b0):
-    """``(a1 + a0) - (b1 + b0)`` as a 4-component nonoverlapping expansion.
-
-    Both operands must be two-component expansions (``|a0|`` at most half an
-    ulp of ``a1``).  The components are returned in order of increasing
-    magnitude; some of them may be zero.
-    """
-    # Subtract b0, then b1, each time carrying the partial expansion upward.
-    i, x0 = _two_diff(a0, b0)
-    j, k = _two_sum(a1, i)
-    i, x1 = _two_diff(k, b1)
-    x3, x2 = _two_sum(j, i)
-    return x0, x1, x2, x3
-
-
-# -- expansion arithmetic ----------------------------------------------------
-# An expansion is stored as ``(array, length)``: components in order of
-# increasing magnitude, pairwise nonoverlapping, zero components removed (the
-# zero expansion is the single component 0.0).
-
-@njit(cache=True)
-def _bracket(px, py, qx, qy, h):
-    """Store ``px*qy - qx*py`` exactly in ``h``; return its length."""
-    s1, s0 = _two_product(px, qy)
-    t1, t0 = _two_product(qx, py)
-    x0, x1, x2, x3 = _two_two_diff(s1, s0, t1, t0)
-    n = 0
-    if x0 != 0.0:
-        h[n] = x0
-        n += 1
-    if x1 != 0.0:
-        h[n] = x1
-        n += 1
-    if x2 != 0.0:
-        h[n] = x2
-        n += 1
-    if x3 != 0.0 or n == 0:
-        h[n] = x3
-        n += 1
-    return n
-
-
-@njit(cache=True)
-def _expansion_sum(e, elen, f, flen, h):
-    """``h = e + f`` (Shewchuk's fast_expansion_sum_zeroelim).
-
-    The components of ``e`` and ``f`` are merged by increasing magnitude and
-    accumulated with error-free additions; the nonzero roundoff terms form the
-    result, which is strongly nonoverlapping if the inputs are.  ``h`` must
-    not alias ``e`` or ``f`` and needs room for ``elen + flen`` entries.
-    """
-    i = 0
-    j = 0
-    if abs(f[0]) < abs(e[0]):
-        q = f[0]
-        j = 1
-    else:
-        q = e[0]
-        i = 1
-    n = 0
-    while i < elen or j < flen:
-        if j >= flen or (i < elen and abs(e[i]) <= abs(f[j])):
-            g = e[i]
-            i += 1
-        else:
-            g = f[j]
-            j += 1
-        q, err = _two_sum(q, g)
-        if err != 0.0:
-            h[n] = err
-            n += 1
-    if q != 0.0 or n == 0:
-        h[n] = q
-        n += 1
-    return n
-
-
-@njit(cache=True)
-def _scale_expansion(e, elen, b, h):
-    """``h = b * e`` (Shewchuk's scale_expansion_zeroelim).
-
-    ``h`` must not alias ``e`` and needs room for ``2 * elen`` entries.
-    """
-    b_hi, b_lo = _split(b)
-    q, err = _two_product_presplit(e[0], b, b_hi, b_lo)
-    n = 0
-    if err != 0.0:
-        h[n] = err
-        n += 1
-    for i in range(1, elen):
-        p1, p0 = _two_product_presplit(e[i], b, b_hi, b_lo)
-        s, err = _two_sum(q, p0)
-        if err != 0.0:
-            h[n] = err
-            n += 1
-        q, err = _fast_two_sum(p1, s)
-        if err != 0.0:
-            h[n] = err
-            n += 1
-    if q != 0.0 or n == 0:
-        h[n] = q
-        n += 1
-    return n
-
-
-@njit(cache=True)
-def _approximate(e, elen):
-    """Float approximation of an expansion, computed by compressing it in place.
-
-    Shewchuk's ``compress``: a downward pass renormalises the expansion from
-    its largest component, an upward pass then accumulates it from the
-    smallest.  The final accumulator is the largest component of the
-    compressed expansion, which has the sign of the exact sum and
-    approximates it within about one ulp.  ``e`` is overwritten.
-    """
-    bottom = elen - 1
-    q = e[bottom]
-    for i in range(elen - 2, -1, -1):
-        q, small = _two_sum(q, e[i])
-        if small != 0.0:
-            e[bottom] = q
-            bottom -= 1
-            q = small
-    e[bottom] = q
-    for i in range(bottom + 1, elen):
-        q, _ = _two_sum(e[i], q)
-    return q
 
 
 # -- double-double arithmetic --------------------------------------------------
@@ -313,9 +143,9 @@ def _approximate(e, elen):
 @njit(cache=True)
 def _dd_mul(ah, al, bh, bl):
     """Product of two double-doubles; error below ``8 eps**2 |a b|``."""
-    p, e = _two_product(ah, bh)
+    p, e = two_product(ah, bh)
     e += ah * bl + al * bh
-    return _fast_two_sum(p, e)
+    return fast_two_sum(p, e)
 
 
 @njit(cache=True)
@@ -325,18 +155,18 @@ def _dd_add(ah, al, bh, bl):
     The final renormalisation is a full ``two_sum`` because after
     cancellation the low-order part may exceed the high-order one.
     """
-    s, e = _two_sum(ah, bh)
+    s, e = two_sum(ah, bh)
     e += al + bl
-    return _two_sum(s, e)
+    return two_sum(s, e)
 
 
 @njit(cache=True)
 def _orient2d_dd(ax, ay, bx, by, cx, cy):
     """Double-double ``orient2d``: return ``(value, error bound)``."""
-    acx, acxt = _two_diff(ax, cx)
-    acy, acyt = _two_diff(ay, cy)
-    bcx, bcxt = _two_diff(bx, cx)
-    bcy, bcyt = _two_diff(by, cy)
+    acx, acxt = two_diff(ax, cx)
+    acy, acyt = two_diff(ay, cy)
+    bcx, bcxt = two_diff(bx, cx)
+    bcy, bcyt = two_diff(by, cy)
     lh, ll = _dd_mul(acx, acxt, bcy, bcyt)
     rh, rl = _dd_mul(acy, acyt, bcx, bcxt)
     det, _ = _dd_add(lh, ll, -rh, -rl)
@@ -346,12 +176,12 @@ def _orient2d_dd(ax, ay, bx, by, cx, cy):
 @njit(cache=True)
 def _incircle_dd(ax, ay, bx, by, cx, cy, dx, dy):
     """Double-double ``incircle``: return ``(value, error bound)``."""
-    adx, adxt = _two_diff(ax, dx)
-    ady, adyt = _two_diff(ay, dy)
-    bdx, bdxt = _two_diff(bx, dx)
-    bdy, bdyt = _two_diff(by, dy)
-    cdx, cdxt = _two_diff(cx, dx)
-    cdy, cdyt = _two_diff(cy, dy)
+    adx, adxt = two_diff(ax, dx)
+    ady, adyt = two_diff(ay, dy)
+    bdx, bdxt = two_diff(bx, dx)
+    bdy, bdyt = two_diff(by, dy)
+    cdx, cdxt = two_diff(cx, dx)
+    cdy, cdyt = two_diff(cy, dy)
 
     p1h, p1l = _dd_mul(bdx, bdxt, cdy, cdyt)
     p2h, p2l = _dd_mul(cdx, cdxt, bdy, bdyt)
@@ -387,38 +217,6 @@ def _incircle_dd(ax, ay, bx, by, cx, cy, dx, dy):
 # -- exact stages ------------------------------------------------------------
 
 @njit(cache=True)
-def _scale_exponent(m):
-    """Exponent ``k`` with ``m * 2**-k`` in ``[0.5, 1)`` (``m > 0``)."""
-    return math.frexp(m)[1]
-
-
-@njit(cache=True)
-def _rescale_exponent(m, max_exp):
-    """Power of two ``k`` by which to divide coordinates of magnitude at most
-    ``m`` before the exact evaluation.
-
-    Small configurations are always scaled up to ``m`` in ``[0.5, 1)``, which
-    loses nothing and keeps products away from underflow.  Large ones are
-    scaled down only when products could overflow (exponent above
-    ``max_exp``), since scaling down can push the smallest coordinates into
-    the subnormal range.
-    """
-    k = _scale_exponent(m)
-    if 0 < k <= max_exp:
-        return 0
-    return k
-
-
-@njit(cache=True)
-def _unscale(v, k):
-    """``v * 2**k``, saturating to the smallest subnormal instead of zero."""
-    r = math.ldexp(v, k)
-    if r == 0.0 and v != 0.0:
-        r = math.copysign(_SMALLEST_SUBNORMAL, v)
-    return r
-
-
-@njit(cache=True)
 def _on_lattice(x1, y1, x2, y2, x3, y3, bits, min_exp, max_exp):
     """Whether all six values are integer multiples of ``q = 2**(e - bits)``,
     where ``2**e`` bounds their magnitudes, and ``e`` is in ``[min_exp,
@@ -431,7 +229,7 @@ def _on_lattice(x1, y1, x2, y2, x3, y3, bits, min_exp, max_exp):
     m = max(abs(x1), abs(y1), abs(x2), abs(y2), abs(x3), abs(y3))
     if m == 0.0:
         return True
-    e = _scale_exponent(m)
+    e = scale_exponent(m)
     if e < min_exp or e > max_exp:
         return False
     q = math.ldexp(1.0, e - bits)
@@ -455,10 +253,10 @@ _EXACT_INCIRCLE = "float64(" + ", ".join(["float64"] * 8) + ")"
 @njit(_EXACT_ORIENT2D, cache=True)
 def _orient2d_exact(ax, ay, bx, by, cx, cy):
     """Exact ``orient2d`` as ``[ab] + [bc] + [ca]``, rounded to a float."""
-    acx, acxt = _two_diff(ax, cx)
-    acy, acyt = _two_diff(ay, cy)
-    bcx, bcxt = _two_diff(bx, cx)
-    bcy, bcyt = _two_diff(by, cy)
+    acx, acxt = two_diff(ax, cx)
+    acy, acyt = two_diff(ay, cy)
+    bcx, bcxt = two_diff(bx, cx)
+    bcy, bcyt = two_diff(by, cy)
     if acxt == 0.0 and acyt == 0.0 and bcxt == 0.0 and bcyt == 0.0:
         # Exact differences: if they lie on a coarse dyadic lattice the plain
         # float formula is exact, otherwise translate c to the origin.
@@ -469,7 +267,7 @@ def _orient2d_exact(ax, ay, bx, by, cx, cy):
     m = max(abs(ax), abs(ay), abs(bx), abs(by), abs(cx), abs(cy))
     if m == 0.0:
         return 0.0
-    k = _rescale_exponent(m, 500)
+    k = rescale_exponent(m, 500)
     if k != 0:
         ax = math.ldexp(ax, -k)
         ay = math.ldexp(ay, -k)
@@ -485,12 +283,12 @@ def _orient2d_exact(ax, ay, bx, by, cx, cy):
     ca = work[2 * B:3 * B]
     abbc = work[3 * B:5 * B]
     det = work[5 * B:]
-    n_ab = _bracket(ax, ay, bx, by, ab)
-    n_bc = _bracket(bx, by, cx, cy, bc)
-    n_ca = _bracket(cx, cy, ax, ay, ca)
-    n_abbc = _expansion_sum(ab, n_ab, bc, n_bc, abbc)
-    n_det = _expansion_sum(abbc, n_abbc, ca, n_ca, det)
-    return _unscale(_approximate(det, n_det), 2 * k)
+    n_ab = bracket(ax, ay, bx, by, ab)
+    n_bc = bracket(bx, by, cx, cy, bc)
+    n_ca = bracket(cx, cy, ax, ay, ca)
+    n_abbc = expansion_sum(ab, n_ab, bc, n_bc, abbc)
+    n_det = expansion_sum(abbc, n_abbc, ca, n_ca, det)
+    return unscale(approximate(det, n_det), 2 * k)
 
 
 @njit(cache=True)
@@ -503,11 +301,11 @@ def _lifted_term(px, py, minor, nminor, sign, tmp, out):
     x1 = tmp[0:2 * M]
     xx = tmp[2 * M:6 * M]
     yy = tmp[6 * M:10 * M]
-    n1 = _scale_expansion(minor, nminor, sign * px, x1)
-    nxx = _scale_expansion(x1, n1, px, xx)
-    n1 = _scale_expansion(minor, nminor, sign * py, x1)
-    nyy = _scale_expansion(x1, n1, py, yy)
-    return _expansion_sum(xx, nxx, yy, nyy, out)
+    n1 = scale_expansion(minor, nminor, sign * px, x1)
+    nxx = scale_expansion(x1, n1, px, xx)
+    n1 = scale_expansion(minor, nminor, sign * py, x1)
+    nyy = scale_expansion(x1, n1, py, yy)
+    return expansion_sum(xx, nxx, yy, nyy, out)
 
 
 @njit(_EXACT_INCIRCLE, cache=True)
@@ -522,12 +320,12 @@ def _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy):
     """
     # Long kernel: Shewchuk's exact expansion arithmetic, written out term by term as in his
     # predicates; a loop over the terms would allocate.
-    adx, adxt = _two_diff(ax, dx)
-    ady, adyt = _two_diff(ay, dy)
-    bdx, bdxt = _two_diff(bx, dx)
-    bdy, bdyt = _two_diff(by, dy)
-    cdx, cdxt = _two_diff(cx, dx)
-    cdy, cdyt = _two_diff(cy, dy)
+    adx, adxt = two_diff(ax, dx)
+    ady, adyt = two_diff(ay, dy)
+    bdx, bdxt = two_diff(bx, dx)
+    bdy, bdyt = two_diff(by, dy)
+    cdx, cdxt = two_diff(cx, dx)
+    cdy, cdyt = two_diff(cy, dy)
     if (adxt == 0.0 and adyt == 0.0 and bdxt == 0.0 and bdyt == 0.0
             and cdxt == 0.0 and cdyt == 0.0):
         # Exact differences: if they lie on a coarse dyadic lattice the plain
@@ -545,7 +343,7 @@ def _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy):
             abs(cx), abs(cy), abs(dx), abs(dy))
     if m == 0.0:
         return 0.0
-    k = _rescale_exponent(m, 250)
+    k = rescale_exponent(m, 250)
     if k != 0:
         ax = math.ldexp(ax, -k)
         ay = math.ldexp(ay, -k)
@@ -581,35 +379,35 @@ def _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy):
     o += 4 * L
     det = work[o:]
 
-    n_ab = _bracket(ax, ay, bx, by, ab)
-    n_bc = _bracket(bx, by, cx, cy, bc)
-    n_cd = _bracket(cx, cy, dx, dy, cd)
-    n_da = _bracket(dx, dy, ax, ay, da)
-    n_ac = _bracket(ax, ay, cx, cy, ac)
-    n_bd = _bracket(bx, by, dx, dy, bd)
+    n_ab = bracket(ax, ay, bx, by, ab)
+    n_bc = bracket(bx, by, cx, cy, bc)
+    n_cd = bracket(cx, cy, dx, dy, cd)
+    n_da = bracket(dx, dy, ax, ay, da)
+    n_ac = bracket(ax, ay, cx, cy, ac)
+    n_bd = bracket(bx, by, dx, dy, bd)
     for i in range(n_ac):
         ca[i] = -ac[i]
     for i in range(n_bd):
         db[i] = -bd[i]
 
-    n = _expansion_sum(bc, n_bc, cd, n_cd, tmp)
-    n_bcd = _expansion_sum(tmp, n, db, n_bd, o_bcd)
-    n = _expansion_sum(ac, n_ac, cd, n_cd, tmp)
-    n_acd = _expansion_sum(tmp, n, da, n_da, o_acd)
-    n = _expansion_sum(ab, n_ab, bd, n_bd, tmp)
-    n_abd = _expansion_sum(tmp, n, da, n_da, o_abd)
-    n = _expansion_sum(ab, n_ab, bc, n_bc, tmp)
-    n_abc = _expansion_sum(tmp, n, ca, n_ac, o_abc)
+    n = expansion_sum(bc, n_bc, cd, n_cd, tmp)
+    n_bcd = expansion_sum(tmp, n, db, n_bd, o_bcd)
+    n = expansion_sum(ac, n_ac, cd, n_cd, tmp)
+    n_acd = expansion_sum(tmp, n, da, n_da, o_acd)
+    n = expansion_sum(ab, n_ab, bd, n_bd, tmp)
+    n_abd = expansion_sum(tmp, n, da, n_da, o_abd)
+    n = expansion_sum(ab, n_ab, bc, n_bc, tmp)
+    n_abc = expansion_sum(tmp, n, ca, n_ac, o_abc)
 
     n_a = _lifted_term(ax, ay, o_bcd, n_bcd, 1.0, scratch, t_a)
     n_b = _lifted_term(bx, by, o_acd, n_acd, -1.0, scratch, t_b)
     n_c = _lifted_term(cx, cy, o_abd, n_abd, 1.0, scratch, t_c)
     n_d = _lifted_term(dx, dy, o_abc, n_abc, -1.0, scratch, t_d)
 
-    n_s_ab = _expansion_sum(t_a, n_a, t_b, n_b, s_ab)
-    n_s_cd = _expansion_sum(t_c, n_c, t_d, n_d, s_cd)
-    n_det = _expansion_sum(s_ab, n_s_ab, s_cd, n_s_cd, det)
-    return _unscale(_approximate(det, n_det), 4 * k)
+    n_s_ab = expansion_sum(t_a, n_a, t_b, n_b, s_ab)
+    n_s_cd = expansion_sum(t_c, n_c, t_d, n_d, s_cd)
+    n_det = expansion_sum(s_ab, n_s_ab, s_cd, n_s_cd, det)
+    return unscale(approximate(det, n_det), 4 * k)
 
 
 # -- public predicates -------------------------------------------------------

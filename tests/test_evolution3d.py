@@ -105,3 +105,28 @@ def test_bad_input_leaves_the_mesh_unchanged():
 def _volume(mesh):
     p = mesh.p.T[mesh.t.T]
     return np.abs(np.linalg.det(p[:, 1:] - p[:, :1])).sum() / 6
+
+
+def test_nodes_pressed_onto_a_wall_are_put_on_it():
+    """A flow towards the bottom wall, w = -1: each step a node covers at most 0.9 of its
+    distance to the wall, so without a floor it would come 1e-11 close and more; a node
+    closer than WALL_SNAP of the box is put on the wall, never left in between, and keeps
+    its wall coordinate from then on (its normal velocity is dropped)."""
+    from skfem_nem.evolution.lagrangian3d import WALL_SNAP
+    from skfem_nem.geometry import box_nodes_3d
+    p = box_nodes_3d(60, (1, 1, 1), seed=2, boundary_spacing=0.5)
+    p[p[:, 2] > 0, 2] += 0.03 - p[p[:, 2] > 0, 2].min()       # the lowest at z = 0.03
+    m = LagrangianMesh3D(p)
+    walls0 = np.count_nonzero(p[:, 2] == 0)
+
+    def down(x):
+        return np.c_[0 * x[:, :2], -1 + 0 * x[:, 2]]
+
+    snapped = 0
+    for _ in range(100):
+        snapped += m.advance(down, 1e-3)["snapped"]
+        z = m.nodes[:, 2]
+        assert not ((z > 0) & (z < WALL_SNAP)).any()
+    assert snapped > 0 and np.count_nonzero(m.nodes[:, 2] == 0) == walls0 + snapped
+    m.advance(lambda x: np.c_[0 * x[:, :2], 1 + 0 * x[:, 2]], 0.1)    # lifted: they stay
+    assert np.count_nonzero(m.nodes[:, 2] == 0) == walls0 + snapped

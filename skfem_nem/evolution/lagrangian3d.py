@@ -7,7 +7,8 @@ present restricted to problems requiring scalar-only memory"), so
 
 * the node positions, moved by the same iterative predictor-corrector
   (trapezoidal) update as :class:`~skfem_nem.LagrangianMesh`, with the walls
-  of the initial bounding box kept exactly (free slip);
+  of the initial bounding box kept exactly (free slip), and a node that comes closer to
+  a wall than :data:`WALL_SNAP` of the box put on it;
 * named node fields (scalar-only memory: viscosity, density, material id,
   initial position, temperature, ...) that travel with their nodes unchanged:
   a node's row never moves to another node and is never interpolated;
@@ -28,6 +29,14 @@ import numpy as np
 from ..basis import NaturalNeighbourBasis
 from .stepping import LagrangianStep, StepTooLong, check_node_fields
 from ..geometry.meshes import delaunay_mesh
+
+#: a node closer to a wall than this times the box's size is put on the wall (and stays
+#: there, free slip). Nodes pushed towards a wall approach it geometrically
+#: (:data:`~skfem_nem.evolution.stepping.WALL_REACH`); 1e-11 above it they made tetrahedra
+#: nearly, not exactly, in its plane, whose coordinates and faces lose every digit (a 3D
+#: plate pressed onto the bottom wall stopped there). 1e-8 of the box moves a node by far
+#: less than any length the mesh resolves.
+WALL_SNAP = 1e-8
 
 __all__ = ["LagrangianMesh3D"]
 
@@ -134,14 +143,29 @@ class LagrangianMesh3D(LagrangianStep):
 
     def _state(self):
         return {"mesh": self._mesh, "bases": self._bases, "time": self.time,
-                "step": self.step}
+                "step": self.step, "on_wall": self._on_wall}
 
     def _restore(self, state):
         self._mesh, self._bases = state["mesh"], state["bases"]
         self.time, self.step = state["time"], state["step"]
+        self._on_wall = state["on_wall"]
+
+    def _snapped(self, x):
+        """x with the nodes closer to a wall than :data:`WALL_SNAP` of the box put on it
+        (wall nodes from now on), and how many were."""
+        if self._on_wall is None:
+            return x, 0
+        lo, hi = self._box
+        gap = WALL_SNAP * float(np.max(hi - lo))
+        x = np.where(x - lo < gap, lo, np.where(hi - x < gap, hi, x))
+        on_wall = (x == lo) | (x == hi)
+        new = int(np.count_nonzero((on_wall & ~self._on_wall).any(axis=1)))
+        self._on_wall = on_wall
+        return x, new
 
     def _repair(self, x0, x, dt, max_substeps, inject):
         """Retriangulate (Qhull) the moved nodes; every node must stay a vertex."""
+        x, snapped = self._snapped(x)
         try:
             mesh = delaunay_mesh(x)
         except ValueError as err:
@@ -154,7 +178,7 @@ class LagrangianMesh3D(LagrangianStep):
         self.time += dt
         self.step += 1
         return {"tetrahedra": int(new.shape[0]),
-                "tetrahedra_changed": int(np.count_nonzero(~kept))}
+                "tetrahedra_changed": int(np.count_nonzero(~kept)), "snapped": snapped}
 
 
 def _rows_in(a, b):

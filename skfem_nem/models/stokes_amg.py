@@ -4,7 +4,7 @@ the few conjugate-gradient steps that solvers ``"schur-amg"``, ``"minres"`` and
 ``"fgmres"`` of :mod:`skfem_nem.models.stokes_solvers` apply as viscous preconditioner.
 
 Kept apart from the solvers because it is one concern, the multigrid, which the
-solvers and their :class:`~skfem_nem.models.stokes_solvers.StokesCache` share; the
+solvers and their :class:`~skfem_nem.models.stokes_cache.StokesCache` share; the
 choices behind the constants are measured in ``docs/stokes.md``.
 """
 from __future__ import annotations

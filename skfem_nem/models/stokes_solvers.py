@@ -50,7 +50,7 @@ only when it is chosen).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Dict, NamedTuple, Optional
 
 import numpy as np
@@ -60,6 +60,7 @@ import scipy.sparse.linalg as spla
 from ..basis import NaturalNeighbourBasis
 from .krylov import FGMRES_RESTART, fgmres, norm
 from .stokes_amg import rigid_modes, velocity_components, viscous_amg
+from .stokes_cache import REBUILD_GROWTH, REBUILD_SLACK, StokesCache
 from .stokes_factors import ComponentFactors, ViscousFactor
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SOLVERS", "CACHED_SOLVERS",
@@ -84,11 +85,6 @@ MINRES_MAX_RTOL = 0.5
 # outer iterations for 1, 2 and 3 steps at 10,338 nodes (3.7, 3.9 and 4.7 s), 266 and
 # 158 for 1 and 2 at 101,054 nodes, 144 for 3 (54 s against 43 s for 2)
 VISCOUS_CG_STEPS = 2
-# a cached AMG hierarchy is rebuilt (a kept factorisation of "schur" made again) when a
-# solve needs more than this factor times the iterations of the solve it was built for
-# (plus REBUILD_SLACK)
-REBUILD_GROWTH = 1.5
-REBUILD_SLACK = 10
 # "schur" keeps the viscous factorisation in its StokesCache for the next solves of the
 # same pattern (False: factorise every solve, as before; benchmarks/scaling.py measures
 # both). Kept, the later Picard iterations of a step take 16-32 FGMRES iterations with the
@@ -548,97 +544,6 @@ def restarted_minres(matvec: Callable, K, M, rhs: np.ndarray, tol: float, maxite
         r = rhs - matvec(x)
         restarts += 1
     return x, res_m, restarts, count[0]
-
-
-@dataclass
-class StokesCache:
-    """What solvers ``"fgmres"`` and ``"schur"`` keep from one solve to the next:
-    the AMG hierarchy of the viscous block (``"fgmres"``), its factorisation
-    (``"schur"``, :data:`REUSE_FACTOR`) and the last solution.
-
-    Pass one object to a sequence of solves of similar problems (the Picard
-    iterations of a time step, successive time steps). The hierarchy is
-    reused, with the new matrix values put into it
-    (:meth:`~skfem_nem.models.stokes_amg.ViscousAMG.refresh`), while the viscous
-    block keeps its sparsity pattern, and rebuilt when the pattern changes or a
-    solve needs more than ``REBUILD_GROWTH`` times the iterations of the solve it
-    was built for. The last solution is the
-    next solve's start where the sizes agree and it is a better start than
-    zero. ``builds`` and ``reuses`` count what happened (``factorisations`` and
-    ``factor_reuses`` for the factorisation, kept while the pattern is the same and a
-    solve with it needs at most ``REBUILD_GROWTH`` times the iterations of the solve
-    that made it).
-    """
-
-    hierarchy: object = None
-    pattern: Optional[tuple] = None
-    solution: Optional[np.ndarray] = None
-    base_iterations: Optional[int] = None
-    builds: int = 0
-    reuses: int = 0
-    last_iterations: Optional[int] = field(default=None, repr=False)
-    factor: object = field(default=None, repr=False)
-    factor_pattern: Optional[tuple] = field(default=None, repr=False)
-    factor_iterations: Optional[int] = None
-    factorisations: int = 0
-    factor_reuses: int = 0
-
-    def amg(self, problem: SaddlePointProblem):
-        """The hierarchy for ``problem.A``: the kept one (refreshed) or a new one."""
-        A = problem.A
-        pattern = _pattern_of(A)
-        stale = (self.base_iterations is not None and self.last_iterations is not None
-                 and self.last_iterations > REBUILD_GROWTH * self.base_iterations
-                 + REBUILD_SLACK)
-        if self.hierarchy is not None and not stale and _same_pattern(self.pattern, pattern):
-            self.hierarchy.refresh(A)
-            self.reuses += 1
-            return self.hierarchy, False
-        self.hierarchy = viscous_amg(problem)
-        self.pattern = _pattern_of(A, copy=True)
-        self.base_iterations = None
-        self.builds += 1
-        return self.hierarchy, True
-
-    def kept_factor(self, A: sp.spmatrix):
-        """The kept factorisation (``"schur"``) if it was made for a viscous block of
-        the pattern of ``A``, else None."""
-        return self.factor if _same_pattern(self.factor_pattern, _pattern_of(A)) else None
-
-    def keep_factor(self, lu, A: sp.spmatrix, iterations: int) -> None:
-        """Keep the factorisation ``lu`` of ``A`` and the iterations of its solve."""
-        self.factor, self.factor_pattern = lu, _pattern_of(A, copy=True)
-        self.factor_iterations = iterations
-        self.factorisations += 1
-
-    def start(self, n: int) -> Optional[np.ndarray]:
-        """The last solution as a start vector of length ``n`` (None if the
-        sizes differ)."""
-        x = self.solution
-        return x.copy() if x is not None and x.size == n else None
-
-    def record(self, x: np.ndarray, iterations: int, rebuilt: bool) -> None:
-        """Keep the solution and the iteration count of a finished solve."""
-        self.solution = x.copy()
-        self.last_iterations = iterations
-        if rebuilt or self.base_iterations is None:
-            self.base_iterations = iterations
-
-
-def _pattern_of(A: sp.spmatrix, copy: bool = False) -> tuple:
-    """The sparsity pattern of the compressed matrix ``A``: shape, format, index arrays."""
-    if copy:
-        return A.shape, A.format, A.indptr.copy(), A.indices.copy()
-    return A.shape, A.format, A.indptr, A.indices
-
-
-def _same_pattern(a: Optional[tuple], b: tuple) -> bool:
-    """True if the patterns ``a`` (None: none kept) and ``b`` are equal."""
-    if a is None:
-        return False
-    (s0, f0, p0, i0), (s1, f1, p1, i1) = a, b
-    return (s0 == s1 and f0 == f1 and p0.shape == p1.shape and i0.shape == i1.shape
-            and np.array_equal(p0, p1) and np.array_equal(i0, i1))
 
 
 def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: dict,

@@ -199,12 +199,9 @@ def test_callers_arrays_are_not_modified():
 # precision
 # --------------------------------------------------------------------------
 
-@settings(max_examples=25, deadline=None)
-@given(st.integers(0, 2**31 - 1), st.integers(4, 80), st.sampled_from([2, 3]),
-       st.sampled_from(["uniform", "clustered", "lattice"]),
-       st.floats(1e-3, 1e3), st.integers(-100, 100).map(lambda k: k / 10))
-def test_linear_precision(seed, n, d, kind, scale, shift):
-    rng = np.random.default_rng(seed)
+def drawn_points(rng, n, d, kind, scale, shift):
+    """The point sets of the property tests: uniform, clustered (a cluster 1e-4 wide among
+    unit-scale points) or a lattice, shifted and scaled."""
     if kind == "uniform":
         p = rng.random((n + d + 1, d))
     elif kind == "clustered":
@@ -212,7 +209,16 @@ def test_linear_precision(seed, n, d, kind, scale, shift):
     else:
         k = 3 + n % 4
         p = np.array(np.meshgrid(*[np.arange(k)] * d)).reshape(d, -1).T / (k - 1)
-    p = (np.unique(p, axis=0) + shift) * scale
+    return (np.unique(p, axis=0) + shift) * scale
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(4, 80), st.sampled_from([2, 3]),
+       st.sampled_from(["uniform", "clustered", "lattice"]),
+       st.floats(1e-3, 1e3), st.integers(-100, 100).map(lambda k: k / 10))
+def test_linear_precision(seed, n, d, kind, scale, shift):
+    rng = np.random.default_rng(seed)
+    p = drawn_points(rng, n, d, kind, scale, shift)
     b = rng.standard_normal(d)
     f = 0.7 + (p / scale - shift) @ b
     tri = Triangulation(p) if d == 2 else Delaunay(p)
@@ -312,14 +318,7 @@ def test_estimated_gradients_exact_for_linear_data(seed, n, d, kind, scale, shif
     """Every gradient estimate returns the gradient of linear data, on random, clustered
     (a cluster 1e-4 wide among unit-scale points) and lattice point sets at any scale."""
     rng = np.random.default_rng(seed)
-    if kind == "uniform":
-        p = rng.random((n + d + 1, d))
-    elif kind == "clustered":
-        p = np.r_[rng.random((n, d)), 0.4 + 1e-4 * rng.random((n // 2 + d + 1, d))]
-    else:
-        k = 3 + n % 4
-        p = np.array(np.meshgrid(*[np.arange(k)] * d)).reshape(d, -1).T / (k - 1)
-    p = (np.unique(p, axis=0) + shift) * scale
+    p = drawn_points(rng, n, d, kind, scale, shift)
     b = rng.standard_normal((d, 2))
     f = 0.7 + (p / scale - shift) @ b                                   # (n, 2)
     before = f.copy()

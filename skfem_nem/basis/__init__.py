@@ -6,7 +6,8 @@ the assembly hook that lets scikit-fem's forms assemble natural-neighbour stenci
 from .assembly import restore_scikit_fem_assembly
 from .elements import (ElementNaturalNeighbour, ElementNaturalNeighbour2,
                        ElementTetNaturalNeighbour, gauss_rule)
-from .natural_neighbour import NaturalNeighbourBasis, NaturalNeighbourFacetBasis
+from .facet_basis import NaturalNeighbourFacetBasis
+from .natural_neighbour import NaturalNeighbourBasis
 
 __all__ = ["ElementNaturalNeighbour", "ElementNaturalNeighbour2", "ElementTetNaturalNeighbour",
            "NaturalNeighbourBasis", "NaturalNeighbourFacetBasis", "gauss_rule",

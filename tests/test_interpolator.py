@@ -326,19 +326,6 @@ def test_estimated_gradients_exact_for_quadratics(d, method):
     np.testing.assert_allclose(a(q), c(q), atol=1e-8)
 
 
-def roundoff_bound(p, f):
-    """The round-off bound of linear precision on the point set p with values f: values at
-    points h apart fix a slope only to eps |f| / h, and that slope is carried over the
-    coordinates' magnitude |x| (the larger of the points' extent and distance from the
-    origin), so errors scale as eps |f| |x| / h_min. The factor 100 is 10 times the largest
-    measured over 1,500 draws of these point sets (sibson1 and farin on uniform 2D sets, whose
-    nodal gradients come from fits over the closest pairs); on a uniform set it is about
-    1e-12, on a cluster 1e-6 wide about 3e-8."""
-    h = pdist(p)
-    extent = max(h.max(), np.abs(p).max())
-    return 100 * np.finfo(float).eps * np.abs(f).max() * extent / h.min()
-
-
 @settings(max_examples=25, deadline=None)
 @given(st.integers(0, 2**31 - 1), st.integers(4, 80), st.sampled_from([2, 3]),
        st.sampled_from(["uniform", "clustered", "lattice"]),

@@ -147,3 +147,13 @@ def compare_2d(p, q, gtol=1e-10, lasserre=None):
     scale = max(1.0, max(np.abs(dense(D)).max() for D in dA))
     for Da, Db in zip(dA, dB):
         np.testing.assert_allclose(dense(Db), dense(Da), rtol=0, atol=gtol * scale)
+
+
+def qhull_mesh(nodes):
+    """The ``MeshTet`` of Qhull's tetrahedra of the (n, 3) nodes, flat ones included, as a
+    user may build it (delaunay_mesh uses the package's own tetrahedralisation, which has
+    no flat tetrahedra)."""
+    from scipy.spatial import Delaunay
+    from skfem import MeshTet
+    p = np.ascontiguousarray(nodes, dtype=float)
+    return MeshTet(np.ascontiguousarray(p.T), Delaunay(p).simplices.T.astype(np.int64))

@@ -11,6 +11,7 @@ from scipy.spatial.distance import pdist
 
 from conftest import load_benchmark, load_example
 from skfem_nem import NaturalNeighbourInterpolator, Triangulation, estimate_gradients
+from skfem_nem.geometry.delaunay3d import Delaunay3D
 
 METHODS_2D = ["sibson", "laplace", "sibson1", "farin", "linear", "nearest"]
 METHODS_3D = ["sibson", "sibson1", "farin", "linear", "nearest"]
@@ -118,10 +119,21 @@ def test_prebuilt_delaunay_3d(method):
     p = data(150, d=3)
     f = np.cos(3 * p[:, 0]) + p[:, 1] * p[:, 2]
     q = inside(40, d=3)
+    ref = NaturalNeighbourInterpolator(p, f, method=method)(q)
+    own = Delaunay3D(p)
+    itp = NaturalNeighbourInterpolator(own, f, method=method)
+    assert itp.triangulation is own
+    np.testing.assert_array_equal(itp(q), ref)
+    # Qhull's: its flat tetrahedra on the cube's faces (four co-circular corners) add face
+    # diagonals to the neighbours the C1 methods' gradients are fitted on; with the same
+    # gradients, the same values
     tri = Delaunay(p)
     itp = NaturalNeighbourInterpolator(tri, f, method=method)
     assert itp.triangulation is tri
-    np.testing.assert_allclose(itp(q), NaturalNeighbourInterpolator(p, f, method=method)(q),
+    g = estimate_gradients(p, f)
+    kw = {"gradients": g} if method in ("sibson1", "farin") else {}
+    np.testing.assert_allclose(NaturalNeighbourInterpolator(tri, f, method=method, **kw)(q),
+                               NaturalNeighbourInterpolator(p, f, method=method, **kw)(q),
                                atol=1e-14)
 
 

@@ -11,6 +11,7 @@ from scipy.spatial import ConvexHull, Delaunay, HalfspaceIntersection, Voronoi
 from helpers import check_properties, compare_2d, dense
 from skfem_nem import Triangulation, sibson_coordinates
 from skfem_nem.coordinates.lasserre import sibson_coordinates_nd
+from skfem_nem.geometry.delaunay3d import Delaunay3D
 
 
 def hypercube_nodes(n, d, seed):
@@ -351,13 +352,17 @@ def test_bad_queries():
 
 def test_delaunay_reuse():
     p = hypercube_nodes(80, 3, seed=26)
-    tri = Delaunay(p)
     q = 0.1 + 0.8 * np.random.default_rng(27).random((50, 3))
     A = sibson_coordinates_nd(p, q, gradient=True)
-    B = sibson_coordinates_nd(p, q, gradient=True, delaunay=tri)
+    B = sibson_coordinates_nd(p, q, gradient=True, delaunay=Delaunay3D(p))
     np.testing.assert_array_equal(dense(A[0]), dense(B[0]))
     for a, b in zip(A[1], B[1]):
         np.testing.assert_array_equal(dense(a), dense(b))
+    # Qhull's tetrahedra, in another order: the same up to round-off
+    C = sibson_coordinates_nd(p, q, gradient=True, delaunay=Delaunay(p))
+    np.testing.assert_allclose(dense(A[0]), dense(C[0]), rtol=0, atol=1e-14)
+    for a, c in zip(A[1], C[1]):
+        np.testing.assert_allclose(dense(a), dense(c), rtol=0, atol=1e-12)
 
 
 # ---------------------------------------------------------------------------

@@ -5,6 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from skfem_nem import delaunay_mesh
+from helpers import qhull_mesh
 from skfem_nem.geometry import box_nodes_3d
 from skfem_nem.models.analytic3d import (Manufactured3D, Sinker, haberman_sayre, relative_errors,
                                          settling_velocity)
@@ -87,23 +88,27 @@ def test_hydrostatic_state_exact(mesh, method):
     assert v.shape == (mesh.p.shape[1], 3)
     p = sol.pressure_at_nodes()
     ref = g @ mesh.p
-    assert np.abs((p - p.mean()) - (ref - ref.mean())).max() < 1e-10
+    # the baselines' pressures carry their direct solve's round-off at this viscosity
+    # contrast (up to 1.2e-10 measured, depending on the tetrahedra's order)
+    tol = 1e-10 if method == "nem" else 1e-9
+    assert np.abs((p - p.mean()) - (ref - ref.mean())).max() < tol
 
 
 def test_flat_tetrahedra_carry_no_bubble():
     """Opposite faces of a box from box_nodes_3d carry the same pattern of nodes, so a node
     of the bottom face, the one above it on the top face and a neighbouring such pair can
-    span a flat tetrahedron of Qhull's (here one, in a graded set of 762 nodes). Its bubble
-    block is singular and scikit-fem cannot map its P1 gradients; it carries no weight, and
-    the hydrostatic state is exact with nothing NaN."""
+    span a flat tetrahedron of Qhull's (here one, in a graded set of 762 nodes; delaunay_mesh
+    makes none, but a user's mesh may have them). Its bubble block is singular and scikit-fem
+    cannot map its P1 gradients; it carries no weight, and the hydrostatic state is exact
+    with nothing NaN."""
     lo, hi = np.array([1.25, 0.5, 0.77]), np.array([2.75, 1.5, 0.87])
 
     def density(p):
         d = np.linalg.norm(np.maximum(np.maximum(lo - p, p - hi), 0.0), axis=1)
         return 1.0 / (1.0 + d / 0.15) ** 3
 
-    m = delaunay_mesh(box_nodes_3d(300, (4, 2, 1), density=density, seed=0,
-                                   boundary_spacing=0.25))
+    m = qhull_mesh(box_nodes_3d(300, (4, 2, 1), density=density, seed=0,
+                                boundary_spacing=0.25))
     P = m.p.T[m.t.T]
     vol = np.abs(np.einsum("kd,kd->k", P[:, 1] - P[:, 0],
                            np.cross(P[:, 2] - P[:, 0], P[:, 3] - P[:, 0]))) / 6
@@ -120,7 +125,8 @@ def test_flat_tetrahedra_carry_no_bubble():
 
 def test_flat_tetrahedra_on_a_wall_keep_the_boundary_term_finite():
     """Nodes on a wall in a square lattice (four by four cocircular): Qhull spans flat
-    tetrahedra of four wall nodes, whose faces lie on the hull. The boundary term of the
+    tetrahedra of four wall nodes, whose faces lie on the hull (delaunay_mesh makes none; a
+    user's mesh of Qhull's tetrahedra has them). The boundary term of the
     divergence takes their normals and pressure traces from the faces themselves (the
     tetrahedra's inverse mapping is NaN), and a 3D plate whose nodes slid along the bottom
     wall into such a pattern stopped with NaN in the pressure iterations; the hydrostatic
@@ -128,7 +134,7 @@ def test_flat_tetrahedra_on_a_wall_keep_the_boundary_term_finite():
     p = box_nodes_3d(150, (1, 1, 1), seed=0, boundary_spacing=0.25)
     g = np.linspace(0, 1, 6)
     X, Y = np.meshgrid(g, g)
-    m = delaunay_mesh(np.vstack([p[p[:, 2] > 0], np.c_[X.ravel(), Y.ravel(), 0 * X.ravel()]]))
+    m = qhull_mesh(np.vstack([p[p[:, 2] > 0], np.c_[X.ravel(), Y.ravel(), 0 * X.ravel()]]))
     P = m.p.T[m.t.T]
     vol = np.abs(np.einsum("kd,kd->k", P[:, 1] - P[:, 0],
                            np.cross(P[:, 2] - P[:, 0], P[:, 3] - P[:, 0]))) / 6
@@ -153,10 +159,11 @@ def test_faces_without_area_carry_no_boundary_term():
     """The nodes of a 3D plate pressed onto its bottom wall: Qhull's hull there has 44
     triangles of three collinear wall nodes (no area, no normal). They carry no weight in the
     boundary term of the divergence (a run stopped at step 68 with NaN in the pressure
-    iterations), and the term gives the box's volume as the flux of u = (x, 0, 0)."""
+    iterations), and the term gives the box's volume as the flux of u = (x, 0, 0). (Today's
+    delaunay_mesh makes no such faces; a user's mesh of Qhull's tetrahedra has them.)"""
     from pathlib import Path
     nodes = np.load(Path(__file__).parent / "data" / "plate3d_wall_nodes.npz")["nodes"]
-    m = delaunay_mesh(nodes)
+    m = qhull_mesh(nodes)
     F = m.p[:, m.facets[:, m.boundary_facets()]]
     area = np.linalg.norm(np.cross(F[:, 1] - F[:, 0], F[:, 2] - F[:, 0], axis=0), axis=0)
     assert np.count_nonzero(area == 0) > 0

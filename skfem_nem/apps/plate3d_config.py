@@ -63,7 +63,7 @@ class Plate3DConfig:
     end_time: float = 250.0
     #: largest time step
     max_dt: float = 50.0
-    #: smallest time step: a step the nodes cannot make (Qhull would lose a node) is
+    #: smallest time step: a step the nodes cannot make (two nodes would coincide) is
     #: retried with half the time step down to this one, then the run stops
     min_dt: float = 0.01
     #: largest node displacement per step, as a fraction of the node's mean edge length

@@ -5,7 +5,7 @@ The paper's 3D programme ("all the theory described is equally valid in three
 dimensions"), with its restriction: scalar-only memory. The nodes carry their material
 (the plate indicator, the height they started at, which picks the fluid layer) and move
 with the flow (:class:`~skfem_nem.LagrangianMesh3D`: the iterative predictor-corrector,
-the walls kept exactly, the Delaunay tetrahedra recomputed by Qhull after every step).
+the walls kept exactly, the Delaunay tetrahedra recomputed after every step).
 Each step solves the Stokes problem on the current tetrahedra
 (:func:`~skfem_nem.models.stokes.stokes_spaces`: natural-neighbour velocity with condensed
 bubbles, P1 pressure; FGMRES with AMG) with the viscosity and the buoyancy interpolated
@@ -45,7 +45,7 @@ __all__ = ["SinkingPlate3D"]
 
 #: spacing of the nodes on the box faces, as a fraction of the box height (the far field)
 WALL_SPACING = 0.25
-#: halvings of a step's dt before the run stops (a move Qhull cannot triangulate, or a
+#: halvings of a step's dt before the run stops (a move that makes two nodes coincide, or a
 #: predictor-corrector that does not converge)
 RETRIES = 6
 

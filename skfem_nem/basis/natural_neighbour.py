@@ -9,7 +9,8 @@ coordinates and their gradients at the quadrature points of a Delaunay
 In 2D the coordinates come from the area method (:mod:`skfem_nem.coordinates.area2d`,
 the default) or from the paper's Box 1 (``method="lasserre"``,
 :mod:`skfem_nem.coordinates.lasserre`); on tetrahedra always from Box 1, with scikit-fem's
-tetrahedral quadrature and the Delaunay tetrahedra of Qhull.
+tetrahedral quadrature and the exact Delaunay tetrahedra of
+:class:`~skfem_nem.geometry.delaunay3d.Delaunay3D`.
 
 Stencils
 --------
@@ -174,8 +175,9 @@ class NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
 
     def _fix_undefined(self, pts, Phi, D, dx, elems):
         """Undefined gradients at quadrature points: allowed only in cells of
-        zero measure (Qhull's flat tetrahedra between co-spherical nodes, e.g.
-        lattices), whose points carry no weight; their gradients become 0."""
+        zero measure (the flat tetrahedra a ``MeshTet`` of Qhull's has between
+        co-spherical nodes, e.g. lattices), whose points carry no weight; their gradients
+        become 0."""
         finite = np.ones(Phi.shape[0], dtype=bool)
         for Dk in D:
             finite &= np.isfinite(np.asarray(Dk.sum(axis=1)).ravel())

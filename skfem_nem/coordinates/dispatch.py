@@ -9,8 +9,8 @@ from __future__ import annotations
 from typing import Literal, Optional
 
 import numpy as np
-from scipy.spatial import Delaunay
 
+from ..geometry.delaunay_nd import DELAUNAY_TYPES
 from ..geometry.hull import OUTSIDE_ROUNDOFF
 from ..geometry.triangulation import Triangulation
 from .area2d import area_coordinates
@@ -24,7 +24,7 @@ def _dimension(nodes_or_triangulation) -> int:
     the 2D checks then name the problem)."""
     if isinstance(nodes_or_triangulation, Triangulation):
         return 2
-    if isinstance(nodes_or_triangulation, Delaunay):
+    if isinstance(nodes_or_triangulation, DELAUNAY_TYPES):
         return int(nodes_or_triangulation.points.shape[1])
     shape = np.shape(nodes_or_triangulation)
     return int(shape[1]) if len(shape) == 2 and shape[1] in (3, 4) else 2
@@ -33,7 +33,7 @@ def _dimension(nodes_or_triangulation) -> int:
 def _as_triangulation(nodes_or_triangulation) -> Triangulation:
     if isinstance(nodes_or_triangulation, Triangulation):
         return nodes_or_triangulation
-    if isinstance(nodes_or_triangulation, Delaunay):
+    if isinstance(nodes_or_triangulation, DELAUNAY_TYPES):
         return Triangulation(nodes_or_triangulation.points)
     return Triangulation(nodes_or_triangulation)
 
@@ -51,7 +51,7 @@ def _lasserre(src, x, gradient, kind, undefined, chunk, area_options):
             raise ValueError("the triangulation has segments: constrained coordinates come "
                              "from the 2D area method only (method='area')")
         src = src.nodes
-    if isinstance(src, Delaunay):
+    if isinstance(src, DELAUNAY_TYPES):
         return sibson_coordinates_nd(src.points, x, gradient=gradient, delaunay=src,
                                      undefined=undefined, chunk=chunk)
     return sibson_coordinates_nd(src, x, gradient=gradient, undefined=undefined, chunk=chunk)

@@ -8,9 +8,8 @@ Every check names the offending argument; the caller's arrays are copied, never 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import Delaunay
 
-from ..geometry.delaunay_nd import check_delaunay, delaunay_of
+from ..geometry.delaunay_nd import DELAUNAY_TYPES, check_delaunay, delaunay_of
 from ..geometry.triangulation import Triangulation, validate_nodes
 
 __all__ = ["triangulated", "check_values", "check_gradients", "check_fill_value",
@@ -30,7 +29,7 @@ def triangulated(points, rescale: bool):
     """``(p, triangulation, offset, scale)`` of the data ``points``: the (n, d) points (after
     rescaling), their :class:`~skfem_nem.Triangulation` (2D) or ``scipy.spatial.Delaunay``
     (3D), and the rescaling (``None`` without)."""
-    if isinstance(points, (Triangulation, Delaunay)):
+    if isinstance(points, (Triangulation,) + DELAUNAY_TYPES):
         if rescale:
             raise ValueError("rescale=True is not supported with a prebuilt triangulation as "
                              "points (rescale the points before triangulating them)")

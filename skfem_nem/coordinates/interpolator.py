@@ -16,8 +16,8 @@ interpolation (:mod:`~skfem_nem.coordinates.interp_simplex`); the hull test in
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import Delaunay
 
+from ..geometry.delaunay_nd import DELAUNAY_TYPES
 from ..geometry.triangulation import Triangulation
 from .interp_farin import FarinInterpolant
 from .interp_gradients import nodal_gradients
@@ -121,7 +121,7 @@ class NaturalNeighbourInterpolator:
             raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
         p, tri, self._offset, self._scale = triangulated(points, bool(rescale))
         given = (points.nodes if isinstance(points, Triangulation) else
-                 points.points if isinstance(points, Delaunay) else points)
+                 points.points if isinstance(points, DELAUNAY_TYPES) else points)
         self.points = np.array(given, dtype=np.float64, copy=True)
         n, d = p.shape
         if d not in METHODS[method]:

@@ -12,10 +12,11 @@ present restricted to problems requiring scalar-only memory"), so
 * named node fields (scalar-only memory: viscosity, density, material id,
   initial position, temperature, ...) that travel with their nodes unchanged:
   a node's row never moves to another node and is never interpolated;
-* the Delaunay tetrahedralisation of the current nodes, recomputed with Qhull
-  after every step and checked: every node stays a vertex of some
-  tetrahedron (Qhull drops nodes that nearly coincide; the step is then
-  refused with the node named and the state left as it was).
+* the Delaunay tetrahedralisation of the current nodes, recomputed after every step
+  by the exact :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D` (no flat tetrahedra,
+  also where wall nodes slide into co-circular patterns) and checked: every node stays
+  a vertex (a step after which two nodes coincide is refused with the nodes named and
+  the state left as it was).
 
 There are no integration-point fields: their remap across a retriangulation
 is the open problem the paper names.
@@ -42,7 +43,7 @@ __all__ = ["LagrangianMesh3D"]
 
 
 class LagrangianMesh3D(LagrangianStep):
-    """A 3D node set carried by a flow, retriangulated (Qhull) every step.
+    """A 3D node set carried by a flow, retriangulated every step.
 
     Parameters
     ----------
@@ -68,7 +69,7 @@ class LagrangianMesh3D(LagrangianStep):
     ValueError
         For bad nodes or fields (naming the node or the field), a velocity of
         the wrong shape or with non-finite values (naming the node), nodes
-        leaving the box, and steps after which Qhull would drop a node.
+        leaving the box, and steps after which two nodes coincide.
     """
 
     def __init__(self, nodes, node_fields: Optional[Dict[str, np.ndarray]] = None,
@@ -164,7 +165,7 @@ class LagrangianMesh3D(LagrangianStep):
         return x, new
 
     def _repair(self, x0, x, dt, max_substeps, inject):
-        """Retriangulate (Qhull) the moved nodes; every node must stay a vertex."""
+        """Retriangulate the moved nodes; every node must stay a vertex."""
         x, snapped = self._snapped(x)
         try:
             mesh = delaunay_mesh(x)

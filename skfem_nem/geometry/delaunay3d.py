@@ -78,7 +78,7 @@ class Delaunay3D:
         if status == FLAT:
             rank = np.linalg.matrix_rank(p[1:] - p[0])
             raise ValueError(f"the {p.shape[0]} points are degenerate: they span only {rank} "
-                             "of 3 dimensions (all coplanar or collinear), so no "
+                             "of 3 dimensions (a flat point set: all coplanar or collinear), so no "
                              "tetrahedralisation exists")
         self.points = p
         self.simplices, self.neighbors = _compact(T, N, ntet, p.shape[0])

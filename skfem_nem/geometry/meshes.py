@@ -20,10 +20,10 @@ import hashlib
 import weakref
 
 import numpy as np
-from scipy.spatial import Delaunay
 from skfem import MeshTet, MeshTri
 
 from .constrained import check_segments, flood_regions, pair_keys
+from .delaunay3d import Delaunay3D
 from .delaunay_nd import delaunay_of
 from .predicates import orient2d
 from .triangulation import Triangulation, unused_nodes, validate_nodes
@@ -112,17 +112,18 @@ def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
     """The Delaunay triangulation of points as a scikit-fem mesh.
 
     (n, 2) points give a ``MeshTri`` (robust 2D triangulation,
-    :class:`~skfem_nem.Triangulation`), (n, 3) points a ``MeshTet`` (Qhull,
-    :class:`scipy.spatial.Delaunay`). Node i of the mesh is ``points[i]``:
-    nothing is reordered or dropped, every node is a vertex of some
-    triangle or tetrahedron. Raises ``ValueError`` for bad points (non-finite,
-    too few, duplicate, all collinear or coplanar) and for points Qhull would
-    drop (nearly coincident with others), naming the point.
+    :class:`~skfem_nem.Triangulation`), (n, 3) points a ``MeshTet`` (exact 3D
+    tetrahedralisation, :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D`).
+    Node i of the mesh is ``points[i]``: nothing is reordered or dropped, every
+    node is a vertex of some triangle or tetrahedron. Raises ``ValueError`` for
+    bad points (non-finite, too few, duplicate, all collinear or coplanar),
+    naming the point.
 
-    For co-spherical 3D points (lattices) Qhull glues its triangulations of
-    the co-spherical cells with flat (zero-volume) tetrahedra; they are kept
-    (the natural-neighbour basis gives their quadrature points zero weight),
-    but scikit-fem's Lagrange elements cannot be used on such a mesh.
+    Co-spherical 3D points (lattices, nodes on a box's walls) are split into
+    tetrahedra by a symbolic perturbation: no flat (zero-volume) tetrahedra, so
+    scikit-fem's Lagrange elements work on such a mesh too. (A ``MeshTet`` of
+    Qhull's tetrahedra, which keeps flat ones, is accepted by the natural-neighbour
+    bases, which give their quadrature points zero weight.)
 
     Segments (2D)
         ``segments``: (k, 2) pairs of node indices, or a dict of such arrays by
@@ -151,8 +152,8 @@ def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
     True
     >>> cube = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]]
     >>> tets = delaunay_mesh(np.array(cube, dtype=float))
-    >>> type(tets).__name__, tets.t.shape
-    ('MeshTet1', (4, 3))
+    >>> type(tets).__name__, tets.t.shape     # (the 5 points are co-spherical)
+    ('MeshTet1', (4, 2))
 
     An L-shaped domain: the boundary as segments, the notch as a hole.
 
@@ -269,11 +270,11 @@ def _check_used(p, t, what):
             f"with skfem_nem.delaunay_mesh(points)")
 
 
-def _tet_delaunay(mesh: MeshTet) -> Delaunay:
-    """Qhull's Delaunay triangulation of a ``MeshTet``'s nodes, after checking
-    that the mesh's own tetrahedra are Delaunay (the coordinates are computed
-    on Qhull's tetrahedra: where several Delaunay triangulations exist, as for
-    co-spherical nodes, all give the same natural-neighbour coordinates)."""
+def _tet_delaunay(mesh: MeshTet) -> Delaunay3D:
+    """The Delaunay tetrahedralisation (:class:`Delaunay3D`) of a ``MeshTet``'s nodes, after
+    checking that the mesh's own tetrahedra are Delaunay (the coordinates are computed on
+    ours: where several Delaunay triangulations exist, as for co-spherical nodes, all give
+    the same natural-neighbour coordinates)."""
     p, t = mesh.p.T, mesh.t.T
     _check_used(p, t, "tetrahedron")
     tri = delaunay_of(np.ascontiguousarray(p))
@@ -304,10 +305,10 @@ def _tet_delaunay(mesh: MeshTet) -> Delaunay:
     return tri
 
 
-def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay:
+def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay3D:
     """The triangulation the coordinates of a mesh are computed on, cached on the
-    mesh: for a ``MeshTet`` a :class:`scipy.spatial.Delaunay` of its nodes (its
-    tetrahedra checked to be Delaunay); for a ``MeshTri`` whose boundary is
+    mesh: for a ``MeshTet`` a :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D` of its
+    nodes (its tetrahedra checked to be Delaunay); for a ``MeshTri`` whose boundary is
     convex its own triangles as a :class:`~skfem_nem.Triangulation` (same order)
     if they are Delaunay, else the Delaunay triangulation of its nodes (a refined,
     smoothed or imported mesh keeps its triangles for integration; the functions

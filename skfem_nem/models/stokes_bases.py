@@ -233,9 +233,9 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
 
 
 def _zero_flat_gradients(basis) -> None:
-    """Gradients 0 on the flat tetrahedra of ``basis`` (zero volume: Qhull's, between
-    co-spherical or co-planar nodes), where scikit-fem's inverse mapping gives NaN: they
-    carry no weight, and 0 times NaN would spoil the assembled sums."""
+    """Gradients 0 on the flat tetrahedra of ``basis`` (zero volume: a mesh of Qhull's
+    tetrahedra has them between co-spherical or co-planar nodes), where scikit-fem's inverse
+    mapping gives NaN: they carry no weight, and 0 times NaN would spoil the assembled sums."""
     if basis is None or isinstance(basis, NaturalNeighbourBasis) or \
             not hasattr(basis, "basis") or not hasattr(basis, "dx"):
         # (the natural-neighbour gradients are zero there already, and reading its

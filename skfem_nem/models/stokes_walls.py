@@ -162,7 +162,7 @@ def _face_frames(mesh, corners: np.ndarray, x: np.ndarray) -> tuple:
     """The barycentric coordinates (3, nf, nq) of the points x (3, nf, nq) in their boundary
     faces ``corners`` (3, nf) -- the P1 pressure's trace there -- and the faces' outward
     unit normals (3, nf), from the faces alone. Not from the tetrahedra behind them:
-    Qhull gives flat tetrahedra of nodes on one wall (zero volume), whose inverse mapping
+    a mesh of Qhull's has flat tetrahedra of nodes on one wall (zero volume), whose inverse mapping
     (and so scikit-fem's facet normals and trace values) is NaN. A hull is convex: the
     mean of the nodes lies inside every face's plane. Faces without area (three collinear
     nodes on a wall) get zeros: they carry no weight."""

@@ -10,8 +10,9 @@ random queries inside, against scipy's linear and nearest interpolants and natin
 Sibson interpolation when it is installed (``pip install natinterp3d``; optional).
 
 Every triangulation is built once (the "triangulation" row; Qhull for scipy, the package's
-checked Delaunay triangulation for ours) and handed to each interpolator; "build" is the
-rest of the set-up (for ``sibson1``, ``farin`` and Clough-Tocher, the gradient estimate). Calls are
+checked Delaunay triangulation for ours, in 3D its ``Delaunay3D``) and handed to each
+interpolator; "build" is the rest of the set-up (for ``sibson1``, ``farin`` and
+Clough-Tocher, the gradient estimate). Calls are
 timed warm, best of ``--repeats``: a first small call loads the numba kernels (their one-time
 load from numba's cache, or compilation on a fresh install, is printed apart). "gradient" is
 ``itp.gradient`` (values and exact gradients); errors are against the exact function at the
@@ -41,6 +42,7 @@ from scipy.interpolate import (CloughTocher2DInterpolator, LinearNDInterpolator,
 from scipy.spatial import Delaunay
 
 from skfem_nem import NaturalNeighbourInterpolator, Triangulation, estimate_gradients
+from skfem_nem.geometry.delaunay3d import Delaunay3D
 
 
 def franke(x, y):
@@ -140,11 +142,12 @@ def study_3d(n, m, repeats):
     f = smooth_3d(p)
     q = 0.02 + 0.96 * np.random.default_rng(1).random((m, 3))
     exact = smooth_3d(q)
+    own, t_tri = timed(lambda: Delaunay3D(p))
     dl, t_qhull = timed(lambda: Delaunay(p))
     lines = [f"3D: {n:,} points, {m:,} random queries", "", HEADER,
-             f"| triangulation (Qhull) | {t_qhull:.3f} | | | | | |"]
+             f"| triangulation (ours / Qhull) | {t_tri:.3f} / {t_qhull:.3f} | | | | | |"]
     for meth in ("sibson", "sibson1", "farin", "linear", "nearest"):
-        itp, tb = timed(lambda: NaturalNeighbourInterpolator(dl, f, method=meth))
+        itp, tb = timed(lambda: NaturalNeighbourInterpolator(own, f, method=meth))
         v, tc = best(lambda: itp(q), repeats)
         _, tg = best(lambda: itp.gradient(q), repeats)
         lines.append(row(meth, tb, tc, tg, v, exact))

@@ -88,10 +88,14 @@ class Delaunay3D:
 
     @property
     def vertex_to_simplex(self):
-        """For each point, a tetrahedron of which it is a vertex."""
-        out = np.full(self.npoints, -1, np.int32)
-        out[self.simplices.ravel()] = np.repeat(np.arange(self.nsimplex, dtype=np.int32), 4)
-        return out
+        """For each point, a tetrahedron of which it is a vertex (computed once: every 3D
+        coordinate call reads it)."""
+        if getattr(self, "_v2s", None) is None:
+            out = np.full(self.npoints, -1, np.int32)
+            out[self.simplices.ravel()] = np.repeat(np.arange(self.nsimplex, dtype=np.int32), 4)
+            out.flags.writeable = False
+            self._v2s = out
+        return self._v2s
 
     @property
     def vertex_neighbor_vertices(self):

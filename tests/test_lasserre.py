@@ -418,3 +418,32 @@ def test_3d_within_round_off_of_a_node():
         np.testing.assert_allclose(F.sum(1), 1.0, rtol=0, atol=1e-12)
         np.testing.assert_allclose(F @ p, x, rtol=0, atol=1e-12)
         assert np.all(F[np.arange(150), i] > 1 - 1e-9)
+
+
+# ---------------------------------------------------------------------------
+# the query kernel as plain Python (numpy checks every index)
+# ---------------------------------------------------------------------------
+
+def test_query_kernel_stays_in_its_buffers_in_2d(monkeypatch):
+    """Compiled kernels do not check indices, so a read past a buffer goes
+    unnoticed. Run the query kernel as plain Python on 2D queries -- direct
+    ones, and those that give the weights of 3D queries on a hull facet --
+    and compare with the compiled kernel. (The 3D near-a-node test read a
+    third column of the (ncap, d) neighbour offsets in 2D as well.)"""
+    from skfem_nem.coordinates import lasserre as L
+    from skfem_nem.coordinates import lasserre_query as LQ
+
+    rng = np.random.default_rng(34)
+    p2 = hypercube_nodes(30, 2, seed=35)
+    q2 = 0.05 + 0.9 * rng.random((8, 2))
+    p3 = np.r_[hypercube_nodes(40, 3, seed=36), np.c_[rng.random((10, 2)), np.zeros(10)]]
+    q3 = np.c_[0.05 + 0.9 * rng.random((8, 2)), np.zeros(8)]
+    compiled = [dense(sibson_coordinates_nd(p2, q2)), dense(sibson_coordinates_nd(p3, q3))]
+    for name in ("query", "query_block"):
+        f = getattr(LQ, name)
+        monkeypatch.setattr(LQ, name, getattr(f, "py_func", f))
+    monkeypatch.setattr(L, "query_batch_serial", getattr(LQ.query_batch, "py_func",
+                                                         LQ.query_batch))
+    python = [dense(sibson_coordinates_nd(p2, q2)), dense(sibson_coordinates_nd(p3, q3))]
+    for a, b in zip(python, compiled):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)

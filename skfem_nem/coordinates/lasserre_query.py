@@ -124,10 +124,12 @@ def query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC,
     # near a node (closer than _NEAR3 L) the cells of the other neighbours are
     # thin slabs: the recursion, with its origins on row 0 and vertices from
     # pairs of lines, keeps about twice the digits of their gradients there
+    # (a test for the 3D path only: q has d columns, two in 2D)
     near = False
-    for j in range(K):
-        near = near or q[j, 0] * q[j, 0] + q[j, 1] * q[j, 1] + q[j, 2] * q[j, 2] < (
-            near3 * L) ** 2
+    if d == 3:
+        for j in range(K):
+            near = near or q[j, 0] * q[j, 0] + q[j, 1] * q[j, 1] + q[j, 2] * q[j, 2] < (
+                near3 * L) ** 2
     if d == 3 and not hullw and not degenerate and not near:
         # general position: the cells' faces from the known combinatorics,
         # accepted if linear precision (and its derivative, sum_i q_i (x)

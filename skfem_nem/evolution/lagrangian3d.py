@@ -29,7 +29,7 @@ import numpy as np
 
 from ..basis import NaturalNeighbourBasis
 from .stepping import LagrangianStep, StepTooLong, check_node_fields
-from ..geometry.meshes import delaunay_mesh
+from ..geometry.meshes import delaunay_mesh, triangulation_mesh, triangulation_of
 
 #: a node closer to a wall than this times the box's size is put on the wall (and stays
 #: there, free slip). Nodes pushed towards a wall approach it geometrically
@@ -165,21 +165,23 @@ class LagrangianMesh3D(LagrangianStep):
         return x, new
 
     def _repair(self, x0, x, dt, max_substeps, inject):
-        """Retriangulate the moved nodes; every node must stay a vertex."""
+        """Repair the tetrahedra for the moved nodes (flips, and nodes relocated where flips
+        cannot mend); every node must stay a vertex."""
         x, snapped = self._snapped(x)
         try:
-            mesh = delaunay_mesh(x)
+            tri, report = triangulation_of(self._mesh).moved(x)
         except ValueError as err:
             raise StepTooLong(f"step {self.step + 1}: the moved nodes cannot be "
                               f"triangulated without losing a node ({err}); reduce dt") from None
+        mesh = triangulation_mesh(tri)
         new = mesh.t.T
         kept = _rows_in(np.sort(new, axis=1), np.sort(self._mesh.t.T, axis=1))
         self._mesh = mesh
         self._bases = {}
         self.time += dt
         self.step += 1
-        return {"tetrahedra": int(new.shape[0]),
-                "tetrahedra_changed": int(np.count_nonzero(~kept)), "snapped": snapped}
+        return dict(report, tetrahedra=int(new.shape[0]),
+                    tetrahedra_changed=int(np.count_nonzero(~kept)), snapped=snapped)
 
 
 def _rows_in(a, b):

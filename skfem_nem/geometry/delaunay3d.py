@@ -9,10 +9,13 @@ the 3D code paths read from scipy's object: ``points``, ``simplices``, ``neighbo
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from numba import njit
 
 from .delaunay3d_build import DUPLICATE, FLAT, build
+from .delaunay3d_repair import COINCIDENT, LOST, repair
 from .nodesets import morton_order
 from .predicates3d import orient3d_sign
 
@@ -80,11 +83,44 @@ class Delaunay3D:
             raise ValueError(f"the {p.shape[0]} points are degenerate: they span only {rank} "
                              "of 3 dimensions (a flat point set: all coplanar or collinear), so no "
                              "tetrahedralisation exists")
+        self._adopt(p, T, N, ntet)
+
+    def _adopt(self, p, T, N, ntet):
+        """Take the points and the ghost-closed tetrahedra of :mod:`.delaunay3d_build`."""
         self.points = p
+        T.flags.writeable = N.flags.writeable = False
+        self._raw = (T, N, ntet)  # the ghost-closed structure :meth:`moved` repairs
         self.simplices, self.neighbors = _compact(T, N, ntet, p.shape[0])
         self.ndim = 3
         self.npoints = p.shape[0]
         self.nsimplex = self.simplices.shape[0]
+        self._v2s = None
+
+    def moved(self, points):
+        """The Delaunay tetrahedralisation of the same nodes at new positions ``points``
+        (n, 3), repaired locally from this one (:mod:`.delaunay3d_repair`; this one stays
+        unchanged), and the repair's report: ``relocated`` (nodes removed and re-inserted),
+        ``rebuilt`` (1 when the repair fell back to a build from scratch) and
+        ``repair_seconds``. The result is the tetrahedralisation :class:`Delaunay3D` builds
+        from ``points``, tetrahedron for tetrahedron. Raises ``ValueError`` for bad points
+        (naming the point) and for two nodes at one position (naming both)."""
+        start = time.perf_counter()
+        p1 = _checked(points)
+        if p1.shape != self.points.shape:
+            raise ValueError(f"points must have the shape of the nodes, {self.points.shape}, "
+                             f"got {p1.shape}")
+        T, N, ntet, status, i, j, counts = repair(self._raw, self.points, p1)
+        if status == COINCIDENT:
+            i, j = sorted((int(i), int(j)))
+            raise ValueError(f"points[{j}] coincides with points[{i}] at {p1[i].tolist()}")
+        out = Delaunay3D.__new__(Delaunay3D)
+        if status == LOST:  # counted, never silent
+            out.__init__(p1)
+        else:
+            out._adopt(p1, T, N, ntet)
+        report = dict(counts, rebuilt=int(status == LOST),
+                      repair_seconds=time.perf_counter() - start)
+        return out, report
 
     @property
     def vertex_to_simplex(self):

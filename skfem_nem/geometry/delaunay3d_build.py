@@ -41,7 +41,7 @@ _HASH_MULT = 0x9E3779B97F4A7C15 >> 1  # Fibonacci hashing (odd, fits an int64)
 
 
 @njit(cache=True, inline="always")
-def _o3(P, a, b, c, d):
+def o3(P, a, b, c, d):
     return orient3d_sign(P[a, 0], P[a, 1], P[a, 2], P[b, 0], P[b, 1], P[b, 2],
                          P[c, 0], P[c, 1], P[c, 2], P[d, 0], P[d, 1], P[d, 2])
 
@@ -71,13 +71,13 @@ def _perturbed_inside(P, a, b, c, d, q):
         if s == q:
             return False
         if s == d:
-            o = _o3(P, a, b, c, q)
+            o = o3(P, a, b, c, q)
         elif s == c:
-            o = _o3(P, a, b, q, d)
+            o = o3(P, a, b, q, d)
         elif s == b:
-            o = _o3(P, a, q, c, d)
+            o = o3(P, a, q, c, d)
         else:
-            o = _o3(P, q, b, c, d)
+            o = o3(P, q, b, c, d)
         if o != 0.0:
             return o > 0.0
     return False
@@ -96,11 +96,11 @@ def finite_conflict(P, T, t, q):
 
 
 @njit(cache=True, inline="always")
-def _conflict(P, G, T, N, t, q):
+def conflict(P, G, T, N, t, q):
     """Whether tet t (finite or ghost) is destroyed by inserting point q."""
     if T[t, 3] != G:
         return finite_conflict(P, T, t, q)
-    o = _o3(P, T[t, 0], T[t, 1], T[t, 2], q)
+    o = o3(P, T[t, 0], T[t, 1], T[t, 2], q)
     if o != 0.0:
         return o > 0.0
     return finite_conflict(P, T, N[t, 3], q)
@@ -111,12 +111,12 @@ def _substituted(P, T, t, i, q):
     """Orientation of the finite tet t with its vertex in slot i replaced by point q."""
     v0, v1, v2, v3 = T[t, 0], T[t, 1], T[t, 2], T[t, 3]
     if i == 0:
-        return _o3(P, q, v1, v2, v3)
+        return o3(P, q, v1, v2, v3)
     if i == 1:
-        return _o3(P, v0, q, v2, v3)
+        return o3(P, v0, q, v2, v3)
     if i == 2:
-        return _o3(P, v0, v1, q, v3)
-    return _o3(P, v0, v1, v2, q)
+        return o3(P, v0, v1, q, v3)
+    return o3(P, v0, v1, v2, q)
 
 
 @njit(cache=True)
@@ -154,7 +154,7 @@ def _grow_rows(A, rows):
 
 
 @njit(cache=True)
-def _cavity(P, G, T, N, stamp, conf, it, t0, q, cav):
+def cavity(P, G, T, N, stamp, conf, it, t0, q, cav):
     """Breadth-first search of the tets in conflict with q from t0 (in conflict); ``stamp``
     marks the tets tested at insertion ``it``, ``conf`` their result."""
     stamp[t0] = it
@@ -170,7 +170,7 @@ def _cavity(P, G, T, N, stamp, conf, it, t0, q, cav):
             if stamp[nb] == it:
                 continue
             stamp[nb] = it
-            c = _conflict(P, G, T, N, nb, q)
+            c = conflict(P, G, T, N, nb, q)
             conf[nb] = c
             if c:
                 if ncav == cav.shape[0]:
@@ -222,7 +222,7 @@ def _link_around(T, N, new, qslot, nnew, keys, vals, used):
             if j == i:
                 continue
             lo, hi = _edge_of(T, nt, i, j)
-            key = lo * _KEY_BASE + hi
+            key = np.int64(lo) * _KEY_BASE + hi
             h = ((key * _HASH_MULT) >> 20) & mask
             while keys[h] >= 0 and keys[h] != key:
                 h = (h + 1) & mask
@@ -276,7 +276,7 @@ def _retriangulate(T, N, stamp, conf, it, cav, ncav, q, free, nfree, ntet, new, 
 
 
 @njit(cache=True)
-def _coincident(P, T, t, q):
+def coincident(P, T, t, q):
     """A vertex of the finite tet t at the position of point q, or -1."""
     for j in range(4):
         v = T[t, j]
@@ -305,7 +305,7 @@ def _first_tet(P, order):
     while k2 < n and _collinear(P, a, order[k1], order[k2]):
         k2 += 1
     k3 = k2 + 1
-    while k3 < n and _o3(P, a, order[k1], order[k2], order[k3]) == 0.0:
+    while k3 < n and o3(P, a, order[k1], order[k2], order[k3]) == 0.0:
         k3 += 1
     if k3 >= n:
         return -1, -1, -1
@@ -322,7 +322,7 @@ def _init_tets(P, G, T, N, a, b, c, d):
     """Tet 0 = (a, b, c, d), positive, and the four ghosts on its faces: the ghost of the
     face opposite slot i is tet 0 with slot i made G, G moved to slot 3 by an odd permutation
     (the oriented boundary of the 4-simplex a, b, c, d, G), as tets 1 to 4."""
-    if _o3(P, a, b, c, d) < 0.0:
+    if o3(P, a, b, c, d) < 0.0:
         a, b = b, a
     v = (a, b, c, d)
     T[0, 0], T[0, 1], T[0, 2], T[0, 3] = a, b, c, d
@@ -353,7 +353,7 @@ def _shares_face(T, s, i, t):
 
 
 @njit(cache=True)
-def _reserve(T, N, stamp, conf, free, need):
+def reserve(T, N, stamp, conf, free, need):
     """The flat arrays grown (by ``_GROW``) to at least ``need`` rows."""
     if need <= T.shape[0]:
         return T, N, stamp, conf, free
@@ -363,8 +363,42 @@ def _reserve(T, N, stamp, conf, free, need):
 
 
 @njit(cache=True)
+def new_work():
+    """Working buffers of one insertion (cavity, new tets, their slot of the new point, and
+    the edge table of :func:`_link_around`), grown by :func:`insert_point` as needed."""
+    return (np.empty(64, np.int32), np.empty(64, np.int32), np.empty(64, np.int32),
+            np.full(256, -1, np.int64), np.empty(256, np.int64), np.empty(256, np.int64))
+
+
+@njit(cache=True)
+def insert_point(P, G, T, N, stamp, conf, free, nfree, ntet, it, t0, q, work):
+    """Bowyer-Watson insertion of point q, whose conflict region contains tet t0, with
+    ``it`` a stamp not used before. Returns the (possibly grown) arrays, ``nfree, ntet``, the
+    work buffers and the number of new tets (``work[1][:nnew]``)."""
+    cav, new, qslot, keys, vals, used = work
+    cav, ncav = cavity(P, G, T, N, stamp, conf, it, t0, q, cav)
+    nb = _boundary_faces(N, stamp, conf, it, cav, ncav)
+    T, N, stamp, conf, free = reserve(T, N, stamp, conf, free, ntet + nb)
+    if nb > new.shape[0]:
+        new = np.empty(2 * nb, np.int32)
+        qslot = np.empty(2 * nb, np.int32)
+    if 8 * nb > keys.shape[0]:  # 3 nb / 2 entries, load factor below 1/5
+        size = keys.shape[0]
+        while size < 8 * nb:
+            size *= 2
+        keys = np.full(size, -1, np.int64)
+        vals = np.empty(size, np.int64)
+        used = np.empty(size, np.int64)
+    nfree, ntet, nnew = _retriangulate(T, N, stamp, conf, it, cav, ncav, q, free,
+                                       nfree, ntet, new, qslot)
+    _link_around(T, N, new, qslot, nnew, keys, vals, used)
+    return T, N, stamp, conf, free, nfree, ntet, (cav, new, qslot, keys, vals, used), nnew
+
+
+@njit(cache=True)
 def build(P, order):
-    """Delaunay tetrahedralisation of the points P (n, 3) inserted in ``order``.
+    """Delaunay tetrahedralisation of the points ``P[order]`` (the other rows of P are not
+    inserted; the ghost vertex is ``n = P.shape[0]``).
 
     Returns ``(T, N, ntet, status, i, j)``: the tets ``T[:ntet]`` (freed rows have
     ``T[t, 0] = -1``, ghosts ``T[t, 3] = n``) and their neighbours, and a status: OK,
@@ -372,7 +406,7 @@ def build(P, order):
     """
     n = P.shape[0]
     G = n
-    cap = _TETS_PER_POINT * n + 64
+    cap = _TETS_PER_POINT * order.shape[0] + 64
     T = np.full((cap, 4), -1, np.int32)
     N = np.full((cap, 4), -1, np.int32)
     stamp = np.zeros(cap, np.int64)
@@ -383,37 +417,18 @@ def build(P, order):
         return T, N, 0, FLAT, -1, -1
     _init_tets(P, G, T, N, order[0], order[k1], order[k2], order[k3])
     ntet, nfree = 5, 0
-    cav = np.empty(64, np.int32)
-    new = np.empty(64, np.int32)
-    qslot = np.empty(64, np.int32)
-    keys = np.full(256, -1, np.int64)
-    vals = np.empty(256, np.int64)
-    used = np.empty(256, np.int64)
+    work = new_work()
     last, seed = 0, 12345
-    for k in range(1, n):
+    for k in range(1, order.shape[0]):
         if k == k1 or k == k2 or k == k3:
             continue
         q = order[k]
         t0, seed = locate(P, G, T, N, last, q, seed)
         if T[t0, 3] != G:
-            v = _coincident(P, T, t0, q)
+            v = coincident(P, T, t0, q)
             if v >= 0:
                 return T, N, ntet, DUPLICATE, q, v
-        cav, ncav = _cavity(P, G, T, N, stamp, conf, k, t0, q, cav)
-        nb = _boundary_faces(N, stamp, conf, k, cav, ncav)
-        T, N, stamp, conf, free = _reserve(T, N, stamp, conf, free, ntet + nb)
-        if nb > new.shape[0]:
-            new = np.empty(2 * nb, np.int32)
-            qslot = np.empty(2 * nb, np.int32)
-        if 8 * nb > keys.shape[0]:  # 3 nb / 2 entries, load factor below 1/5
-            size = keys.shape[0]
-            while size < 8 * nb:
-                size *= 2
-            keys = np.full(size, -1, np.int64)
-            vals = np.empty(size, np.int64)
-            used = np.empty(size, np.int64)
-        nfree, ntet, nnew = _retriangulate(T, N, stamp, conf, k, cav, ncav, q, free,
-                                           nfree, ntet, new, qslot)
-        _link_around(T, N, new, qslot, nnew, keys, vals, used)
-        last = new[0]
+        T, N, stamp, conf, free, nfree, ntet, work, nnew = insert_point(
+            P, G, T, N, stamp, conf, free, nfree, ntet, k, t0, q, work)
+        last = work[1][0]
     return T, N, ntet, OK, -1, -1

@@ -178,11 +178,17 @@ def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
     return MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T))
 
 
-def triangulation_mesh(tri: Triangulation) -> MeshTri:
+def triangulation_mesh(tri: Triangulation | Delaunay3D) -> MeshTri | MeshTet:
     """The ``MeshTri`` of a :class:`~skfem_nem.Triangulation` (same nodes, same
     triangles in the same order) with ``tri`` cached as its triangulation: bases on
     it use ``tri`` as it is, segments (constrained coordinates) included. ``tri``
-    must not change afterwards: pass a copy of one that will."""
+    must not change afterwards: pass a copy of one that will. For a
+    :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D` the ``MeshTet`` of its
+    tetrahedra (same order), which a moving 3D mesh repairs instead of rebuilding."""
+    if isinstance(tri, Delaunay3D):
+        mesh = MeshTet(np.ascontiguousarray(tri.points.T),
+                       np.ascontiguousarray(tri.simplices.T, dtype=np.int64))
+        return _cache(mesh, tri)
     mesh = MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T),
                    sort_t=False)
     return _cache(mesh, tri)

@@ -1,9 +1,7 @@
-"""The evolving mesh in 3D: nodes carried by a flow, Delaunay recomputed every step.
+"""The evolving mesh in 3D: nodes carried by a flow, the Delaunay tetrahedra repaired locally.
 
-In 3D there is no flip-based repair with a tensor remap (the paper: "the
-Delaunay triangulation has to be computed at every time step ... NEM is at
-present restricted to problems requiring scalar-only memory"), so
-:class:`LagrangianMesh3D` keeps
+The paper rebuilt the 3D Delaunay triangulation every step ("there is, as yet, no direct
+extension of the 2D flip operation in three dimensions"). :class:`LagrangianMesh3D` keeps
 
 * the node positions, moved by the same iterative predictor-corrector
   (trapezoidal) update as :class:`~skfem_nem.LagrangianMesh`, with the walls
@@ -12,14 +10,16 @@ present restricted to problems requiring scalar-only memory"), so
 * named node fields (scalar-only memory: viscosity, density, material id,
   initial position, temperature, ...) that travel with their nodes unchanged:
   a node's row never moves to another node and is never interpolated;
-* the Delaunay tetrahedralisation of the current nodes, recomputed after every step
-  by the exact :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D` (no flat tetrahedra,
-  also where wall nodes slide into co-circular patterns) and checked: every node stays
-  a vertex (a step after which two nodes coincide is refused with the nodes named and
+* the Delaunay tetrahedralisation of the current nodes, repaired after every step by
+  :meth:`~skfem_nem.geometry.delaunay3d.Delaunay3D.moved` (exact flips, and nodes removed and
+  re-inserted where flips cannot mend; the result is what a fresh build gives, with no flat
+  tetrahedra, also where wall nodes slide into co-circular patterns) and checked: every node
+  stays a vertex (a step after which two nodes coincide is refused with the nodes named and
   the state left as it was).
 
-There are no integration-point fields: their remap across a retriangulation
-is the open problem the paper names.
+Integration-point fields (a stress history) go past the paper's scalar-only memory: one
+value per vertex cell of each tetrahedron, carried across each step's repair by the
+averaging or the conservative rule of :mod:`.remap3d`.
 """
 from __future__ import annotations
 
@@ -28,6 +28,7 @@ from typing import Callable, Dict, Optional
 import numpy as np
 
 from ..basis import NaturalNeighbourBasis
+from .remap3d import REMAP_RULES, cell_points, cell_volumes, check_ip_fields, remap_fields
 from .stepping import LagrangianStep, StepTooLong, check_node_fields
 from ..geometry.meshes import delaunay_mesh, triangulation_mesh, triangulation_of
 
@@ -43,7 +44,7 @@ __all__ = ["LagrangianMesh3D"]
 
 
 class LagrangianMesh3D(LagrangianStep):
-    """A 3D node set carried by a flow, retriangulated every step.
+    """A 3D node set carried by a flow, its Delaunay tetrahedra repaired every step.
 
     Parameters
     ----------
@@ -56,12 +57,20 @@ class LagrangianMesh3D(LagrangianStep):
         ``"box"`` (default): nodes on the bounding box of the initial nodes
         keep their wall coordinate exactly (free slip); ``None``: no
         constraint.
+    ip_fields
+        Named arrays of shape (ntetrahedra, 4, ...): one value per vertex cell of
+        each tetrahedron of ``mesh`` (points: :meth:`ip_points`), carried across
+        the repairs by :mod:`~skfem_nem.evolution.remap3d`.
+    remap
+        ``"conservative"`` (default: each changed region's integral kept to
+        round-off) or ``"average"`` (values within the old ones' range).
 
     Attributes
     ----------
     nodes (n, 3), mesh (the current ``MeshTet``), node_fields, time, step,
-    history (per-step dicts: step, time, dt, iterations, converged,
-    tetrahedra, tetrahedra_changed: how many of the new tetrahedra were not
+    history (per-step dicts: step, time, dt, iterations, converged, the repair's
+    flips, relocated, rebuilt and repair_seconds, tetrahedra,
+    tetrahedra_changed: how many of the new tetrahedra were not
     in the previous triangulation).
 
     Raises
@@ -73,13 +82,19 @@ class LagrangianMesh3D(LagrangianStep):
     """
 
     def __init__(self, nodes, node_fields: Optional[Dict[str, np.ndarray]] = None,
-                 walls: Optional[str] = "box"):
+                 walls: Optional[str] = "box",
+                 ip_fields: Optional[Dict[str, np.ndarray]] = None,
+                 remap: str = "conservative"):
         if walls not in ("box", None):
             raise ValueError(f"walls must be 'box' or None, got {walls!r}")
+        if remap not in REMAP_RULES:
+            raise ValueError(f"remap must be one of {REMAP_RULES}, got {remap!r}")
         self._mesh = delaunay_mesh(nodes)
         p = self.nodes
         self.walls = walls
+        self.remap = remap
         self.node_fields = check_node_fields(node_fields, p.shape[0])
+        self.ip_fields = check_ip_fields(ip_fields, self._mesh.t.shape[1])
         lo, hi = p.min(axis=0), p.max(axis=0)
         self._box = (lo, hi)
         self._on_wall = (p == lo) | (p == hi) if walls == "box" else None
@@ -108,6 +123,18 @@ class LagrangianMesh3D(LagrangianStep):
             self._bases[key] = NaturalNeighbourBasis(self._mesh, elem, **kwargs)
         return self._bases[key]
 
+    def ip_points(self) -> np.ndarray:
+        """(ntetrahedra, 4, 3) the points of the integration-point fields: one per vertex
+        cell of each tetrahedron (row t of ``mesh.t.T``, vertex order as there)."""
+        return cell_points(self.nodes, self._mesh.t.T)
+
+    def ip_integral(self, name: str) -> np.ndarray:
+        """The integral of integration-point field ``name`` over the mesh (each value
+        times its cell's volume, a quarter of its tetrahedron's)."""
+        f = self.ip_fields[name]
+        w = cell_volumes(self.nodes, self._mesh.t.T)
+        return np.einsum("t,tk...->...", w, f)
+
     def interpolate(self, name: str, x) -> np.ndarray:
         """Values of node field ``name`` at points x (m, 3) by Sibson
         interpolation on the current mesh: (m, ...)."""
@@ -131,7 +158,7 @@ class LagrangianMesh3D(LagrangianStep):
 
     def advance(self, velocity: Callable[[np.ndarray], np.ndarray], dt: float,
                 tol: float = 1e-10, maxiter: int = 10) -> dict:
-        """Move the nodes by one step and recompute the Delaunay tetrahedra.
+        """Move the nodes by one step and repair the Delaunay tetrahedra.
 
         ``velocity(x)`` -> (n, 3) nodal velocities at positions x (n, 3) (for
         a NEM solution: ``basis.probes(x.T) @ u`` per component, or the nodal
@@ -144,10 +171,11 @@ class LagrangianMesh3D(LagrangianStep):
 
     def _state(self):
         return {"mesh": self._mesh, "bases": self._bases, "time": self.time,
-                "step": self.step, "on_wall": self._on_wall}
+                "step": self.step, "on_wall": self._on_wall, "ip_fields": self.ip_fields}
 
     def _restore(self, state):
         self._mesh, self._bases = state["mesh"], state["bases"]
+        self.ip_fields = state["ip_fields"]
         self.time, self.step = state["time"], state["step"]
         self._on_wall = state["on_wall"]
 
@@ -176,6 +204,9 @@ class LagrangianMesh3D(LagrangianStep):
         mesh = triangulation_mesh(tri)
         new = mesh.t.T
         kept = _rows_in(np.sort(new, axis=1), np.sort(self._mesh.t.T, axis=1))
+        if self.ip_fields:
+            self.ip_fields, report["remapped"] = remap_fields(
+                x, self._mesh.t.T, new, self.ip_fields, self.remap)
         self._mesh = mesh
         self._bases = {}
         self.time += dt

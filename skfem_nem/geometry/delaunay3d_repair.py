@@ -1,28 +1,31 @@
 """Local repair of a 3D Delaunay tetrahedralisation whose nodes have moved.
 
-Why not rebuild: a Lagrangian step moves every node a little, and most tetrahedra stay
-Delaunay; rebuilding costs every insertion again, and loses the identity of the tetrahedra
-that integration-point fields live on. The paper could not do this in 3D ("there is, as yet,
-no direct extension of the 2D flip operation"); this module does it by relocating nodes:
+Why not rebuild: a Lagrangian step moves every node a little, and about one face in a hundred
+stops being Delaunay; rebuilding costs every insertion again and loses the identity of the
+tetrahedra that integration-point fields live on. The paper could not do this in 3D ("there
+is, as yet, no direct extension of the 2D flip operation"). :func:`repair` does it in rounds:
 
-1. **Freeze.** The nodes are put at their new positions, and every tetrahedron and face is
-   tested with the exact predicates: orientation (a ghost's: the hull stays convex) and the
-   empty sphere across each face. The moved vertices of each failing tetrahedron or face go
-   back to their old positions ("frozen"), and the tetrahedra around them are tested again,
-   until none fails. This ends, at worst with every node frozen, where the old
-   tetrahedralisation is Delaunay. The tetrahedra are now the Delaunay tetrahedralisation of
-   the nodes at these mixed positions: valid everywhere and locally Delaunay across every
-   face.
-2. **Relocate.** Each frozen node is removed (the hole it leaves is filled by the part of
+1. **Scan.** The nodes are put at their new positions and every tetrahedron is tested with
+   the exact predicates (:func:`scan`): inverted, or a face failing the empty-sphere test.
+2. **Freeze.** The moved vertices of inverted tetrahedra (and of tetrahedra under a hull face
+   they poke through) go back to their old positions ("frozen"), and the tetrahedra around
+   them are tested again, until none is inverted (:func:`freeze`). This ends, at worst with
+   every node frozen, where the old tetrahedralisation is valid.
+3. **Flip.** The failing faces are flipped (:mod:`.delaunay3d_flips`: 2-3, 3-2, and 4-4 on
+   flat walls). Where flips stop at a face they cannot mend, its moved vertices are frozen
+   too and the round starts again from the old tetrahedra.
+4. **Relocate.** The tetrahedra are now the Delaunay tetrahedralisation of the nodes at these
+   mixed positions. Each frozen node is removed (the hole it leaves is filled by the part of
    the Delaunay tetrahedralisation of its link that its own insertion would destroy:
    Devillers' removal by the link's triangulation) and re-inserted at its new position
-   (Bowyer-Watson, :func:`.delaunay3d_build.insert_point`). The tetrahedralisation stays
-   Delaunay after every node.
+   (Bowyer-Watson, :func:`.delaunay3d_build.insert_point`); the tetrahedralisation stays
+   Delaunay after every node (:func:`relocate`).
 
-Both steps touch only tetrahedra around failing places and frozen nodes, so the cost grows
-with what changed, not with the mesh. Every decision is an exact sign with the symbolic
+Apart from the scan (one pass of two predicates per tetrahedron, on all threads) the work
+grows with what changed, not with the mesh. Every decision is an exact sign with the symbolic
 perturbation of :mod:`.delaunay3d_build`, so the result is the tetrahedralisation a fresh
-build of the new positions gives, tetrahedron for tetrahedron.
+build of the new positions gives, tetrahedron for tetrahedron. A rebuild from scratch happens
+only when rounds stop freezing new nodes (counted, never seen in the tests or benchmarks).
 """
 from __future__ import annotations
 

@@ -1,0 +1,132 @@
+"""Integration-point fields of the 3D evolving mesh: carried across the repaired tetrahedra
+by the conservative rule (each step's integral kept to round-off) and the averaging rule
+(values within range), surviving tetrahedra unchanged, bad input refused, failed steps
+leaving the fields as they were."""
+import numpy as np
+import pytest
+
+from skfem_nem import LagrangianMesh3D
+from skfem_nem.evolution import lagrangian3d
+from skfem_nem.evolution.remap3d import cell_volumes
+from skfem_nem.geometry.nodesets3d import box_nodes_3d
+
+
+def swirl(x):
+    a, b, c = np.pi * x.T
+    return np.c_[np.sin(a) * np.cos(b), -np.cos(a) * np.sin(b) + np.sin(b) * np.cos(c),
+                 -np.cos(b) * np.sin(c)]
+
+
+def mesh_with_fields(rule, n=500, seed=0):
+    p = box_nodes_3d(n, seed=seed)
+    m = LagrangianMesh3D(p, remap=rule)
+    x = m.ip_points()
+    rng = np.random.default_rng(seed)
+    fields = {"scalar": rng.random(x.shape[:2]),
+              "tensor": rng.standard_normal(x.shape[:2] + (3, 3)),
+              "smooth": np.sin(3 * x[..., 0]) * x[..., 1] + x[..., 2],
+              "constant": np.full(x.shape[:2], 2.5)}
+    return LagrangianMesh3D(p, ip_fields=fields, remap=rule), fields
+
+
+def integral_before_repair(m, name, x_new, old_t):
+    """The pre-repair field on the old tetrahedra at the moved nodes."""
+    return np.einsum("t,tk...->...", cell_volumes(x_new, old_t), m.ip_fields[name])
+
+
+def test_conservative_keeps_each_steps_integral():
+    m, _ = mesh_with_fields("conservative")
+    dt = 0.15 * 500 ** (-1 / 3)
+    remapped = 0
+    for _ in range(5):
+        old_t, old = m.mesh.t.T.copy(), dict(m.ip_fields)
+        m.advance(swirl, dt)
+        remapped += m.history[-1]["remapped"]
+        for name in old:
+            before = np.einsum("t,tk...->...", cell_volumes(m.nodes, old_t), old[name])
+            scale = np.abs(old[name]).max() * cell_volumes(m.nodes, old_t).sum()
+            assert np.abs(m.ip_integral(name) - before).max() <= 1e-12 * scale, name
+    assert remapped > 0, "the flow must change tetrahedra"
+
+
+def test_average_stays_in_range_and_constants_stay_exact():
+    for rule in ("average", "conservative"):
+        m, f = mesh_with_fields(rule)
+        for _ in range(4):
+            m.advance(swirl, 0.15 * 500 ** (-1 / 3))
+        assert np.abs(m.ip_fields["constant"] - 2.5).max() < 1e-12
+        if rule == "average":
+            for name in ("scalar", "tensor", "smooth"):
+                g = m.ip_fields[name]
+                assert g.min() >= f[name].min() and g.max() <= f[name].max(), name
+
+
+def test_surviving_tetrahedra_keep_their_values_by_vertex():
+    m, _ = mesh_with_fields("conservative")
+    before = {tuple(t): dict(zip(t, v)) for t, v in
+              zip(np.sort(m.mesh.t.T, axis=1).tolist(), _by_sorted_vertex(m, "scalar"))}
+    m.advance(swirl, 0.15 * 500 ** (-1 / 3))
+    kept = 0
+    for t, v in zip(np.sort(m.mesh.t.T, axis=1).tolist(), _by_sorted_vertex(m, "scalar")):
+        if tuple(t) in before:
+            assert dict(zip(t, v)) == before[tuple(t)]
+            kept += 1
+    assert 0 < kept < m.mesh.t.shape[1]
+
+
+def _by_sorted_vertex(m, name):
+    t = m.mesh.t.T
+    order = np.argsort(t, axis=1)
+    return np.take_along_axis(m.ip_fields[name], order, axis=1).tolist()
+
+
+def test_ip_points_are_the_vertex_cells_centroids():
+    m, _ = mesh_with_fields("average", n=200)
+    x = m.ip_points()
+    t = m.mesh.t.T
+    centroid = m.nodes[t].mean(axis=1)
+    assert np.allclose(x.mean(axis=1), centroid, atol=1e-14)
+    v = m.nodes[t]                                   # barycentric coordinates of each point
+    A = np.concatenate([v.transpose(0, 2, 1), np.ones((t.shape[0], 1, 4))], axis=1)
+    rhs = np.concatenate([x.transpose(0, 2, 1), np.ones((t.shape[0], 1, 4))], axis=1)
+    lam = np.linalg.solve(A, rhs)                    # (m, 4 coordinates, 4 points)
+    expect = np.full((4, 4), 23 / 144) + np.eye(4) * (25 / 48 - 23 / 144)
+    assert np.abs(lam - expect).max() < 1e-9
+
+
+@pytest.mark.parametrize("fields, match", [
+    ({"s": np.zeros((3, 4))}, r"ip field 's' has shape \(3, 4\)"),
+    ("nan", r"ip field 'bad' has non-finite values \(first at tetrahedron 7, cell 2\)"),
+])
+def test_bad_ip_fields_are_named(fields, match):
+    p = box_nodes_3d(200, seed=0)
+    if fields == "nan":
+        m = LagrangianMesh3D(p)
+        f = np.zeros((m.mesh.t.shape[1], 4))
+        f[7, 2] = np.nan
+        fields = {"bad": f}
+    with pytest.raises(ValueError, match=match):
+        LagrangianMesh3D(p, ip_fields=fields)
+
+
+def test_unknown_remap_rule_is_refused():
+    with pytest.raises(ValueError, match=r"remap must be one of .* got 'flat'"):
+        LagrangianMesh3D(box_nodes_3d(100, seed=0), remap="flat")
+
+
+def test_a_failed_remap_leaves_the_state_as_it_was(monkeypatch):
+    """The last stage of a step fails: mesh, fields, time and history stay."""
+    m, _ = mesh_with_fields("conservative")
+    m.advance(swirl, 0.1 * 500 ** (-1 / 3))
+    state = (m.mesh.t.copy(), np.array(m.nodes), {k: v.copy() for k, v in m.ip_fields.items()},
+             m.time, len(m.history))
+
+    def broken(*args):
+        raise RuntimeError("remap failed")
+
+    monkeypatch.setattr(lagrangian3d, "remap_fields", broken)
+    with pytest.raises(RuntimeError, match="remap failed"):
+        m.advance(swirl, 0.3 * 500 ** (-1 / 3))
+    assert np.array_equal(m.mesh.t, state[0]) and np.array_equal(m.nodes, state[1])
+    assert all(np.array_equal(m.ip_fields[k], v) for k, v in state[2].items())
+    assert (m.time, len(m.history)) == state[3:]

@@ -1,4 +1,5 @@
-"""LagrangianMesh3D: nodes advected in 3D, fields follow their nodes, Qhull every step."""
+"""LagrangianMesh3D: nodes advected in 3D, fields follow their nodes, the tetrahedra repaired
+every step into the ones a fresh build gives."""
 
 import numpy as np
 import pytest
@@ -6,6 +7,7 @@ from skfem import MeshTet
 
 from helpers import cube_nodes, vortex
 from skfem_nem import LagrangianMesh3D
+from skfem_nem.geometry.delaunay3d import Delaunay3D
 
 
 def inner_cube(n=300, seed=0):
@@ -24,7 +26,7 @@ def test_fields_follow_their_nodes_and_nothing_is_lost():
     vol0 = m.mesh
     dt = 0.05
     assert 0 < m.max_dt(vortex(m.nodes)) < 0.05   # a step moves nodes past their neighbours
-    changed = 0
+    changed = flips = 0
     x = np.array(m.nodes)
     for _ in range(6):
         r = m.advance(vortex, dt)
@@ -41,11 +43,17 @@ def test_fields_follow_their_nodes_and_nothing_is_lost():
         assert err < 3e-3
         assert r["converged"]
         changed += r["tetrahedra_changed"]
+        flips += r["flips"]
+        assert r["rebuilt"] == 0 and r["repair_seconds"] > 0
+        # the repaired tetrahedra are the Delaunay ones of the moved nodes
+        fresh = Delaunay3D(np.array(m.nodes)).simplices
+        assert set(map(tuple, np.sort(m.mesh.t.T, axis=1).tolist())) == \
+            set(map(tuple, np.sort(fresh, axis=1).tolist()))
         # nothing is lost: every node is a vertex, the tetrahedra fill the box
         assert isinstance(m.mesh, MeshTet) and np.unique(m.mesh.t).size == n
         assert abs(_volume(m.mesh) - 1.0) < 1e-12
     assert m.step == 6 and abs(m.time - 6 * dt) < 1e-15
-    assert changed > 0                     # the connectivity did change
+    assert changed > 0 and flips > 0       # the connectivity did change, by flips
     assert np.abs(m.nodes - p).max() > 0.05
     # the fields are untouched and still belong to the same nodes
     np.testing.assert_array_equal(m.node_fields["x0"], p)

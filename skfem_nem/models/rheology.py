@@ -49,6 +49,8 @@ from typing import Callable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from .return_mapping import (ArrayLike, deviator, maxwell_coefficients, return_map,
+                             rotate_stress, second_invariant, spin, strain_rate, vep_update)
 from .stokes import (StokesCache, StokesSolution, StokesSpaces, quadrature_values,
                      solve_stokes)
 from .stokes_solvers import CACHED_SOLVERS, check_solver
@@ -62,8 +64,6 @@ __all__ = ["Material", "combine_materials", "maxwell_coefficients", "strain_rate
 class PicardNotConverged(RuntimeError):
     """The plastic (Picard) iterations of :func:`vep_step` did not settle: a caller that
     can shorten the step (the yielded region then changes less) may retry."""
-
-ArrayLike = Union[float, np.ndarray]
 
 # Picard iterations stop once the effective viscosity changes by less than
 # this (max |log ratio|) in the first iteration, or after the second
@@ -214,117 +214,8 @@ def combine_materials(materials: Sequence[Material], phase) -> Material:
 
 
 # ---------------------------------------------------------------------------
-# pointwise kernels (vectorised over the trailing axes)
+# layouts (the pointwise update itself: :mod:`.return_mapping`)
 # ---------------------------------------------------------------------------
-
-def maxwell_coefficients(eta: ArrayLike, mu: ArrayLike, dt: float) -> Tuple[np.ndarray, np.ndarray]:
-    """``(eta_ve, 1 - Z)`` of the backward-Euler Maxwell step.
-
-    ``eta_ve = 1 / (1/eta + 1/(mu dt))`` (Pa s) and ``1 - Z = eta / (mu dt +
-    eta) = eta_ve / (mu dt)`` (dimensionless); ``mu = inf`` gives
-    ``(eta, 0)``, ``eta = inf`` gives ``(mu dt, 1)``.
-    """
-    eta = np.asarray(eta, dtype=float)
-    mu = np.asarray(mu, dtype=float)
-    with np.errstate(divide="ignore"):
-        eta_ve = 1.0 / (1.0 / eta + 1.0 / (mu * dt))
-        keep = np.where(np.isinf(mu), 0.0, eta_ve / (mu * dt))
-    return eta_ve, keep
-
-
-def strain_rate(grad: np.ndarray) -> np.ndarray:
-    """Symmetric part of the velocity gradient (2, 2, ...) (``[i, j] = du_i/dx_j``), 1/s."""
-    return 0.5 * (grad + np.swapaxes(grad, 0, 1))
-
-
-def spin(grad: np.ndarray) -> np.ndarray:
-    """Antisymmetric part ``W = (grad u - grad u^T) / 2`` (2, 2, ...), 1/s."""
-    return 0.5 * (grad - np.swapaxes(grad, 0, 1))
-
-
-def deviator(t: np.ndarray) -> np.ndarray:
-    """2D deviator ``t - tr(t) / 2 I`` of (2, 2, ...) tensors."""
-    out = np.array(t, dtype=float, copy=True)
-    h = 0.5 * (t[0, 0] + t[1, 1])
-    out[0, 0] -= h
-    out[1, 1] -= h
-    return out
-
-
-def second_invariant(t: np.ndarray) -> np.ndarray:
-    """``sqrt(t_ij t_ij / 2)`` of the deviator of (2, 2, ...) tensors, shape (...)."""
-    d = deviator(t)
-    return np.sqrt(0.5 * (d[0, 0] ** 2 + d[1, 1] ** 2) + 0.25 * (d[0, 1] + d[1, 0]) ** 2)
-
-
-def rotate_stress(tau: np.ndarray, W: np.ndarray, dt: float,
-                  method: str = "jaumann") -> np.ndarray:
-    """Advance the stress (2, 2, ...) by the objective rotation with spin W (2, 2, ...) over dt.
-
-    ``"jaumann"``: ``tau + dt (W tau - tau W)`` (first order: invariants change
-    by O((w dt)^2) per step); ``"exact"``: ``R tau R^T`` with ``R = exp(W dt)``,
-    the rotation by the angle ``w dt``, ``w = W[1, 0]`` (the solution of the
-    Jaumann rate equation for a constant spin; invariants kept exactly).
-    """
-    if method == "jaumann":
-        Wt = np.einsum("ik...,kj...->ij...", W, tau)
-        tW = np.einsum("ik...,kj...->ij...", tau, W)
-        return tau + dt * (Wt - tW)
-    if method == "exact":
-        a = 0.5 * (W[1, 0] - W[0, 1]) * dt
-        c, s = np.cos(a), np.sin(a)
-        R = np.array([[c, -s], [s, c]])
-        return np.einsum("ik...,kl...,jl...->ij...", R, tau, R)
-    raise ValueError(f"rotation must be 'jaumann' or 'exact', got {method!r}")
-
-
-def return_map(tau_trial: np.ndarray, yield_stress: ArrayLike) -> Tuple[np.ndarray, np.ndarray]:
-    """Radial return of trial stresses (2, 2, ...) onto the von Mises surface ``II = Y``.
-
-    Returns ``(tau, factor)``: ``tau = factor * tau_trial`` with ``factor =
-    min(1, Y / II(tau_trial))`` (shape (...); 1 where elastic/viscous).
-    """
-    II = second_invariant(tau_trial)
-    Y = np.asarray(yield_stress, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        factor = np.where(II > Y, Y / np.where(II > 0, II, 1.0), 1.0)
-    return tau_trial * factor, factor
-
-
-def vep_update(eps: np.ndarray, W: Optional[np.ndarray], tau_old: np.ndarray, eta: ArrayLike,
-               mu: ArrayLike, yield_stress: ArrayLike, dt: float,
-               rotation: str = "jaumann") -> Tuple[np.ndarray, np.ndarray]:
-    """Pointwise visco-elasto-plastic stress update for a known strain rate.
-
-    Parameters
-    ----------
-    eps
-        Strain rate (2, 2, ...) (1/s).
-    W
-        Spin (2, 2, ...) (1/s) or None (no rotation).
-    tau_old
-        Stress at the start of the step (2, 2, ...), Pa.
-    eta, mu, yield_stress
-        Viscosity (Pa s), shear modulus (Pa), yield stress (Pa), broadcast
-        to the trailing shape.
-    dt
-        Time step (s).
-
-    Returns
-    -------
-    (tau_new, plastic_rate): the stress (2, 2, ...) after the step and the
-    plastic strain-rate tensor (2, 2, ...) (1/s).
-    """
-    if not (np.isscalar(dt) and np.isfinite(dt) and dt > 0):
-        raise ValueError(f"time step dt must be a positive finite number, got {dt!r}")
-    eta_ve, keep = maxwell_coefficients(eta, mu, dt)
-    chi = keep / eta_ve
-    tau_rot = tau_old if (W is None or rotation == "none") else rotate_stress(tau_old, W, dt,
-                                                                               rotation)
-    edot = eps + 0.5 * chi * tau_rot
-    tau_new, _ = return_map(2.0 * eta_ve * edot, yield_stress)
-    return tau_new, edot - tau_new / (2.0 * eta_ve)
-
 
 def to_ip_field(tau: np.ndarray) -> np.ndarray:
     """(2, 2, ne, nq) -> (ne, nq, 2, 2): the layout of :class:`~skfem_nem.LagrangianMesh`

@@ -1,7 +1,8 @@
 """Visco-elasto-plastic (Maxwell + von Mises) solids on top of the Stokes solver.
 
 The stress history ``tau`` (deviatoric, Pa) lives at the quadrature points of
-the triangles, shape (2, 2, ne, nq): the paper's "tensorial memory". One time
+the triangles, shape (2, 2, ne, nq): the paper's "tensorial memory"; on tetrahedra
+(3D spaces) shape (3, 3, ne, nq), past the paper's scalar-only 3D memory. One time
 step of length ``dt`` (s) is the velocity-based incremental formulation of
 Moresi, Dufour and Muehlhaus (2003) and Gerya (2010):
 
@@ -233,7 +234,8 @@ def from_ip_field(F: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------
 
 def prescribed_velocity(spaces: StokesSpaces, facets, value: Union[Callable, Sequence[float]],
-                        components: Sequence[int] = (0, 1)) -> Tuple[np.ndarray, np.ndarray]:
+                        components: Optional[Sequence[int]] = None
+                        ) -> Tuple[np.ndarray, np.ndarray]:
     """Velocity dofs and values on boundary facets.
 
     Parameters
@@ -241,10 +243,10 @@ def prescribed_velocity(spaces: StokesSpaces, facets, value: Union[Callable, Seq
     facets
         Facet indices of ``spaces.mesh``, a boundary name, or ``"all"``.
     value
-        Callable of points x (2, m) returning (2, m) velocities (m/s), or a
-        constant (2,) velocity.
+        Callable of points x (d, m) returning (d, m) velocities (m/s), or a
+        constant (d,) velocity.
     components
-        Which components to prescribe (0: x, 1: y).
+        Which components to prescribe (0: x, 1: y, 2: z; default all).
 
     Returns
     -------
@@ -255,7 +257,7 @@ def prescribed_velocity(spaces: StokesSpaces, facets, value: Union[Callable, Seq
         facets = mesh.boundary_facets() if facets == "all" else mesh.boundaries[facets]
     facets = np.asarray(facets, dtype=np.int64)
     dofs, vals = [], []
-    for c in components:
+    for c in range(mesh.dim()) if components is None else components:
         d = ub.get_dofs(facets).all(f"u^{c + 1}")
         x = ub.doflocs[:, d]
         v = (np.asarray(value(x), dtype=float)[c] if callable(value)
@@ -390,13 +392,14 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     material
         The :class:`Material` (per-element or per-point arrays allowed).
     tau_old
-        Deviatoric stress at the start of the step, (2, 2, ne, nq), Pa
+        Deviatoric stress at the start of the step, (d, d, ne, nq), Pa (d = 2, or 3 on
+        tetrahedra)
         (for :class:`~skfem_nem.LagrangianMesh` fields use :func:`from_ip_field`).
     dt
         Time step (s), positive and finite.
     f, gravity
         Body force (N m^-3, see ``assemble_stokes``) plus ``density *
-        gravity`` if ``gravity`` (2,) (m s^-2) is given.
+        gravity`` if ``gravity`` (d,) (m s^-2) is given.
     prescribed, free_slip, no_slip, pressure_mean
         Boundary conditions, see :func:`solve_stokes_bc`.
     plastic_strain
@@ -519,10 +522,10 @@ def _checked_stress(spaces: StokesSpaces, tau_old, dt, rotation: str) -> np.ndar
         raise ValueError(f"time step dt must be a positive finite number, got {dt!r}")
     if rotation not in ("jaumann", "exact", "none"):
         raise ValueError(f"rotation must be 'jaumann', 'exact' or 'none', got {rotation!r}")
-    ne, nq = spaces.quadrature_points.shape[1:]
+    d, ne, nq = spaces.quadrature_points.shape
     tau_old = np.asarray(tau_old, dtype=float)
-    if tau_old.shape != (2, 2, ne, nq):
-        raise ValueError(f"tau_old has shape {tau_old.shape}, expected (2, 2, {ne}, {nq})")
+    if tau_old.shape != (d, d, ne, nq):
+        raise ValueError(f"tau_old has shape {tau_old.shape}, expected ({d}, {d}, {ne}, {nq})")
     bad = ~np.isfinite(tau_old).all(axis=(0, 1))
     if bad.any():
         raise ValueError("tau_old is not finite" + _where(bad))
@@ -542,7 +545,7 @@ def _step_setup(spaces: StokesSpaces, material: Material, tau_old, dt, f, gravit
     chi = keep / eta_ve           # 1 / (mu dt), zero for mu = inf
     eta_min = (MIN_VISCOSITY_FACTOR * float(eta_ve.min()) if min_viscosity is None
                else float(min_viscosity))
-    load = quadrature_values(spaces, f, "body force f", shape=(2,))
+    load = quadrature_values(spaces, f, "body force f", shape=(tau_old.shape[0],))
     if gravity is not None:
         if material.density is None:
             raise ValueError("gravity given but the material has no density")

@@ -7,8 +7,9 @@ import pytest
 
 from skfem_nem import LagrangianMesh3D
 from skfem_nem.evolution import lagrangian3d
-from skfem_nem.evolution.remap3d import cell_volumes
+from skfem_nem.evolution.remap3d import cell_volumes, from_quadrature, to_quadrature
 from skfem_nem.geometry.nodesets3d import box_nodes_3d
+from skfem_nem.models.stokes import stokes_spaces
 
 
 def swirl(x):
@@ -80,18 +81,23 @@ def _by_sorted_vertex(m, name):
     return np.take_along_axis(m.ip_fields[name], order, axis=1).tolist()
 
 
-def test_ip_points_are_the_vertex_cells_centroids():
-    m, _ = mesh_with_fields("average", n=200)
+def test_ip_points_are_the_stokes_quadrature_points():
+    """One point per vertex, a quarter of the volume each, and the same points (in
+    scikit-fem's order) as the 3D Stokes spaces, so stresses pass to vep_step unchanged."""
+    m, f = mesh_with_fields("average", n=200)
     x = m.ip_points()
     t = m.mesh.t.T
-    centroid = m.nodes[t].mean(axis=1)
-    assert np.allclose(x.mean(axis=1), centroid, atol=1e-14)
     v = m.nodes[t]                                   # barycentric coordinates of each point
     A = np.concatenate([v.transpose(0, 2, 1), np.ones((t.shape[0], 1, 4))], axis=1)
     rhs = np.concatenate([x.transpose(0, 2, 1), np.ones((t.shape[0], 1, 4))], axis=1)
     lam = np.linalg.solve(A, rhs)                    # (m, 4 coordinates, 4 points)
-    expect = np.full((4, 4), 23 / 144) + np.eye(4) * (25 / 48 - 23 / 144)
-    assert np.abs(lam - expect).max() < 1e-9
+    a, b = (5 + 3 * np.sqrt(5)) / 20, (5 - np.sqrt(5)) / 20
+    assert np.abs(lam - (np.full((4, 4), b) + np.eye(4) * (a - b))).max() < 1e-9
+    q = stokes_spaces(m.mesh).quadrature_points      # (3, m, 4)
+    assert np.abs(to_quadrature(x) - q).max() < 1e-14
+    tau = m.ip_fields["tensor"]
+    assert np.array_equal(from_quadrature(to_quadrature(tau)), tau)
+    assert to_quadrature(tau).shape == (3, 3) + tau.shape[:2]
 
 
 @pytest.mark.parametrize("fields, match", [

@@ -2,9 +2,12 @@
 
 Why: a solid's stress history lives at integration points, and the paper could not keep it
 in 3D ("there is no 3D equivalent of the 2D averaging and splitting strategy"). Here each
-tetrahedron carries one value per vertex cell (the part of the tetrahedron nearest that
-vertex in barycentric terms; its point is at barycentric ``(25/48, 23/144, 23/144,
-23/144)``, the cell's centroid), a quarter of its volume each.
+tetrahedron carries one value per vertex cell, a quarter of its volume each, at the point of
+the degree-2 four-point rule nearest that vertex (barycentric ``(a, b, b, b)``, ``a = (5 +
+3 sqrt 5) / 20``): the quadrature points of the 3D Stokes spaces, so that a stress history
+passes to :func:`~skfem_nem.models.rheology.vep_step` and back without interpolation
+(:func:`to_quadrature`, :func:`from_quadrature`: scikit-fem lists the same points in
+another order).
 
 A step's repair (flips, relocated nodes) replaces some tetrahedra by others over the same
 region. Tetrahedra that survive keep their values (a value belongs to a vertex of its
@@ -23,11 +26,14 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["REMAP_RULES", "cell_points", "cell_volumes", "check_ip_fields", "remap_fields"]
+__all__ = ["REMAP_RULES", "cell_points", "cell_volumes", "check_ip_fields", "remap_fields",
+           "to_quadrature", "from_quadrature"]
 
 REMAP_RULES = ("conservative", "average")
-CELL_CENTROID = 25.0 / 48.0  # E[max of 4 barycentric coordinates]: the cell's centroid
-_REST = (1.0 - CELL_CENTROID) / 3.0
+CELL_POINT = (5.0 + 3.0 * np.sqrt(5.0)) / 20.0  # barycentric weight of a cell's own vertex
+_REST = (1.0 - CELL_POINT) / 3.0
+#: scikit-fem's four-point tetrahedron rule lists the point of vertex k as point RULE_ORDER[k]
+RULE_ORDER = np.array([1, 0, 3, 2])
 
 
 def cell_volumes(p, t):
@@ -37,9 +43,23 @@ def cell_volumes(p, t):
 
 
 def cell_points(p, t):
-    """(m, 4, 3) the points of the vertex cells (the cells' centroids)."""
+    """(m, 4, 3) the points of the vertex cells (the four-point rule's, vertex by vertex)."""
     x = p[t]                                            # (m, 4, 3)
-    return _REST * x.sum(axis=1, keepdims=True) + (CELL_CENTROID - _REST) * x
+    return _REST * x.sum(axis=1, keepdims=True) + (CELL_POINT - _REST) * x
+
+
+def to_quadrature(f):
+    """An ip field (m, 4, *shape) in the layout of the Stokes spaces' quadrature values
+    (*shape, m, 4), points in scikit-fem's order (e.g. a stress for ``vep_step``)."""
+    g = np.empty_like(f)
+    g[:, RULE_ORDER] = f
+    return np.moveaxis(g, (0, 1), (-2, -1))
+
+
+def from_quadrature(q):
+    """The inverse of :func:`to_quadrature`: (*shape, m, 4) -> (m, 4, *shape)."""
+    g = np.moveaxis(np.asarray(q), (-2, -1), (0, 1))
+    return np.ascontiguousarray(g[:, RULE_ORDER])
 
 
 def check_ip_fields(ip_fields, m):

@@ -24,7 +24,8 @@ from numba import njit
 
 from .delaunay3d_build import conflict, o3
 
-__all__ = ["flip_to_delaunay", "glue", "face_fails", "internal", "push"]
+__all__ = ["flip_to_delaunay", "glue", "face_fails", "internal", "push", "take_rows",
+           "release_rows"]
 
 _FLIPPED, _STUCK = 0, 1
 _FLIP_BUDGET = 4  # flips per tet before the flips are taken to cycle (each is finite)
@@ -131,7 +132,8 @@ def _member(x, rows):
 @njit(cache=True)
 def _replace(T, N, old, tets, free, nfree, ntet):
     """Replace the tets of rows ``old`` by ``tets`` (same region): rows reused, then free
-    rows, then new rows. Returns ``nfree, ntet`` and the rows of the new tets."""
+    rows, then new rows (:func:`take_rows`). Returns ``nfree, ntet`` and the rows of the new
+    tets (none if the boundaries did not match, and nothing changed)."""
     nold = old.shape[0]
     faces = np.empty((4 * nold, 3), np.int64)
     inner = np.empty(4 * nold, np.int32)
@@ -151,9 +153,19 @@ def _replace(T, N, old, tets, free, nfree, ntet):
             inner[nf] = s
             outer[nf] = o
             nf += 1
-    slots = np.empty(tets.shape[0], np.int32)
-    for k in range(tets.shape[0]):
-        if k < nold:
+    slots, nfree1, ntet1 = take_rows(old, tets.shape[0], free, nfree, ntet)
+    if not glue(T, N, tets, internal(tets), faces[:nf], inner[:nf], outer[:nf], slots):
+        return nfree, ntet, slots[:0]          # never seen: the flip is left undone
+    return release_rows(T, old, tets.shape[0], free, nfree1), ntet1, slots
+
+
+@njit(cache=True)
+def take_rows(old, count, free, nfree, ntet):
+    """Rows for ``count`` new tets replacing the tets of rows ``old``: those rows first,
+    then free rows, then new rows at the end. Returns the rows and ``nfree, ntet``."""
+    slots = np.empty(count, np.int32)
+    for k in range(count):
+        if k < old.shape[0]:
             slots[k] = old[k]
         elif nfree > 0:
             nfree -= 1
@@ -161,12 +173,17 @@ def _replace(T, N, old, tets, free, nfree, ntet):
         else:
             slots[k] = ntet
             ntet += 1
-    glue(T, N, tets, internal(tets), faces[:nf], inner[:nf], outer[:nf], slots)
-    for k in range(tets.shape[0], nold):
+    return slots, nfree, ntet
+
+
+@njit(cache=True)
+def release_rows(T, old, count, free, nfree):
+    """Free the rows of ``old`` beyond the first ``count`` (reused); returns ``nfree``."""
+    for k in range(count, old.shape[0]):
         T[old[k], 0] = -1
         free[nfree] = old[k]
         nfree += 1
-    return nfree, ntet, slots
+    return nfree
 
 
 @njit(cache=True, inline="always")
@@ -320,7 +337,7 @@ def flip_to_delaunay(P, G, T, N, ntet, free, nfree, stack, v2t):
             if not face_fails(P, G, T, N, t, i):
                 continue
             status, nfree, ntet, rows = _flip(P, G, T, N, t, i, free, nfree, ntet)
-            if status == _FLIPPED:
+            if status == _FLIPPED and rows.shape[0] > 0:
                 flips += 1
                 for r in rows:
                     stack, nstack = push(stack, nstack, r)

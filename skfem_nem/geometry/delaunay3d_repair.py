@@ -32,7 +32,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .delaunay3d_flips import face_fails, flip_to_delaunay, glue, internal, push
+from .delaunay3d_flips import (face_fails, flip_to_delaunay, glue, internal, push,
+                               release_rows, take_rows)
 from .nodesets import morton_order
 from .delaunay3d_build import (OK, cavity, coincident, o3, reserve, build,
                                insert_point, locate, new_work)
@@ -283,22 +284,10 @@ def _remove(P, G, T, N, stamp, it, free, nfree, ntet, v, v2t, star):
         tets, nbrs, ok = _flat_fill(T, N, G, v, star, ns)
     if not ok or tets.shape[0] > ns + nfree + (T.shape[0] - ntet):
         return nfree, ntet, star, -1, False
-    slots = np.empty(tets.shape[0], np.int32)
-    for k in range(tets.shape[0]):  # the star's rows first, then free rows, then new rows
-        if k < ns:
-            slots[k] = star[k]
-        elif nfree > 0:
-            nfree -= 1
-            slots[k] = free[nfree]
-        else:
-            slots[k] = ntet
-            ntet += 1
+    slots, nfree1, ntet1 = take_rows(star[:ns], tets.shape[0], free, nfree, ntet)
     if not glue(T, N, tets, nbrs, faces, inner, outer, slots):
         return nfree, ntet, star, -1, False
-    for k in range(tets.shape[0], ns):
-        T[star[k], 0] = -1
-        free[nfree] = star[k]
-        nfree += 1
+    nfree, ntet = release_rows(T, star[:ns], tets.shape[0], free, nfree1), ntet1
     for k in range(tets.shape[0]):
         for j in range(4):
             if tets[k, j] != G:

@@ -392,9 +392,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     material
         The :class:`Material` (per-element or per-point arrays allowed).
     tau_old
-        Deviatoric stress at the start of the step, (d, d, ne, nq), Pa (d = 2, or 3 on
-        tetrahedra)
-        (for :class:`~skfem_nem.LagrangianMesh` fields use :func:`from_ip_field`).
+        Deviatoric stress at the start of the step, (d, d, ne, nq), Pa (d = 3 on
+        tetrahedra; for :class:`~skfem_nem.LagrangianMesh` fields use :func:`from_ip_field`).
     dt
         Time step (s), positive and finite.
     f, gravity

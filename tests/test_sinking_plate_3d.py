@@ -42,6 +42,8 @@ def test_the_run_writes_its_outputs(run3d):
     assert np.all(np.diff(d["plate_depth"]) > 0) and np.all(d["plate_velocity"] < 0)
     assert np.abs(d["plate_volume_change"]).max() < 0.05
     assert np.all(d["solver_iterations"] > 0) and np.all(d["seconds"] > 0)
+    # the tetrahedra are mended by flips, never rebuilt
+    assert d["flips"].sum() > 0 and np.all(d["rebuilt"] == 0) and np.all(d["repair_seconds"] > 0)
 
 
 def test_the_slices_show_the_plate_where_it_is(run3d):

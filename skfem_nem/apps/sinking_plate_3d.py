@@ -5,13 +5,13 @@ The paper's 3D programme ("all the theory described is equally valid in three
 dimensions"), with its restriction: scalar-only memory. The nodes carry their material
 (the plate indicator, the height they started at, which picks the fluid layer) and move
 with the flow (:class:`~skfem_nem.LagrangianMesh3D`: the iterative predictor-corrector,
-the walls kept exactly, the Delaunay tetrahedra recomputed after every step).
+the walls kept exactly, the Delaunay tetrahedra repaired by exact flips after every step).
 Each step solves the Stokes problem on the current tetrahedra
 (:func:`~skfem_nem.models.stokes.stokes_spaces`: natural-neighbour velocity with condensed
 bubbles, P1 pressure; FGMRES with AMG) with the viscosity and the buoyancy interpolated
 from the nodes, free slip on all six walls. The plate is viscous (``plate_viscosity``):
-elasticity and plasticity need the stress history of the 2D plate, a tensor memory that
-3D does not carry yet.
+the tensor memory (``LagrangianMesh3D(ip_fields=...)``) and ``vep_step`` on tetrahedra
+exist, but this run does not use them yet.
 
 Outputs (in the output folder), as the 2D plate's: ``plate_NNNNN.vtu`` per output time
 and ``plate.pvd`` (ParaView; point data velocity, pressure, material, initial height),
@@ -198,7 +198,9 @@ class SinkingPlate3D:
                 "max_speed": float(np.linalg.norm(v, axis=1).max()),
                 "plate_velocity": float(v[plate, 2].mean()),
                 "solver_iterations": int(sol.iterations),
-                "move_iterations": report["iterations"],
+                "move_iterations": report["iterations"], "flips": report["flips"],
+                "relocated": report["relocated"], "rebuilt": report["rebuilt"],
+                "repair_seconds": report["repair_seconds"],
                 "nodes": int(self.lm.nodes.shape[0]), "tetrahedra": report["tetrahedra"],
                 "solve_seconds": self._solve_seconds, "seconds": seconds}
 

@@ -63,6 +63,8 @@ the field unchanged.
 ``peak MB`` is the peak resident memory of the process for that size (the
 stiffness matrix included where it was formed).
 
+``--dim 3`` (given first) runs :mod:`evolve_3d` with the options that follow.
+
 Run ``python benchmarks/evolve.py [--sizes 1e4 1e5 1e6] [--steps 10]`` (about
 4 minutes, 3 GB) and ``python benchmarks/evolve.py --diffusion [--nodes 1000
 4000] [--durations 0.25 0.5 1]`` (about 1 minute). Results: docs/evolution.md.
@@ -491,7 +493,13 @@ def diffusion_main(a):
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:2] == ["--dim", "3"]:        # the 3D study has its own script and options
+        from evolve_3d import main as main_3d
+        return main_3d(argv[2:])
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--dim", type=int, choices=[2], default=2,
+                    help="2 (this study) or 3 (given first: benchmarks/evolve_3d.py)")
     ap.add_argument("--sizes", nargs="+", type=float, default=[1e4, 1e5, 1e6])
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--budget", type=float, default=300.0,

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from typing import Callable, Dict, Optional
 
 import numpy as np
@@ -49,7 +48,7 @@ from .merging import NodeRemoval
 from .quality import cross, inverted, min_angles
 from .remap import remap_average, remap_conservative
 from .spacing import SpacingTarget, spacing_from_areas
-from .stepping import LagrangianStep, StepTooLong, check_node_fields
+from .stepping import LagrangianStep, StepTooLong, check_node_fields, save_npz_atomically
 
 __all__ = ["LagrangianMesh"]
 
@@ -650,18 +649,7 @@ class LagrangianMesh(SpacingTarget, NodeInjection, NodeRemoval, LagrangianStep):
                   "segment_ref": self._segment_ref, "meta": np.array(json.dumps(meta))}
         arrays.update({f"node__{k}": v for k, v in self.node_fields.items()})
         arrays.update({f"ip__{k}": v for k, v in self.ip_fields.items()})
-        folder = os.path.dirname(os.path.abspath(path))
-        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise
+        save_npz_atomically(path, arrays)
 
     @classmethod
     def load(cls, path, spacing: Optional[Callable[[np.ndarray], np.ndarray]] = None

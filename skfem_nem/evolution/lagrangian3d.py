@@ -23,13 +23,15 @@ averaging or the conservative rule of :mod:`.remap3d`.
 """
 from __future__ import annotations
 
+import json
+import os
 from typing import Callable, Dict, Optional
 
 import numpy as np
 
 from ..basis import NaturalNeighbourBasis
 from .remap3d import REMAP_RULES, cell_points, cell_volumes, check_ip_fields, remap_fields
-from .stepping import LagrangianStep, StepTooLong, check_node_fields
+from .stepping import LagrangianStep, StepTooLong, check_node_fields, save_npz_atomically
 from ..geometry.meshes import delaunay_mesh, triangulation_mesh, triangulation_of
 
 #: a node closer to a wall than this times the box's size is put on the wall (and stays
@@ -178,6 +180,41 @@ class LagrangianMesh3D(LagrangianStep):
         self.ip_fields = state["ip_fields"]
         self.time, self.step = state["time"], state["step"]
         self._on_wall = state["on_wall"]
+
+    def save(self, path) -> None:
+        """Write the whole state to ``path`` (.npz), atomically: nodes, tetrahedra, node and
+        integration-point fields, walls, clock and history."""
+        meta = {"time": self.time, "step": self.step, "remap": self.remap, "walls": self.walls,
+                "node_fields": list(self.node_fields), "ip_fields": list(self.ip_fields),
+                "history": self.history, "format": 1}
+        arrays = {"nodes": self.nodes, "tetrahedra": self._mesh.t.T,
+                  "box_lo": self._box[0], "box_hi": self._box[1],
+                  "meta": np.array(json.dumps(meta))}
+        if self._on_wall is not None:
+            arrays["on_wall"] = self._on_wall
+        arrays.update({f"node__{k}": v for k, v in self.node_fields.items()})
+        arrays.update({f"ip__{k}": v for k, v in self.ip_fields.items()})
+        save_npz_atomically(path, arrays)
+
+    @classmethod
+    def load(cls, path) -> "LagrangianMesh3D":
+        """Restore a mesh written by :meth:`save`. The tetrahedra are built again from the
+        nodes (the same ones: the Delaunay tetrahedralisation is unique) and the
+        integration-point values follow their tetrahedra and vertices."""
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            self = cls(z["nodes"], {k: z[f"node__{k}"] for k in meta["node_fields"]},
+                       walls=meta["walls"], remap=meta["remap"])
+            old = z["tetrahedra"]
+            ip = {k: z[f"ip__{k}"].copy() for k in meta["ip_fields"]}
+            self._box = (z["box_lo"].copy(), z["box_hi"].copy())
+            self._on_wall = z["on_wall"].copy() if "on_wall" in z.files else None
+        self.ip_fields, moved = remap_fields(self.nodes, old, self._mesh.t.T, ip, self.remap)
+        if moved:
+            raise ValueError(f"{os.fspath(path)!r}: {moved} tetrahedra of the saved mesh are "
+                             "not those of its nodes (not written by LagrangianMesh3D.save?)")
+        self.time, self.step, self.history = meta["time"], meta["step"], meta["history"]
+        return self
 
     def _snapped(self, x):
         """x with the nodes closer to a wall than :data:`WALL_SNAP` of the box put on it

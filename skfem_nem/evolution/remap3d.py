@@ -113,7 +113,8 @@ def remap_fields(p, old_t, new_t, fields, rule):
     for name, f in fields.items():
         g = np.empty((new_t.shape[0],) + f.shape[1:])
         g[kept] = f[src[kept][:, None], slot[kept]]
-        g[made] = _region_values(new_t[made], ln, vn, old_t[gone], lo, vo, f[gone], rule)
+        if made.size:
+            g[made] = _region_values(new_t[made], ln, vn, old_t[gone], lo, vo, f[gone], rule)
         out[name] = g
     return out, int(made.size)
 

@@ -7,13 +7,15 @@ or move the nodes: that part lives here once.
 """
 from __future__ import annotations
 
+import os
+import tempfile
 from typing import Dict
 
 import numpy as np
 
 __all__ = ["StepTooLong", "MoveNotConverged", "LagrangianStep", "check_node_fields",
            "evaluate_velocity", "check_step_arguments", "predictor_corrector", "keep_in_box",
-           "WALL_REACH", "LEAVE_TOLERANCE"]
+           "WALL_REACH", "LEAVE_TOLERANCE", "save_npz_atomically"]
 
 
 class StepTooLong(ValueError):
@@ -187,3 +189,22 @@ class LagrangianStep:
             raise
         self.history.append(report)
         return report
+
+
+def save_npz_atomically(path, arrays) -> None:
+    """``np.savez`` of ``arrays`` to ``path`` through a temporary file in the same folder,
+    flushed and renamed: a checkpoint is either the old one or the new one, never torn."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, **arrays)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+

@@ -5,7 +5,9 @@ coordinates that use it, gives flat tetrahedra for cospherical nodes (lattices),
 adjacency of our own to update by flips when nodes move. :class:`Delaunay3D` inserts the points
 with exact predicates (:mod:`.delaunay3d_build`) in a spatially coherent order and exposes what
 the 3D code paths read from scipy's object: ``points``, ``simplices``, ``neighbors``,
-``vertex_to_simplex``, ``vertex_neighbor_vertices``, ``convex_hull`` and ``find_simplex``.
+``vertex_to_simplex``, ``vertex_neighbor_vertices``, ``convex_hull`` and ``find_simplex``;
+and, for nodes that move, :meth:`Delaunay3D.moved`, the local repair by flips
+(:mod:`.delaunay3d_repair`).
 """
 from __future__ import annotations
 

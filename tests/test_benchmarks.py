@@ -242,6 +242,19 @@ def test_evolve_step_smoke(evolve):
     assert lm.ip_fields["stress"].shape == (lm.triangles.shape[0], 3, 3)
 
 
+def test_evolve_3d_repair_rows_and_round_trip():
+    """The 3D study: every step's tetrahedra equal a fresh build, none rebuilt; the round
+    trip brings the nodes back, and the averaging rule keeps the range."""
+    bench = load_benchmark("evolve_3d")
+    rows = bench.run(400, 2)
+    assert all(r["same"] and r["rebuilt"] == 0 for r in rows)
+    assert sum(r["flips"] for r in rows) > 0 and all(r["qhull_s"] > 0 for r in rows)
+    for name, rule, flips, back, peak, l2, lo, hi, elo, ehi, di in bench.diffusion(400, 3,
+                                                                                   "average"):
+        assert back < 1e-9 and flips > 0 and 0 <= l2 < 0.2, name
+        assert elo - 1e-9 <= lo and hi <= ehi + 1e-9, name    # (points back to 1e-9)
+
+
 # --------------------------------------------------------------------------
 # constrained natural neighbours: non-convex domains and the cost per query
 # --------------------------------------------------------------------------

@@ -127,7 +127,7 @@ def scan(P, G, T, N, ntet, flags):
 
 @njit(cache=True)
 def freeze(P, P0, G, T, N, v2t, moved, frozen, flags):
-    """Step 1 of the module docstring on the positions P (modified in place, as is
+    """Step 2 of the module docstring on the positions P (modified in place, as is
     ``frozen``, the nodes already at their old positions ``P0``), starting from the tets
     :func:`scan` flagged 1: moved nodes of inverted tets and of failing hull faces are frozen
     until none is left. Returns the flip stack: the tets flagged 2 and the tets around every
@@ -300,7 +300,7 @@ _ROOM = 4096  # rows kept free in the flat arrays before each relocation
 
 @njit(cache=True)
 def relocate(P, P1, G, T, N, ntet, v2t, order):
-    """Step 2 of the module docstring: each node of ``order`` removed at its position in P
+    """Step 4 of the module docstring: each node of ``order`` removed at its position in P
     and re-inserted at its position in P1 (P updated). Returns the (grown) ``T, N, ntet``,
     a status (RELOCATED; LOST: a removal failed, ``i`` the node; COINCIDENT: node ``i``
     landed on node ``j``) and ``i, j``."""

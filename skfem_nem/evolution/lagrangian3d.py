@@ -30,7 +30,8 @@ from typing import Callable, Dict, Optional
 import numpy as np
 
 from ..basis import NaturalNeighbourBasis
-from .remap3d import REMAP_RULES, cell_points, cell_volumes, check_ip_fields, remap_fields
+from .remap3d import (REMAP_RULES, cell_points, cell_volumes, check_ip_fields, match_rows,
+                      remap_fields)
 from .stepping import LagrangianStep, StepTooLong, check_node_fields, save_npz_atomically
 from ..geometry.meshes import delaunay_mesh, triangulation_mesh, triangulation_of
 
@@ -240,7 +241,7 @@ class LagrangianMesh3D(LagrangianStep):
                               f"triangulated without losing a node ({err}); reduce dt") from None
         mesh = triangulation_mesh(tri)
         new = mesh.t.T
-        kept = _rows_in(np.sort(new, axis=1), np.sort(self._mesh.t.T, axis=1))
+        kept = match_rows(self._mesh.t.T, new)[0]
         if self.ip_fields:
             self.ip_fields, report["remapped"] = remap_fields(
                 x, self._mesh.t.T, new, self.ip_fields, self.remap)
@@ -251,10 +252,3 @@ class LagrangianMesh3D(LagrangianStep):
         return dict(report, tetrahedra=int(new.shape[0]),
                     tetrahedra_changed=int(np.count_nonzero(~kept)), snapped=snapped)
 
-
-def _rows_in(a, b):
-    """For each row of the int array a (k, 4), whether it is a row of b."""
-    a = np.ascontiguousarray(a, dtype=np.int64)
-    b = np.ascontiguousarray(b, dtype=np.int64)
-    view = np.dtype((np.void, 4 * 8))
-    return np.isin(a.view(view).ravel(), b.view(view).ravel())

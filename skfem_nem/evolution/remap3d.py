@@ -27,7 +27,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 __all__ = ["REMAP_RULES", "cell_points", "cell_volumes", "check_ip_fields", "remap_fields",
-           "to_quadrature", "from_quadrature"]
+           "to_quadrature", "from_quadrature", "match_rows"]
 
 REMAP_RULES = ("conservative", "average")
 CELL_POINT = (5.0 + 3.0 * np.sqrt(5.0)) / 20.0  # barycentric weight of a cell's own vertex
@@ -83,6 +83,14 @@ def _keys(t):
     return np.ascontiguousarray(s).view(np.dtype((np.void, 32))).ravel()
 
 
+def match_rows(old_t, new_t):
+    """For each new tetrahedron, whether it was an old one (same vertices) and which row."""
+    ko, kn = _keys(old_t), _keys(new_t)
+    order = np.argsort(ko)
+    pos = np.searchsorted(ko[order], kn).clip(0, ko.size - 1)
+    return ko[order][pos] == kn, order[pos]
+
+
 def _regions(n, t):
     """Region label of each tetrahedron of t (connected through shared vertices)."""
     rows = np.repeat(t[:, 0], 3)
@@ -97,11 +105,7 @@ def remap_fields(p, old_t, new_t, fields, rule):
     Returns the new fields and the number of new tetrahedra whose values were remapped."""
     if rule not in REMAP_RULES:
         raise ValueError(f"remap must be one of {REMAP_RULES}, got {rule!r}")
-    ko, kn = _keys(old_t), _keys(new_t)
-    order = np.argsort(ko)
-    pos = np.searchsorted(ko[order], kn).clip(0, ko.size - 1)
-    kept = ko[order][pos] == kn
-    src = order[pos]                                    # old row of each kept new row
+    kept, src = match_rows(old_t, new_t)
     made = np.flatnonzero(~kept)
     gone = np.setdiff1d(np.arange(old_t.shape[0]), src[kept])
     # slot in the old tet of each new tet's vertex (kept rows)

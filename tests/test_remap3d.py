@@ -158,3 +158,19 @@ def test_save_and_load_carry_the_fields(tmp_path):
         a = _by_sorted_vertex(m, name)
         b = _by_sorted_vertex(back, name)
         assert np.allclose(np.array(b), np.array(a)[rows], rtol=0, atol=1e-12), name
+
+
+def test_ip_at_nodes_keeps_constants_and_the_integral():
+    lm = LagrangianMesh3D(box_nodes_3d(300, seed=2))
+    m = lm.mesh.nelements
+    rng = np.random.default_rng(3)
+    lm.ip_fields = {"c": np.full((m, 4, 2), [1.5, -2.0]), "r": rng.random((m, 4))}
+    np.testing.assert_allclose(lm.ip_at_nodes("c"), np.tile([1.5, -2.0], (lm.nodes.shape[0], 1)),
+                               rtol=1e-14)
+    # the nodal means times the volume of each node's cells give back the integral
+    t = lm.mesh.t.T
+    w = np.bincount(t.ravel(), np.repeat(cell_volumes(lm.nodes, t), 4), lm.nodes.shape[0])
+    r = lm.ip_at_nodes("r")
+    assert r.shape == (lm.nodes.shape[0],)
+    np.testing.assert_allclose(w @ r, lm.ip_integral("r"), rtol=1e-13)
+    assert r.min() >= lm.ip_fields["r"].min() and r.max() <= lm.ip_fields["r"].max()

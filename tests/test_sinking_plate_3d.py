@@ -1,5 +1,6 @@
-"""The 3D sinking plate (``skfem-nem sinking-plate --dim 3``): a small run end to end, its
-outputs, a restart, and the command line's one-line errors."""
+"""The 3D sinking plate (``skfem-nem sinking-plate --dim 3``): a small elasto-plastic run end
+to end, its outputs and figures, a restart with its stress history, failed steps that leave
+the state as it was, the viscous plate, and the command line's one-line errors."""
 import json
 
 import numpy as np
@@ -44,6 +45,16 @@ def test_the_run_writes_its_outputs(run3d):
     assert np.all(d["solver_iterations"] > 0) and np.all(d["seconds"] > 0)
     # the tetrahedra are mended by flips, never rebuilt
     assert d["flips"].sum() > 0 and np.all(d["rebuilt"] == 0) and np.all(d["repair_seconds"] > 0)
+    # elasto-plastic: Picard iterations, yield at the yield stress and no more, plastic
+    # strain; no step longer than its own velocity allows
+    assert np.all(d["picard_iterations"] > 1) and d["yielded_points"].max() > 0
+    assert np.all(d["max_plate_stress"] <= 0.12 * (1 + 1e-9))
+    assert d["max_plate_stress"].max() > 0.12 * (1 - 1e-9)
+    assert d["max_plastic_strain"][-1] > 0
+    assert np.all(d["dt"] <= 1.25 * d["stable_dt"] * (1 + 1e-12))
+    assert m.point_data["plastic_strain"].shape == (n,) and m.point_data["plastic_strain"].max() > 0
+    assert m.cell_data["stress_invariant"][0].max() > 0
+    assert m.cell_data["plastic_strain"][0].shape == (cells.data.shape[0],)
 
 
 def test_the_slices_show_the_plate_where_it_is(run3d):
@@ -90,8 +101,151 @@ def test_a_restart_continues_the_run(run3d, tmp_path):
     assert float(more[-1].split(",")[1]) == 80
 
 
+def test_a_restart_carries_the_stress_history(run3d):
+    from skfem_nem.apps.sinking_plate_3d import SinkingPlate3D
+    from skfem_nem.evolution.remap3d import cell_volumes
+    sim = SinkingPlate3D.restart(run3d)
+    with np.load(run3d / "checkpoint.npz") as z:
+        w = cell_volumes(z["nodes"], z["tetrahedra"])
+        stored = {k: np.einsum("t,tk...->...", w, z[f"ip__{k}"])
+                  for k in ("stress", "plastic_strain", "log_eta_eff")}
+    assert stored["plastic_strain"] > 0 and np.abs(stored["stress"]).max() > 0
+    for k, v in stored.items():
+        np.testing.assert_allclose(sim.lm.ip_integral(k), v, rtol=1e-12, atol=1e-15)
+    assert sim.lm.time == 60 and sim.cfg.shear_modulus == 2.0
+
+
+def small_sim(tmp_path, **kw):
+    from skfem_nem.apps.plate3d_config import Plate3DConfig
+    from skfem_nem.apps.sinking_plate_3d import SinkingPlate3D
+    cfg = dict(nodes=300, density_length=0.3, max_dt=30.0, end_time=60.0, output_interval=30.0)
+    cfg.update(kw)
+    return SinkingPlate3D(Plate3DConfig(**cfg), tmp_path / "s")
+
+
+@pytest.mark.parametrize("stage", ["picard", "move"])
+def test_a_failed_step_leaves_the_state_as_it_was(stage, tmp_path, monkeypatch):
+    from skfem_nem.apps import sinking_plate_3d
+    from skfem_nem.apps.sinking_plate import StepStalled
+    from skfem_nem.evolution.stepping import StepTooLong
+    from skfem_nem.models.rheology import PicardNotConverged
+    sim = small_sim(tmp_path, min_dt=4.0)
+    sim.step(10.0)                                      # a stress history to lose
+    before = {k: v.copy() for k, v in sim.lm.ip_fields.items()}
+    nodes, t0, tries = sim.lm.nodes.copy(), sim.lm.time, []
+    assert np.abs(before["stress"]).max() > 0
+    if stage == "picard":
+        def fail(*a, **k):
+            tries.append(a[3])
+            raise PicardNotConverged("no convergence")
+        monkeypatch.setattr(sinking_plate_3d, "vep_step", fail)
+    else:
+        def fail(velocity, dt, tol):
+            tries.append(dt)
+            raise StepTooLong("two nodes would coincide")
+        monkeypatch.setattr(sim.lm, "advance", fail)
+    with pytest.raises(StepStalled, match="failed at dt = 5"):
+        sim.step(20.0)
+    assert tries == [20.0, 10.0, 5.0]          # halved down to min_dt
+    assert sim.lm.ip_fields.keys() == before.keys()
+    for k, v in before.items():
+        np.testing.assert_array_equal(sim.lm.ip_fields[k], v)
+    np.testing.assert_array_equal(sim.lm.nodes, nodes)
+    assert sim.lm.time == t0
+
+
+def test_a_step_longer_than_its_velocity_allows_is_solved_again(tmp_path):
+    sim = small_sim(tmp_path, max_dt=500.0, end_time=500.0)
+    row = sim.step(500.0)
+    assert row["retries"] >= 1 and row["dt"] < 500.0
+    assert row["dt"] <= 1.25 * row["stable_dt"]
+
+
+def test_infinite_modulus_and_yield_stress_give_the_viscous_plate(tmp_path):
+    sim = small_sim(tmp_path, shear_modulus=float("inf"), yield_stress=float("inf"),
+                    plate_viscosity=1000.0)
+    row = sim.step(10.0)
+    assert row["picard_iterations"] == 1 and row["max_plastic_strain"] == 0
+    assert row["yielded_points"] == 0 and np.abs(sim.lm.ip_fields["plastic_strain"]).max() == 0
+    assert row["plate_velocity"] < 0
+
+
+def test_a_checkpoint_of_the_viscous_plate_restarts_viscous(tmp_path):
+    """A checkpoint written before the plate had a stress history (nodes and node
+    fields only, a configuration without rheology) continues as the viscous plate."""
+    from dataclasses import asdict
+
+    from skfem_nem.apps.sinking_plate_3d import SinkingPlate3D
+    sim = small_sim(tmp_path, plate_viscosity=1000.0)
+    out = tmp_path / "old"
+    out.mkdir()
+    f = sim.lm.node_fields
+    np.savez(out / "checkpoint.npz", nodes=sim.lm.nodes, plate=f["plate"], start=f["start"],
+             clock=np.array([12.5, 3]))
+    config = {k: v for k, v in asdict(sim.cfg).items()
+              if k not in ("shear_modulus", "yield_stress", "picard_tol", "remap")}
+    (out / "checkpoint.json").write_text(json.dumps(
+        {"dim": 3, "config": config, "next_output": 30.0, "dt_next": 10.0, "outputs": 1,
+         "volume0": sim.volume0}))
+    old = SinkingPlate3D.restart(out)
+    assert old.cfg.shear_modulus == np.inf and old.cfg.yield_stress == np.inf
+    assert old.cfg.plate_viscosity == 1000.0 and old.cfg.picard_tol == 1e-3
+    assert (old.lm.time, old.lm.step) == (12.5, 3)
+    assert np.abs(old.lm.ip_fields["stress"]).max() == 0
+    np.testing.assert_array_equal(old.lm.nodes, sim.lm.nodes)
+    assert old.step(5.0)["picard_iterations"] == 1
+
+
+def test_the_plastic_strain_figure_shows_the_plate(run3d):
+    from skfem_nem.apps.plate3d_figures import plastic_slices, plate_surface
+    from skfem_nem.apps.sinking_plate_3d import SinkingPlate3D, plate_box
+    sim = SinkingPlate3D.restart(run3d)
+    lo, hi = plate_box(sim.cfg)
+    slack = 0.15
+    for title, plane, image, extent in plastic_slices(sim):
+        inside = np.isfinite(image)
+        assert inside.any() and (~inside).any()       # the plate only
+        assert image[inside].min() >= -1e-12 and image[inside].max() > 0
+        rows, cols = image.shape
+        x = np.linspace(extent[0], extent[1], cols)[None, :].repeat(rows, 0)
+        assert np.all((x[inside] > lo[0] - slack) & (x[inside] < hi[0] + slack))
+    triangles, values = plate_surface(sim)
+    corners = triangles.reshape(-1, 3)
+    assert triangles.shape[1:] == (3, 3) and values.shape == triangles.shape[:1]
+    # (the surface cuts edges from plate nodes to the next nodes out, up to 0.3 long here)
+    assert np.all((corners > lo - 2 * slack) & (corners < hi + 2 * slack))
+    assert values.min() >= -1e-12 and values.max() > 0
+    assert (run3d / "plastic_strain.png").exists()
+
+
+def test_level_surface_of_a_linear_field_is_its_plane():
+    from skfem.mesh import MeshTet
+
+    from skfem_nem.apps.plate3d_figures import level_surface
+    m = MeshTet.init_tensor(*(np.linspace(0, 1, 5),) * 3)
+    p, t = m.p.T, m.t.T
+    s = p @ [0.3, 0.5, 0.2]
+    triangles, values = level_surface(p, t, s, 0.45, 2 * s)
+    corners = triangles.reshape(-1, 3)
+    np.testing.assert_allclose(corners @ [0.3, 0.5, 0.2], 0.45, atol=1e-14)
+    np.testing.assert_allclose(values, 0.9, atol=1e-14)
+    # the cut through the cube: its area from the triangles
+    area = 0.5 * np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0],
+                                         triangles[:, 2] - triangles[:, 0]), axis=1).sum()
+    from scipy.spatial import ConvexHull
+    n = np.array([0.3, 0.5, 0.2]) / np.linalg.norm([0.3, 0.5, 0.2])
+    e1 = np.cross(n, [1, 0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    exact = ConvexHull(np.c_[corners @ e1, corners @ e2]).volume
+    np.testing.assert_allclose(area, exact, rtol=1e-12)
+
+
 @pytest.mark.parametrize("args, words", [
-    (["--dim", "3", "--yield-stress", "1"], "--yield-stress is not a parameter of the 3D"),
+    (["--dim", "3", "--outline-spacing", "1"],
+     "--outline-spacing is not a parameter of the 3D plate (it is one of the 2D plate only)"),
+    (["--dim", "3", "--remap", "nearest"], "remap must be one of"),
+    (["--dim", "3", "--shear-modulus", "-1"], "shear_modulus must be a positive number or inf"),
     (["--depth", "3"], "--depth is not a parameter of the 2D plate"),
     (["--dim", "3", "--plate-y", "1.9"], "plate_y / plate_width"),
     (["--dim", "3", "--solver", "petsc"], "solver must be one of"),
@@ -119,8 +273,8 @@ def test_a_restart_keeps_its_dimension(run3d, tmp_path, capsys):
 
 def test_a_toml_file_with_a_2d_key_is_refused(tmp_path, capsys):
     cfg = tmp_path / "p.toml"
-    cfg.write_text("[sinking-plate]\nshear_modulus = 3.0\n")
+    cfg.write_text("[sinking-plate]\noutline_spacing = 3.0\n")
     with pytest.raises(SystemExit) as exc:
         main(["sinking-plate", "--dim", "3", "--config", str(cfg), "-o", str(tmp_path / "o")])
-    assert exc.value.code == 2 and "unknown configuration key 'shear_modulus'" in \
+    assert exc.value.code == 2 and "unknown configuration key 'outline_spacing'" in \
         capsys.readouterr().err

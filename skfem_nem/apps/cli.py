@@ -104,7 +104,7 @@ def _given_parameters(args, kind, dim) -> dict:
         if name not in names:
             flag = "--" + name.replace("_", "-")
             raise ValueError(f"{flag} is not a parameter of the {dim}D plate"
-                             + (" (the 3D plate is viscous: scalar-only memory)"
+                             + (" (it is one of the 2D plate only)"
                                 if dim == 3 else " (it is one of the 3D plate: --dim 3)"))
         given[name] = value
     return given
@@ -247,8 +247,8 @@ def _add_plate_parser(sub):
     sp.add_argument("--quiet", action="store_true", help="no progress bar")
     sp.add_argument("--dim", type=int, choices=(2, 3), default=None,
                     help="2 (default): the paper's plate, elasto-plastic, on a mesh repaired "
-                    "by flips; 3: a viscous slab in a box, on nodes retriangulated every step "
-                    "(a restart continues the stored run's)")
+                    "by flips; 3: an elasto-plastic slab in a box, on tetrahedra repaired by "
+                    "flips (a restart continues the stored run's)")
     g = sp.add_argument_group("parameters (nondimensional; [3D: ...] the --dim 3 default)")
     for name, (d2, d3, text) in _plate_parameters().items():
         flag = "--" + name.replace("_", "-")

@@ -1,10 +1,13 @@
 """The 3D sinking plate's configuration: a slab in a box, its parameters and their help.
 
 Beside :mod:`skfem_nem.apps.plate_config` (the 2D plate) because the 3D plate is a
-different model: the paper's 3D programme with scalar-only memory, so the plate is
-viscous (no elastic stress, no yield: those need the tensor memory of the 2D mesh) and
-its density and viscosity are carried by the nodes. The names the two share mean the
-same (``width`` is the box along x, ``height`` along z); ``depth``, ``plate_width`` and
+different model: a slab in a box, whose material (plate indicator, initial height) is
+carried by the nodes and blended across the plate's edge, and whose stress history lives
+at the vertex cells of the tetrahedra (``LagrangianMesh3D(ip_fields=...)``) instead of
+the 2D plate's outline and integration points. The names the two share mean the
+same: ``width`` is the box along x, ``height`` along z, and the plate's rheology
+(``plate_viscosity``, ``shear_modulus``, ``yield_stress``) has the 2D defaults, ``inf``
+turning elasticity or plasticity off; ``depth``, ``plate_width`` and
 ``plate_y`` are the third direction. Reading from TOML, the command line and a checkpoint
 is :func:`~skfem_nem.apps.plate_config.load_config` with ``kind=Plate3DConfig``.
 """
@@ -12,16 +15,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
+import numpy as np
+
+from ..evolution.remap3d import REMAP_RULES
 from ..models.stokes_solvers import SOLVERS
 
-__all__ = ["HELP_3D", "Plate3DConfig"]
+__all__ = ["HELP_3D", "Plate3DConfig", "plate_box"]
 
 
 @dataclass
 class Plate3DConfig:
     """Parameters of the 3D sinking-plate run (nondimensional: box height 1, upper
     fluid viscosity 1, buoyancy scale ``plate_density * gravity * height`` = 1.5)."""
+
+    #: what a checkpoint written before a parameter existed ran with: the viscous plate
+    #: (read by :func:`~skfem_nem.apps.plate_config.stored_config` on ``--restart``)
+    OLDER_CHECKPOINTS: ClassVar[dict] = {"shear_modulus": math.inf, "yield_stress": math.inf}
 
     #: box height (z)
     height: float = 1.0
@@ -51,10 +62,15 @@ class Plate3DConfig:
     plate_density: float = 1.5
     #: gravitational acceleration (downward)
     gravity: float = 1.0
-    #: plate viscosity (a viscous plate: scalar-only memory)
-    plate_viscosity: float = 1000.0
-    #: number of random interior nodes drawn (before thinning near the walls)
-    nodes: int = 10000
+    #: plate viscosity (Maxwell)
+    plate_viscosity: float = 1e4
+    #: plate shear modulus (``inf``: a viscous plate, no stress history)
+    shear_modulus: float = 2.0
+    #: plate von Mises yield stress, sqrt(J2) (``inf``: no plasticity)
+    yield_stress: float = 0.12
+    #: number of random interior nodes drawn (before thinning near the walls); 6,000 keeps
+    #: the elasto-plastic run near 10 minutes on two cores (docs/stokes_3d.md)
+    nodes: int = 6000
     #: random seed of the node set
     seed: int = 0
     #: node density ~ 1 / (1 + distance to the plate / density_length)^3
@@ -72,6 +88,10 @@ class Plate3DConfig:
     output_interval: float = 100.0
     #: relative residual of the Stokes solver's iterations
     solver_tol: float = 1e-8
+    #: Picard tolerance of the plastic iterations (relative velocity change)
+    picard_tol: float = 1e-3
+    #: remap of the stress history on flips: "conservative" or "average"
+    remap: str = "conservative"
     #: Stokes solver (``solve_stokes``'s ``solver``; "auto": FGMRES with AMG in 3D)
     solver: str = "auto"
     #: write a checkpoint every this many steps
@@ -82,11 +102,15 @@ class Plate3DConfig:
         for k in ("height", "width", "depth", "eta_upper", "eta_lower", "plate_length",
                   "plate_width", "plate_thickness", "plate_density", "gravity",
                   "plate_viscosity", "density_length", "end_time", "max_dt", "min_dt", "cfl",
-                  "output_interval", "solver_tol"):
+                  "output_interval", "solver_tol", "picard_tol"):
             v = getattr(self, k)
             number = isinstance(v, (int, float)) and not isinstance(v, bool)
             if not (number and v > 0 and math.isfinite(v)):
                 raise ValueError(f"{k} must be a positive number, got {v!r}")
+        for k in ("shear_modulus", "yield_stress"):   # inf: elasticity / plasticity off
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0):
+                raise ValueError(f"{k} must be a positive number or inf, got {v!r}")
         for k in ("nodes", "checkpoint_every"):
             v = getattr(self, k)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
@@ -104,8 +128,12 @@ class Plate3DConfig:
                              f"{self.min_dt!r}")
         if self.cfl > 1:
             raise ValueError(f"cfl must not exceed 1, got {self.cfl!r}")
-        if self.solver_tol >= 1:
-            raise ValueError(f"solver_tol must be below 1, got {self.solver_tol!r}")
+        for k in ("solver_tol", "picard_tol"):
+            if getattr(self, k) >= 1:
+                raise ValueError(f"{k} must be below 1, got {getattr(self, k)!r}")
+        if self.remap not in REMAP_RULES:
+            raise ValueError(f"remap must be one of {', '.join(map(repr, REMAP_RULES))}, got "
+                             f"{self.remap!r}")
         margin = 0.5 * self.plate_thickness
         for axis, centre, extent, box in (("x", "plate_x", "plate_length", "width"),
                                           ("y", "plate_y", "plate_width", "depth"),
@@ -115,6 +143,13 @@ class Plate3DConfig:
                 raise ValueError(f"{centre} / {extent}: the plate spans {axis} = {c - e / 2:g} "
                                  f".. {c + e / 2:g}, which is not inside the box (0, {b:g}) "
                                  f"with a margin of {margin:g}")
+
+
+def plate_box(c: Plate3DConfig):
+    """The plate's lowest and highest corners (3,), (3,) at the start."""
+    centre = np.array([c.plate_x, c.plate_y, c.plate_z])
+    half = 0.5 * np.array([c.plate_length, c.plate_width, c.plate_thickness])
+    return centre - half, centre + half
 
 
 #: one line of help per parameter (the command line shows them)
@@ -133,7 +168,9 @@ HELP_3D = {
     "plate_z": "height of the plate centre above the bottom",
     "plate_density": "density excess of the plate over the fluid",
     "gravity": "gravitational acceleration (downward)",
-    "plate_viscosity": "plate viscosity (viscous plate: scalar-only memory)",
+    "plate_viscosity": "plate viscosity (Maxwell)",
+    "shear_modulus": "plate shear modulus (inf: a viscous plate)",
+    "yield_stress": "plate von Mises yield stress, sqrt(J2) (inf: no plasticity)",
     "nodes": "number of random interior nodes drawn",
     "seed": "random seed of the node set",
     "density_length": "node density ~ 1 / (1 + distance to the plate / density_length)^3",
@@ -144,6 +181,8 @@ HELP_3D = {
     "cfl": "largest node displacement per step, as a fraction of the node's mean edge length",
     "output_interval": "time between VTU outputs",
     "solver_tol": "relative residual of the Stokes solver's iterations",
+    "picard_tol": "Picard tolerance of the plastic iterations",
+    "remap": 'remap of the stress history on flips: "conservative" or "average"',
     "solver": 'Stokes solver: "auto" (FGMRES with AMG in 3D), "fgmres", "schur", '
               '"schur-amg", "minres" or "direct"',
     "checkpoint_every": "write a checkpoint every this many steps",

@@ -227,7 +227,9 @@ def stored_config(out, overrides: Optional[Dict] = None, kind: type = PlateConfi
     without one."""
     out = Path(out)
     stored_dim(out)
-    data = dict(json.loads((out / "checkpoint.json").read_text())["config"])
+    # parameters added since the checkpoint was written: the values it ran with
+    data = dict(getattr(kind, "OLDER_CHECKPOINTS", {}))
+    data.update(json.loads((out / "checkpoint.json").read_text())["config"])
     data.update(overrides or {})
     return _config_from(data, kind)
 

@@ -138,6 +138,18 @@ class LagrangianMesh3D(LagrangianStep):
         w = cell_volumes(self.nodes, self._mesh.t.T)
         return np.einsum("t,tk...->...", w, f)
 
+    def ip_at_nodes(self, name: str) -> np.ndarray:
+        """Integration-point field ``name`` at the nodes, (n, ...): the mean of the vertex
+        cells around each node weighted by their volumes (for output and figures)."""
+        f = self.ip_fields[name]
+        t = self._mesh.t.T
+        w = np.repeat(cell_volumes(self.nodes, t), 4)
+        n = self.nodes.shape[0]
+        flat = f.reshape(f.shape[0] * 4, -1)
+        out = np.stack([np.bincount(t.ravel(), w * flat[:, k], n) for k in range(flat.shape[1])],
+                       axis=-1) / np.bincount(t.ravel(), w, n)[:, None]
+        return out.reshape((n,) + f.shape[2:])
+
     def interpolate(self, name: str, x) -> np.ndarray:
         """Values of node field ``name`` at points x (m, 3) by Sibson
         interpolation on the current mesh: (m, ...)."""

@@ -480,8 +480,11 @@ class _StepSetup:
 
     @property
     def iterate(self) -> bool:
-        """True if the viscosity or the stress depends on the velocity."""
-        return bool(np.isfinite(self.yield_stress).any()) or self.rotation != "none"
+        """True if the viscosity or the stress depends on the velocity: a finite yield
+        stress, or an old stress that the rotation turns (none without elasticity)."""
+        if np.isfinite(self.yield_stress).any():
+            return True
+        return self.rotation != "none" and bool(np.any(self.chi * np.abs(self.tau_old)))
 
     def rotated(self, G: Optional[np.ndarray]) -> np.ndarray:
         """The old stress rotated with the spin of the velocity gradient ``G``."""
@@ -618,7 +621,9 @@ def _vep_result(st: _StepSetup, pic: _PicardResult) -> VEPStep:
     if bad.any():
         raise ValueError("the updated stress is not finite" + _where(bad)
                          + f" ({int(bad.any(axis=1).sum())} element(s))")
-    pl = edot - tau_new / (2.0 * st.eta_ve[None, None])
+    # the plastic strain rate: what the stress does not take up where it yielded (zero
+    # elsewhere, exactly rather than to round-off)
+    pl = np.where(factor < 1.0, edot - tau_new / (2.0 * st.eta_ve[None, None]), 0.0)
     plII = second_invariant(pl)
     return VEPStep(tau=tau_new, solution=pic.solution, strain_rate=pic.strain_rate,
                    plastic_strain_rate=pl, plastic_rate_II=plII,

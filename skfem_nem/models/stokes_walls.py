@@ -143,7 +143,7 @@ def _face_flux(spaces: stokes_bases.StokesSpaces, faces: np.ndarray) -> sp.csr_m
     fb = FacetBasis(mesh, pb.elem, facets=faces, intorder=FACE_ORDER)
     nf, nq = fb.dx.shape
     corners = mesh.facets[:, faces]                              # (3, nf) the faces' nodes
-    lam, n = _face_frames(mesh, corners, np.asarray(fb.global_coordinates().value))
+    lam, n = _face_frames(mesh, corners, np.asarray(fb.global_coordinates()))
     points = np.arange(nf * nq).reshape(nf, nq)
     pn = np.asarray(pb.dofs.nodal_dofs[0])
     Q = sp.csr_matrix(((lam * fb.dx).ravel(), (np.repeat(pn[corners], nq, axis=1).ravel(),

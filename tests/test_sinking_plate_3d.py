@@ -52,6 +52,7 @@ def test_the_run_writes_its_outputs(run3d):
     assert d["max_plate_stress"].max() > 0.12 * (1 - 1e-9)
     assert d["max_plastic_strain"][-1] > 0
     assert np.all(d["dt"] <= 1.25 * d["stable_dt"] * (1 + 1e-12))
+    assert np.all(d["injected"] >= 0) and np.all(np.diff(d["nodes"]) == d["injected"][1:])
     assert m.point_data["plastic_strain"].shape == (n,) and m.point_data["plastic_strain"].max() > 0
     assert m.cell_data["stress_invariant"][0].max() > 0
     assert m.cell_data["plastic_strain"][0].shape == (cells.data.shape[0],)
@@ -140,7 +141,7 @@ def test_a_failed_step_leaves_the_state_as_it_was(stage, tmp_path, monkeypatch):
             raise PicardNotConverged("no convergence")
         monkeypatch.setattr(sinking_plate_3d, "vep_step", fail)
     else:
-        def fail(velocity, dt, tol):
+        def fail(velocity, dt, tol, inject=None):
             tries.append(dt)
             raise StepTooLong("two nodes would coincide")
         monkeypatch.setattr(sim.lm, "advance", fail)
@@ -246,6 +247,7 @@ def test_level_surface_of_a_linear_field_is_its_plane():
      "--outline-spacing is not a parameter of the 3D plate (it is one of the 2D plate only)"),
     (["--dim", "3", "--remap", "nearest"], "remap must be one of"),
     (["--dim", "3", "--shear-modulus", "-1"], "shear_modulus must be a positive number or inf"),
+    (["--dim", "3", "--split-edges", "1"], "split_edges must be a number above 1 or inf"),
     (["--depth", "3"], "--depth is not a parameter of the 2D plate"),
     (["--dim", "3", "--plate-y", "1.9"], "plate_y / plate_width"),
     (["--dim", "3", "--solver", "petsc"], "solver must be one of"),

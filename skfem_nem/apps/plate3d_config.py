@@ -32,7 +32,8 @@ class Plate3DConfig:
 
     #: what a checkpoint written before a parameter existed ran with: the viscous plate
     #: (read by :func:`~skfem_nem.apps.plate_config.stored_config` on ``--restart``)
-    OLDER_CHECKPOINTS: ClassVar[dict] = {"shear_modulus": math.inf, "yield_stress": math.inf}
+    OLDER_CHECKPOINTS: ClassVar[dict] = {"shear_modulus": math.inf, "yield_stress": math.inf,
+                                         "split_edges": math.inf}
 
     #: box height (z)
     height: float = 1.0
@@ -92,6 +93,9 @@ class Plate3DConfig:
     picard_tol: float = 1e-3
     #: remap of the stress history on flips: "conservative" or "average"
     remap: str = "conservative"
+    #: edges longer than this many target spacings (the initial node set's) are split after
+    #: each step, a node added at the midpoint (``inf``: no nodes added)
+    split_edges: float = 3.0
     #: Stokes solver (``solve_stokes``'s ``solver``; "auto": FGMRES with AMG in 3D)
     solver: str = "auto"
     #: write a checkpoint every this many steps
@@ -111,6 +115,9 @@ class Plate3DConfig:
             v = getattr(self, k)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0):
                 raise ValueError(f"{k} must be a positive number or inf, got {v!r}")
+        v = self.split_edges
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 1):
+            raise ValueError(f"split_edges must be a number above 1 or inf, got {v!r}")
         for k in ("nodes", "checkpoint_every"):
             v = getattr(self, k)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
@@ -183,6 +190,8 @@ HELP_3D = {
     "solver_tol": "relative residual of the Stokes solver's iterations",
     "picard_tol": "Picard tolerance of the plastic iterations",
     "remap": 'remap of the stress history on flips: "conservative" or "average"',
+    "split_edges": "edges longer than this many target spacings are split after each step "
+                   "(inf: no nodes added)",
     "solver": 'Stokes solver: "auto" (FGMRES with AMG in 3D), "fgmres", "schur", '
               '"schur-amg", "minres" or "direct"',
     "checkpoint_every": "write a checkpoint every this many steps",

@@ -194,7 +194,8 @@ class SinkingPlate3D:
         def velocity(x):
             return (P.probes(x.T) @ u).reshape(3, -1).T
 
-        report = lm.advance(velocity, dt, tol=1e-8)
+        split = c.split_edges if np.isfinite(c.split_edges) else None
+        report = lm.advance(velocity, dt, tol=1e-8, inject=split)
         self._last = (r.solution, r, s)
         self.dt_next = stable
         return self._row(report, r, v, s, stable, seconds=(t_basis, t_solve, t0))
@@ -230,6 +231,7 @@ class SinkingPlate3D:
                 "picard_iterations": r.iterations,
                 "solver_iterations": int(r.solution.iterations),
                 "move_iterations": report["iterations"], "flips": report["flips"],
+                "injected": report["injected"],
                 "relocated": report["relocated"], "rebuilt": report["rebuilt"],
                 "repair_seconds": report["repair_seconds"],
                 "nodes": int(self.lm.nodes.shape[0]), "tetrahedra": report["tetrahedra"],

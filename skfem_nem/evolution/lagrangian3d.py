@@ -9,7 +9,8 @@ extension of the 2D flip operation in three dimensions"). :class:`LagrangianMesh
   a wall than :data:`WALL_SNAP` of the box put on it;
 * named node fields (scalar-only memory: viscosity, density, material id,
   initial position, temperature, ...) that travel with their nodes unchanged:
-  a node's row never moves to another node and is never interpolated;
+  a node's row never moves to another node and is never interpolated (a node added where
+  the flow stretches the mesh, :mod:`.injection3d`, takes their Sibson interpolant);
 * the Delaunay tetrahedralisation of the current nodes, repaired after every step by
   :meth:`~skfem_nem.geometry.delaunay3d.Delaunay3D.moved` (exact flips, and nodes removed and
   re-inserted where flips cannot mend; the result is what a fresh build gives, with no flat
@@ -30,6 +31,7 @@ from typing import Callable, Dict, Optional
 import numpy as np
 
 from ..basis import NaturalNeighbourBasis
+from .injection3d import Injection3D, initial_spacing
 from .remap3d import (REMAP_RULES, cell_points, cell_volumes, check_ip_fields, match_rows,
                       remap_fields)
 from .stepping import LagrangianStep, StepTooLong, check_node_fields, save_npz_atomically
@@ -46,7 +48,7 @@ WALL_SNAP = 1e-8
 __all__ = ["LagrangianMesh3D"]
 
 
-class LagrangianMesh3D(LagrangianStep):
+class LagrangianMesh3D(LagrangianStep, Injection3D):
     """A 3D node set carried by a flow, its Delaunay tetrahedra repaired every step.
 
     Parameters
@@ -74,7 +76,7 @@ class LagrangianMesh3D(LagrangianStep):
     history (per-step dicts: step, time, dt, iterations, converged, the repair's
     flips, relocated, rebuilt and repair_seconds, tetrahedra,
     tetrahedra_changed: how many of the new tetrahedra were not
-    in the previous triangulation).
+    in the previous triangulation, injected: the nodes added), target_spacing.
 
     Raises
     ------
@@ -101,6 +103,7 @@ class LagrangianMesh3D(LagrangianStep):
         lo, hi = p.min(axis=0), p.max(axis=0)
         self._box = (lo, hi)
         self._on_wall = (p == lo) | (p == hi) if walls == "box" else None
+        self._target = initial_spacing(p, self._mesh.t.T)
         self.time = 0.0
         self.step = 0
         self.history = []
@@ -172,25 +175,29 @@ class LagrangianMesh3D(LagrangianStep):
             return float((fraction * h / speed).min())
 
     def advance(self, velocity: Callable[[np.ndarray], np.ndarray], dt: float,
-                tol: float = 1e-10, maxiter: int = 10) -> dict:
+                tol: float = 1e-10, maxiter: int = 10, inject: Optional[float] = None) -> dict:
         """Move the nodes by one step and repair the Delaunay tetrahedra.
 
         ``velocity(x)`` -> (n, 3) nodal velocities at positions x (n, 3) (for
         a NEM solution: ``basis.probes(x.T) @ u`` per component, or the nodal
         values themselves when the field is known at the moving nodes).
         ``tol``, ``maxiter``: the predictor-corrector, as in
-        :meth:`skfem_nem.LagrangianMesh.advance`. Returns the step's report
-        (also appended to ``history``); on error nothing changes.
+        :meth:`skfem_nem.LagrangianMesh.advance`. ``inject``: after the repair, split the
+        edges longer than this many target spacings (:meth:`split_long_edges`; None: no
+        nodes added). Returns the step's report (also appended to ``history``;
+        ``injected``: the nodes added); on error nothing changes.
         """
-        return self.step_transaction(velocity, dt, tol, maxiter)
+        return self.step_transaction(velocity, dt, tol, maxiter, inject=inject)
 
     def _state(self):
         return {"mesh": self._mesh, "bases": self._bases, "time": self.time,
-                "step": self.step, "on_wall": self._on_wall, "ip_fields": self.ip_fields}
+                "step": self.step, "on_wall": self._on_wall, "ip_fields": self.ip_fields,
+                "node_fields": self.node_fields, "target": self._target}
 
     def _restore(self, state):
         self._mesh, self._bases = state["mesh"], state["bases"]
-        self.ip_fields = state["ip_fields"]
+        self.ip_fields, self.node_fields = state["ip_fields"], state["node_fields"]
+        self._target = state["target"]
         self.time, self.step = state["time"], state["step"]
         self._on_wall = state["on_wall"]
 
@@ -200,7 +207,7 @@ class LagrangianMesh3D(LagrangianStep):
         meta = {"time": self.time, "step": self.step, "remap": self.remap, "walls": self.walls,
                 "node_fields": list(self.node_fields), "ip_fields": list(self.ip_fields),
                 "history": self.history, "format": 1}
-        arrays = {"nodes": self.nodes, "tetrahedra": self._mesh.t.T,
+        arrays = {"nodes": self.nodes, "tetrahedra": self._mesh.t.T, "target": self._target,
                   "box_lo": self._box[0], "box_hi": self._box[1],
                   "meta": np.array(json.dumps(meta))}
         if self._on_wall is not None:
@@ -222,6 +229,8 @@ class LagrangianMesh3D(LagrangianStep):
             ip = {k: z[f"ip__{k}"].copy() for k in meta["ip_fields"]}
             self._box = (z["box_lo"].copy(), z["box_hi"].copy())
             self._on_wall = z["on_wall"].copy() if "on_wall" in z.files else None
+            if "target" in z.files:  # (earlier files: the saved nodes' own spacing)
+                self._target = z["target"].copy()
         self.ip_fields, moved = remap_fields(self.nodes, old, self._mesh.t.T, ip, self.remap)
         if moved:
             raise ValueError(f"{os.fspath(path)!r}: {moved} tetrahedra of the saved mesh are "
@@ -261,6 +270,8 @@ class LagrangianMesh3D(LagrangianStep):
         self._bases = {}
         self.time += dt
         self.step += 1
-        return dict(report, tetrahedra=int(new.shape[0]),
-                    tetrahedra_changed=int(np.count_nonzero(~kept)), snapped=snapped)
+        injected = 0 if inject is None else self.split_long_edges(inject)
+        return dict(report, tetrahedra=int(self._mesh.t.shape[1]),
+                    tetrahedra_changed=int(np.count_nonzero(~kept)), snapped=snapped,
+                    injected=injected)
 

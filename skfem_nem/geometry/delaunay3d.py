@@ -7,7 +7,7 @@ with exact predicates (:mod:`.delaunay3d_build`) in a spatially coherent order a
 the 3D code paths read from scipy's object: ``points``, ``simplices``, ``neighbors``,
 ``vertex_to_simplex``, ``vertex_neighbor_vertices``, ``convex_hull`` and ``find_simplex``;
 and, for nodes that move, :meth:`Delaunay3D.moved`, the local repair by flips
-(:mod:`.delaunay3d_repair`).
+(:mod:`.delaunay3d_repair`), and for nodes added, :meth:`Delaunay3D.inserted`.
 """
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ import time
 import numpy as np
 from numba import njit
 
-from .delaunay3d_build import DUPLICATE, FLAT, build
-from .delaunay3d_repair import COINCIDENT, LOST, repair
+from .delaunay3d_build import DUPLICATE, FLAT, add_points, build
+from .delaunay3d_repair import COINCIDENT, LOST, repair, working
 from .nodesets import morton_order
 from .predicates3d import orient3d_sign
 
@@ -123,6 +123,33 @@ class Delaunay3D:
         report = dict(counts, rebuilt=int(status == LOST),
                       repair_seconds=time.perf_counter() - start)
         return out, report
+
+    def inserted(self, points):
+        """The Delaunay tetrahedralisation of these nodes and new ones ``points`` (k, 3),
+        numbered after them: each inserted into this one (Bowyer-Watson; this one stays
+        unchanged), so that only the tetrahedra in their conflict regions change. The
+        result is the one :class:`Delaunay3D` builds from all the nodes. Raises
+        ``ValueError`` for non-finite points and for a new point on a node or on another
+        new point (naming both)."""
+        q = np.array(points, dtype=np.float64, order="C", copy=True)
+        if q.ndim != 2 or q.shape[1] != 3:
+            raise ValueError(f"points must have shape (k, 3), got {np.shape(points)}")
+        bad = np.flatnonzero(~np.isfinite(q).all(axis=1))
+        if bad.size:
+            raise ValueError(f"points[{bad[0]}] = {q[bad[0]].tolist()} is not finite")
+        n = self.npoints
+        p = np.concatenate([self.points, q])
+        T, N = working(*self._raw)
+        order = n + morton_order(q).astype(np.int64) if q.shape[0] > 1 else \
+            np.arange(n, n + q.shape[0], dtype=np.int64)
+        T, N, ntet, status, i, j = add_points(p, T, N, self._raw[2], n, order)
+        if status == DUPLICATE:
+            i, j = sorted((int(i), int(j)))
+            what = f"node {i}" if i < n else f"new point {i - n}"
+            raise ValueError(f"new point {j - n} at {p[j].tolist()} coincides with {what}")
+        out = Delaunay3D.__new__(Delaunay3D)
+        out._adopt(p, T, N, ntet)
+        return out
 
     @property
     def vertex_to_simplex(self):

@@ -432,3 +432,40 @@ def build(P, order):
             P, G, T, N, stamp, conf, free, nfree, ntet, k, t0, q, work)
         last = work[1][0]
     return T, N, ntet, OK, -1, -1
+
+
+@njit(cache=True)
+def add_points(P, T, N, ntet, G0, order):
+    """The tetrahedralisation ``T, N, ntet`` of the points ``P[:G0]`` (ghost vertex ``G0``)
+    with the points ``P[order]`` inserted as well (the ghost vertex renumbered to
+    ``G = P.shape[0]``; the arrays must have spare rows, :func:`reserve` grows them).
+    Returns ``(T, N, ntet, status, i, j)`` as :func:`build`: DUPLICATE when point i
+    coincides with point j. By the symbolic perturbation the result is the one a build of
+    all the points gives."""
+    G = P.shape[0]
+    for t in range(ntet):
+        if T[t, 0] >= 0 and T[t, 3] == G0:
+            T[t, 3] = G
+    free = np.empty(T.shape[0], np.int32)
+    nfree, last = 0, -1
+    for t in range(ntet):
+        if T[t, 0] < 0:
+            free[nfree] = t
+            nfree += 1
+        elif last < 0:
+            last = t
+    stamp = np.zeros(T.shape[0], np.int64)
+    conf = np.zeros(T.shape[0], np.bool_)
+    work = new_work()
+    seed = 12345
+    for k in range(order.shape[0]):
+        q = order[k]
+        t0, seed = locate(P, G, T, N, last, q, seed)
+        if T[t0, 3] != G:
+            v = coincident(P, T, t0, q)
+            if v >= 0:
+                return T, N, ntet, DUPLICATE, q, v
+        T, N, stamp, conf, free, nfree, ntet, work, nnew = insert_point(
+            P, G, T, N, stamp, conf, free, nfree, ntet, k + 1, t0, q, work)
+        last = work[1][0]
+    return T, N, ntet, OK, -1, -1

@@ -162,6 +162,24 @@ def test_a_step_longer_than_its_velocity_allows_is_solved_again(tmp_path):
     assert row["dt"] <= 1.25 * row["stable_dt"]
 
 
+def test_nodes_added_after_a_step_get_fields_and_output(tmp_path):
+    import meshio
+
+    from skfem_nem.apps.output import PVDWriter
+    sim = small_sim(tmp_path, split_edges=1.6)
+    n = sim.lm.nodes.shape[0]
+    row = sim.step(10.0)
+    assert row["injected"] > 0 and row["nodes"] == n + row["injected"] == sim.lm.nodes.shape[0]
+    assert sim.lm.ip_fields["stress"].shape[0] == sim.lm.mesh.nelements
+    sim._pvd = PVDWriter(sim.out / "plate.pvd")
+    m = meshio.read(sim.out / sim.write_output())
+    v = m.point_data["velocity"]
+    assert v.shape == (sim.lm.nodes.shape[0], 3) and np.isfinite(v).all()
+    # an added node's velocity lies between its neighbours' (Sibson: a convex combination)
+    assert np.abs(v[n:]).max() <= np.abs(v[:n]).max()
+    assert sim.step(10.0)["picard_iterations"] >= 1      # and the next step solves on them
+
+
 def test_infinite_modulus_and_yield_stress_give_the_viscous_plate(tmp_path):
     sim = small_sim(tmp_path, shear_modulus=float("inf"), yield_stress=float("inf"),
                     plate_viscosity=1000.0)

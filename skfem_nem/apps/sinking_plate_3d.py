@@ -31,6 +31,7 @@ from typing import Optional
 
 import numpy as np
 
+from ..coordinates import sibson_coordinates
 from ..evolution.lagrangian3d import LagrangianMesh3D
 from ..evolution.remap3d import from_quadrature, to_quadrature
 from ..evolution.stepping import StepTooLong
@@ -215,6 +216,7 @@ class SinkingPlate3D:
         f = self.lm.node_fields
         plate = f["plate"] > 0.5
         z = self.lm.nodes[plate, 2]
+        moving = plate[:v.shape[0]]          # (nodes added after the solve come last)
         t_basis, t_solve, t0 = seconds
         in_plate = s >= 0.5
         tauII = second_invariant(r.tau)
@@ -224,7 +226,7 @@ class SinkingPlate3D:
                 "plate_bottom": float(z.min()),
                 "plate_volume_change": self.plate_volume() / self.volume0 - 1.0,
                 "max_speed": float(np.linalg.norm(v, axis=1).max()),
-                "plate_velocity": float(v[plate, 2].mean()),
+                "plate_velocity": float(v[moving, 2].mean()),
                 "max_plastic_strain": float(r.plastic_strain.max()),
                 "yielded_points": int(r.yielded.sum()),
                 "max_plate_stress": float(tauII[in_plate].max()) if in_plate.any() else 0.0,
@@ -249,8 +251,8 @@ class SinkingPlate3D:
         pd = {"material": self._material(), "initial_height": f["start"][:, 2],
               "plastic_strain": lm.ip_at_nodes("plastic_strain")}
         sol = self.solution()
-        if sol is not None and sol.u.size == 3 * lm.nodes.shape[0]:
-            pd["velocity"], pd["pressure"] = sol.velocity_at_nodes(), sol.pressure_at_nodes()
+        if sol is not None:
+            pd["velocity"], pd["pressure"] = self._solved_at_nodes(sol)
         stress = to_quadrature(lm.ip_fields["stress"])
         cd = {"stress_invariant": second_invariant(stress).mean(axis=1),
               "plastic_strain": lm.ip_fields["plastic_strain"].mean(axis=1)}
@@ -258,6 +260,16 @@ class SinkingPlate3D:
         self._pvd.add(lm.time, name)
         self.outputs += 1
         return name
+
+    def _solved_at_nodes(self, sol):
+        """Velocity (n, 3) and pressure (n,) of the last solve at the nodes; at nodes added
+        after it, their Sibson interpolants from the others."""
+        v, p = sol.velocity_at_nodes(), sol.pressure_at_nodes()
+        x = self.lm.nodes
+        if x.shape[0] > v.shape[0]:
+            Phi = sibson_coordinates(x[:v.shape[0]], x[v.shape[0]:])
+            v, p = np.concatenate([v, Phi @ v]), np.concatenate([p, Phi @ p])
+        return v, p
 
     def _material(self) -> np.ndarray:
         """0 upper fluid, 1 lower fluid, 2 plate, per node."""

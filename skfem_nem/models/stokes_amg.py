@@ -14,6 +14,7 @@ from contextlib import contextmanager
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from numba import njit, prange
 
 from .krylov import dot
 
@@ -152,10 +153,22 @@ def unit_scale(A: sp.spmatrix) -> np.ndarray:
 
 def scaled_block(A: sp.spmatrix, s: np.ndarray, dtype=np.float64) -> sp.spmatrix:
     """``diag(s) A diag(s)`` of a CSR or CSC matrix ``A``, in its format (the index
-    arrays shared, not copied), with values of ``dtype``."""
-    outer = np.repeat(s, np.diff(A.indptr))
-    data = (A.data * s[A.indices] * outer).astype(dtype)
+    arrays shared, not copied), with values of ``dtype`` (rounded from the products in
+    double precision). Each value is ``(a_ij s_j) s_i`` in that order (CSR; for CSC
+    i and j swap), in a threaded kernel: at 13 million entries (a 3D viscous block of
+    10,000 nodes) 0.7 s in numpy's vectorised form, which every AMG refresh repeats."""
+    data = np.empty(A.data.shape[0], dtype=dtype)
+    _scaled_values(A.indptr, A.indices, A.data, np.asarray(s, dtype=np.float64), data)
     return type(A)((data, A.indices, A.indptr), shape=A.shape)
+
+
+@njit(cache=True, parallel=True)
+def _scaled_values(indptr, indices, values, s, out):
+    """``out[k] = values[k] s[indices[k]] s[row of k]`` row by row (outer index)."""
+    for i in prange(indptr.shape[0] - 1):
+        si = s[i]
+        for k in range(indptr[i], indptr[i + 1]):
+            out[k] = values[k] * s[indices[k]] * si
 
 
 def amg_cg(ml, A: sp.spmatrix, b: np.ndarray, steps: int) -> np.ndarray:

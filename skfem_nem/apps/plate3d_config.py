@@ -87,8 +87,9 @@ class Plate3DConfig:
     cfl: float = 0.5
     #: time between VTU outputs
     output_interval: float = 100.0
-    #: relative residual of the Stokes solver's iterations
-    solver_tol: float = 1e-8
+    #: relative residual of each Stokes solve; 0: from the Picard tolerance (a thousandth of
+    #: it, 1e-10 for a step without plastic iterations: ``vep_step``'s ``linear_tol``)
+    solver_tol: float = 0.0
     #: Picard tolerance of the plastic iterations (relative velocity change)
     picard_tol: float = 1e-3
     #: remap of the stress history on flips: "conservative" or "average"
@@ -106,7 +107,7 @@ class Plate3DConfig:
         for k in ("height", "width", "depth", "eta_upper", "eta_lower", "plate_length",
                   "plate_width", "plate_thickness", "plate_density", "gravity",
                   "plate_viscosity", "density_length", "end_time", "max_dt", "min_dt", "cfl",
-                  "output_interval", "solver_tol", "picard_tol"):
+                  "output_interval", "picard_tol"):
             v = getattr(self, k)
             number = isinstance(v, (int, float)) and not isinstance(v, bool)
             if not (number and v > 0 and math.isfinite(v)):
@@ -135,9 +136,12 @@ class Plate3DConfig:
                              f"{self.min_dt!r}")
         if self.cfl > 1:
             raise ValueError(f"cfl must not exceed 1, got {self.cfl!r}")
-        for k in ("solver_tol", "picard_tol"):
-            if getattr(self, k) >= 1:
-                raise ValueError(f"{k} must be below 1, got {getattr(self, k)!r}")
+        if self.picard_tol >= 1:
+            raise ValueError(f"picard_tol must be below 1, got {self.picard_tol!r}")
+        v = self.solver_tol
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 1):
+            raise ValueError(f"solver_tol must be 0 (from picard_tol) or a number in (0, 1), "
+                             f"got {v!r}")
         if self.remap not in REMAP_RULES:
             raise ValueError(f"remap must be one of {', '.join(map(repr, REMAP_RULES))}, got "
                              f"{self.remap!r}")
@@ -187,7 +191,7 @@ HELP_3D = {
               "to this one, then the run stops",
     "cfl": "largest node displacement per step, as a fraction of the node's mean edge length",
     "output_interval": "time between VTU outputs",
-    "solver_tol": "relative residual of the Stokes solver's iterations",
+    "solver_tol": "relative residual of each Stokes solve (0: a thousandth of picard_tol)",
     "picard_tol": "Picard tolerance of the plastic iterations",
     "remap": 'remap of the stress history on flips: "conservative" or "average"',
     "split_edges": "edges longer than this many target spacings are split after each step "

@@ -117,13 +117,17 @@ def slices(sim):
     and now, each vertical (y = plate_y) and horizontal (through the plate's centre)."""
     c, f = sim.cfg, sim.lm.node_fields
     box = (c.width, c.depth, c.height)
-    plate, start = f["plate"], f["start"]
+    # the start: the nodes drawn then (nodes added later come last; their interpolated
+    # start positions are no node set of their own, and lie off the walls by round-off)
+    n0 = sim.lm.nodes.shape[0] - sum(h.get("injected", 0) for h in sim.lm.history)
     out = []
-    for when, nodes, t in (("start", start, 0.0), ("now", sim.lm.nodes, sim.lm.time)):
+    for t, keep, nodes in ((0.0, slice(0, n0), f["start"][:n0]),
+                           (sim.lm.time, slice(None), sim.lm.nodes)):
+        plate, start_z = f["plate"][keep], f["start"][keep, 2]
         zc = float(nodes[plate > 0.5, 2].mean()) if (plate > 0.5).any() else c.plate_z
         for plane, level, label in (("xz", c.plate_y, f"y = {c.plate_y:g}"),
                                     ("xy", zc, f"z = {zc:.3f}")):
-            image, extent = slice_material(nodes, plate, start[:, 2], c.interface_z, plane,
+            image, extent = slice_material(nodes, plate, start_z, c.interface_z, plane,
                                            level, box)
             out.append((f"t = {t:.4g}, {label}", plane, image, extent))
     return out

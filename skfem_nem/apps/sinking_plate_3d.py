@@ -90,6 +90,7 @@ class SinkingPlate3D:
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         self._last = None         # (solution, VEP step) of the last step
+        self._spaces_of = None    # (mesh, its Stokes spaces)
         self._cache = StokesCache() if cfg.solver in CACHED_SOLVERS else None
         if _state is not None:
             self.lm, meta = _state
@@ -170,18 +171,25 @@ class SinkingPlate3D:
         raise StepStalled(f"step {self.lm.step + 1} at t = {self.lm.time:.6g}: no dt "
                           f"down to {dt:.3g} passed")
 
+    def _spaces(self):
+        """The Stokes spaces of the current tetrahedra (built once per mesh: a step solved
+        again at a shorter dt reuses them)."""
+        if self._spaces_of is None or self._spaces_of[0] is not self.lm.mesh:
+            self._spaces_of = (self.lm.mesh, stokes_spaces(self.lm.mesh))
+        return self._spaces_of[1]
+
     def _step(self, dt: float) -> dict:
         """One try at ``dt``: the visco-elasto-plastic solve, the new stress history set
         on the mesh, the move and repair (which carries it to the new tetrahedra)."""
         c, lm = self.cfg, self.lm
         t0 = _time.perf_counter()
-        spaces = stokes_spaces(lm.mesh)
+        spaces = self._spaces()
         t_basis = _time.perf_counter() - t0
         mat, force, s = self.materials(spaces)
         r = vep_step(spaces, mat, to_quadrature(lm.ip_fields["stress"]), dt, f=force,
                      plastic_strain=to_quadrature(lm.ip_fields["plastic_strain"]),
                      tol=c.picard_tol, solver=c.solver, cache=self._cache,
-                     **self._guesses(spaces))
+                     linear_tol=c.solver_tol or None, **self._guesses(spaces))
         v = r.solution.velocity_at_nodes()
         stable = self._stable_dt(v)
         if dt > STABLE_SLACK * stable:

@@ -189,3 +189,119 @@ def test_save_and_load_carry_the_targets(tmp_path):
     back = LagrangianMesh3D.load(tmp_path / "m.npz")
     np.testing.assert_array_equal(back.target_spacing, lm.target_spacing)
     np.testing.assert_array_equal(back.nodes, lm.nodes)
+
+
+# --------------------------------------------------------------------------
+# removal
+# --------------------------------------------------------------------------
+
+def removed_and_checked(p, idx):
+    d = Delaunay3D(p)
+    before = (d.points.copy(), d.simplices.copy(), d.neighbors.copy())
+    out = d.removed(idx)
+    keep = np.ones(p.shape[0], bool)
+    keep[idx] = False
+    np.testing.assert_array_equal(out.points, p[keep])
+    assert tet_set(out) == tet_set(Delaunay3D(p[keep]))
+    check_tetrahedralisation(p[keep], out, brute=True)
+    assert all(np.array_equal(a, b) for a, b in zip(before, (d.points, d.simplices,
+                                                              d.neighbors)))
+    return out
+
+
+@FEW
+@given(st.integers(8, 60), st.integers(0, 2 ** 31), st.floats(0.05, 0.6))
+@example(40, 0, 0.5)
+def test_removed_points_give_the_fresh_tetrahedralisation(n, seed, share):
+    """Interior and hull nodes removed (the hull shrinks with them)."""
+    rng = np.random.default_rng(seed)
+    p = rng.random((n, 3))
+    k = max(1, min(n - 5, int(share * n)))
+    out = removed_and_checked(p, rng.choice(n, k, replace=False))
+    # the result is a working tetrahedralisation: it can be moved and added to
+    q = out.points + 0.01 * rng.standard_normal(out.points.shape)
+    assert tet_set(out.moved(q)[0]) == tet_set(Delaunay3D(q))
+    assert tet_set(out.inserted([[0.5, 0.5, 0.5]])) == tet_set(
+        Delaunay3D(np.r_[out.points, [[0.5, 0.5, 0.5]]]))
+
+
+@FEW
+@given(st.integers(3, 4), st.integers(0, 2 ** 31))
+def test_removed_lattice_points_give_the_fresh_tetrahedralisation(m, seed):
+    g = np.linspace(0, 1, m)
+    p = np.stack(np.meshgrid(g, g, g), -1).reshape(-1, 3)
+    rng = np.random.default_rng(seed)
+    removed_and_checked(p, rng.choice(p.shape[0], int(rng.integers(1, p.shape[0] // 2)),
+                                      replace=False))
+
+
+@pytest.mark.parametrize("idx, words", [
+    ([9], "index 9 is out of range for 6 nodes"),
+    ([1, 1], "indices must not repeat"),
+    ([0, 1], "removing 2 of 6 nodes would leave fewer than 5"),
+])
+def test_bad_removals_are_named(idx, words):
+    p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1.0], [0.3, 0.3, 0.3]])
+    with pytest.raises(ValueError, match=words.replace("(", r"\(")):
+        Delaunay3D(p).removed(idx)
+
+
+def squeeze(p):
+    """A flow towards the plane x = 1/2, tangent to the unit cube's walls: it crowds."""
+    x = p[:, 0]
+    return np.c_[4 * (0.5 - x) * x * (1 - x), np.zeros(p.shape[0]), np.zeros(p.shape[0])]
+
+
+def shortest(lm):
+    """The shortest edge over the smaller target spacing of its nodes."""
+    e = tet_edges(lm.mesh.t.T)
+    p, h = lm.nodes, lm.target_spacing
+    return (np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1)
+            / np.minimum(h[e[:, 0]], h[e[:, 1]])).min()
+
+
+def test_a_crowding_flow_keeps_the_nodes_apart():
+    """Nodes squeezed towards a plane for 30 steps: without removal the shortest edge falls
+    far below a fifth of the target spacing; with it, not below a fifth after any step, the
+    node fields follow their nodes through the node maps, and the tetrahedra are those of
+    the nodes."""
+    worst = {}
+    for remove in (None, 0.2):
+        p = box_nodes_3d(300, seed=2)
+        lm = LagrangianMesh3D(p, {"id": np.arange(p.shape[0]).astype(float)})
+        ids = np.arange(p.shape[0])
+        w = np.inf
+        for _ in range(30):
+            rep = lm.advance(squeeze, 0.2, tol=1e-8, maxiter=20, remove=remove)
+            assert rep["removed"] == np.count_nonzero(lm.node_map < 0)
+            ids = ids[lm.node_map >= 0]
+            w = min(w, shortest(lm))
+        np.testing.assert_array_equal(lm.node_fields["id"], ids)
+        assert tet_set_of(lm) == tet_set(Delaunay3D(np.array(lm.nodes)))
+        worst[remove] = (w, lm.nodes.shape[0], p.shape[0])
+    assert worst[None][0] < 0.05 and worst[None][1] == worst[None][2]
+    assert worst[0.2][0] >= 0.2 * (1 - 1e-12) and worst[0.2][1] < worst[0.2][2]
+    corners = (lm._on_wall.sum(axis=1) == 3).sum()
+    assert corners == 8
+
+
+def test_removal_keeps_integrals_and_refuses_corners():
+    p = box_nodes_3d(300, seed=6)
+    lm = LagrangianMesh3D(p, {"a": p[:, 0].copy()}, remap="conservative")
+    rng = np.random.default_rng(2)
+    lm.ip_fields = {"t": rng.standard_normal((lm.mesh.nelements, 4, 3))}
+    before = lm.ip_integral("t")
+    inner = np.flatnonzero(~lm._on_wall.any(axis=1))[:20]
+    face = np.flatnonzero(lm._on_wall.sum(axis=1) == 1)[:5]
+    node_map = lm.remove_nodes(np.r_[inner, face])
+    np.testing.assert_allclose(lm.ip_integral("t"), before, atol=1e-12)
+    assert (node_map < 0).sum() == 25 and lm.nodes.shape[0] == p.shape[0] - 25
+    np.testing.assert_array_equal(lm.node_fields["a"], lm.nodes[:, 0])
+    corner = int(np.flatnonzero(lm._on_wall.sum(axis=1) == 3)[0])
+    state = (lm.nodes.copy(), lm.mesh.t.copy(), lm.ip_fields["t"].copy())
+    with pytest.raises(ValueError, match=f"node {corner} is a corner of the box"):
+        lm.remove_nodes([corner])
+    with pytest.raises(ValueError, match="out of range"):
+        lm.remove_nodes([10 ** 6])
+    assert all(np.array_equal(a, b) for a, b in zip(state, (lm.nodes, lm.mesh.t,
+                                                              lm.ip_fields["t"])))

@@ -1,4 +1,5 @@
-"""Nodes added to the 3D evolving mesh where the flow stretches it: long edges split.
+"""Nodes added to the 3D evolving mesh where the flow stretches it (long edges split), and
+taken away where it crowds them.
 
 Why: nodes that move with a flow drift apart where it stretches, and the tetrahedra there
 grow until a handful of nodes resolve a whole region (the 2D plate lost a third of its
@@ -15,7 +16,15 @@ Each added node is inserted into the tetrahedralisation
 changes, the result is a fresh build's); its node fields are the Sibson interpolant of the
 fields at its position (an indicator such as a material id becomes a fraction at a material
 edge), the integration-point fields of the changed tetrahedra are remapped as after a flip
-(:mod:`.remap3d`: the conservative rule keeps their integrals). Nodes are not removed in 3D.
+(:mod:`.remap3d`: the conservative rule keeps their integrals).
+
+A node closer to a neighbour than ``fraction`` (default :data:`MERGE_FRACTION_3D`) of their
+smaller target spacing is removed (the interior one of the pair where one is on a wall;
+never a box corner, which holds the hull): its hole is filled by the Delaunay
+tetrahedralisation of its neighbours (:meth:`~skfem_nem.geometry.delaunay3d.Delaunay3D.removed`),
+the nodes after it are renumbered (``node_map``), and the integration-point fields of the
+changed tetrahedra are remapped as above. The band between a fifth and three target
+spacings keeps adding and removing from undoing each other.
 """
 from __future__ import annotations
 
@@ -26,14 +35,19 @@ from ..geometry.meshes import triangulation_mesh, triangulation_of
 from .remap3d import remap_fields
 from .spacing import smoothed_spacing
 
-__all__ = ["Injection3D", "SPLIT_FACTOR_3D", "SPLIT_PASSES_3D", "tet_edges"]
+__all__ = ["Injection3D", "MERGE_FRACTION_3D", "SPLIT_FACTOR_3D", "SPLIT_PASSES_3D",
+           "tet_edges"]
 
 #: an edge longer than this many target spacings is split. In the initial random 3D node
 #: sets of the sinking plate (1,500 to 10,000 nodes, seeds 0 and 1) 99.9% of the edges are
 #: below 2.6 smoothed spacings (the rest, up to 5.3, near the walls: the targets there are
 #: raised to keep them, :func:`initial_spacing`)
 SPLIT_FACTOR_3D = 3.0
-#: rounds of splitting in one call (each splits a set of edges with no node in common)
+#: a node closer to a neighbour than this fraction of their smaller target spacing is
+#: removed (the 2D mesh's removal threshold, :mod:`.spacing`)
+MERGE_FRACTION_3D = 0.2
+#: rounds of splitting (and of removal) in one call (each splits a set of edges with no
+#: node in common)
 SPLIT_PASSES_3D = 3
 
 
@@ -130,3 +144,71 @@ class Injection3D:
             self._on_wall = np.concatenate([self._on_wall, (x == lo) | (x == hi)])
         self._mesh = mesh
         self._bases = {}
+
+    def remove_nodes(self, indices) -> np.ndarray:
+        """Remove the nodes ``indices`` (module docstring); returns the node map (n,): each
+        old node's new index, -1 for a removed one. ``ValueError`` naming the node for an
+        index out of range or repeated, a box corner, or a node that cannot be removed;
+        nothing changes then."""
+        idx = np.asarray(indices, dtype=np.int64).ravel()
+        n = self.nodes.shape[0]
+        if self._on_wall is not None and idx.size and np.all((idx >= 0) & (idx < n)):
+            corner = idx[self._on_wall[idx].sum(axis=1) == 3]
+            if corner.size:
+                raise ValueError(f"node {int(corner[0])} is a corner of the box (it holds the "
+                                 "hull) and cannot be removed")
+        tri = triangulation_of(self._mesh).removed(idx)
+        mesh = triangulation_mesh(tri)
+        keep = np.ones(n, bool)
+        keep[idx] = False
+        kept = np.flatnonzero(keep)
+        if self.ip_fields:
+            self.ip_fields = remap_fields(self.nodes, self._mesh.t.T, kept[mesh.t.T],
+                                          self.ip_fields, self.remap)[0]
+        self.node_fields = {k: f[keep] for k, f in self.node_fields.items()}
+        self._target = self._target[keep]
+        if self._on_wall is not None:
+            self._on_wall = self._on_wall[keep]
+        self._mesh = mesh
+        self._bases = {}
+        node_map = np.full(n, -1, np.int64)
+        node_map[kept] = np.arange(kept.size)
+        return node_map
+
+    def crowded_nodes(self, fraction: float = MERGE_FRACTION_3D) -> np.ndarray:
+        """The nodes :meth:`remove_crowded` would remove: of each edge shorter than
+        ``fraction`` of its nodes' smaller target spacing (closest first, no node in two
+        such edges), the node on fewer walls (the higher index on a tie), never a corner."""
+        p, h = self.nodes, self._target
+        e = tet_edges(self.mesh.t.T)
+        ratio = np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1) / np.minimum(h[e[:, 0]],
+                                                                             h[e[:, 1]])
+        short = np.flatnonzero(ratio < fraction)
+        walls = (np.zeros(p.shape[0], int) if self._on_wall is None
+                 else self._on_wall.sum(axis=1))
+        used = np.zeros(p.shape[0], bool)
+        out = []
+        for a, b in e[short[np.argsort(ratio[short], kind="stable")]]:
+            if used[a] or used[b]:
+                continue
+            used[a] = used[b] = True
+            v = a if walls[a] < walls[b] else b
+            if walls[v] < 3:
+                out.append(v)
+        return np.array(out, dtype=np.int64)
+
+    def remove_crowded(self, fraction: float = MERGE_FRACTION_3D,
+                       passes: int = SPLIT_PASSES_3D) -> np.ndarray:
+        """Remove the nodes of :meth:`crowded_nodes`, in up to ``passes`` rounds (a node in
+        two short edges, or a short edge a removal made, waits for the next); returns the
+        node map (as :meth:`remove_nodes`). ``ValueError`` unless ``fraction`` is in (0, 1)."""
+        if not (isinstance(fraction, (int, float)) and 0 < fraction < 1):
+            raise ValueError(f"fraction must be a number in (0, 1), got {fraction!r}")
+        node_map = np.arange(self.nodes.shape[0])
+        for _ in range(passes):
+            idx = self.crowded_nodes(fraction)
+            if not idx.size:
+                break
+            step = self.remove_nodes(idx)
+            node_map = np.where(node_map >= 0, step[np.maximum(node_map, 0)], -1)
+        return node_map

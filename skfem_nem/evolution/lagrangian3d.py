@@ -76,7 +76,9 @@ class LagrangianMesh3D(LagrangianStep, Injection3D):
     history (per-step dicts: step, time, dt, iterations, converged, the repair's
     flips, relocated, rebuilt and repair_seconds, tetrahedra,
     tetrahedra_changed: how many of the new tetrahedra were not
-    in the previous triangulation, injected: the nodes added), target_spacing.
+    in the previous triangulation, injected and removed: the nodes added and
+    removed), target_spacing, node_map (the last step's: each node's index after it,
+    -1 if removed; nodes added come after the others).
 
     Raises
     ------
@@ -104,6 +106,7 @@ class LagrangianMesh3D(LagrangianStep, Injection3D):
         self._box = (lo, hi)
         self._on_wall = (p == lo) | (p == hi) if walls == "box" else None
         self._target = initial_spacing(p, self._mesh.t.T)
+        self.node_map = np.arange(p.shape[0])
         self.time = 0.0
         self.step = 0
         self.history = []
@@ -175,7 +178,8 @@ class LagrangianMesh3D(LagrangianStep, Injection3D):
             return float((fraction * h / speed).min())
 
     def advance(self, velocity: Callable[[np.ndarray], np.ndarray], dt: float,
-                tol: float = 1e-10, maxiter: int = 10, inject: Optional[float] = None) -> dict:
+                tol: float = 1e-10, maxiter: int = 10, inject: Optional[float] = None,
+                remove: Optional[float] = None) -> dict:
         """Move the nodes by one step and repair the Delaunay tetrahedra.
 
         ``velocity(x)`` -> (n, 3) nodal velocities at positions x (n, 3) (for
@@ -184,20 +188,24 @@ class LagrangianMesh3D(LagrangianStep, Injection3D):
         ``tol``, ``maxiter``: the predictor-corrector, as in
         :meth:`skfem_nem.LagrangianMesh.advance`. ``inject``: after the repair, split the
         edges longer than this many target spacings (:meth:`split_long_edges`; None: no
-        nodes added). Returns the step's report (also appended to ``history``;
-        ``injected``: the nodes added); on error nothing changes.
+        nodes added); ``remove``: then remove the nodes closer to a neighbour than this
+        fraction of their target spacing (:meth:`remove_crowded`; None: none removed).
+        Returns the step's report (also appended to ``history``; ``injected`` and
+        ``removed``: the nodes added and removed; :attr:`node_map`: each node's index
+        after the step); on error nothing changes.
         """
-        return self.step_transaction(velocity, dt, tol, maxiter, inject=inject)
+        return self.step_transaction(velocity, dt, tol, maxiter, inject=inject, remove=remove)
 
     def _state(self):
         return {"mesh": self._mesh, "bases": self._bases, "time": self.time,
                 "step": self.step, "on_wall": self._on_wall, "ip_fields": self.ip_fields,
-                "node_fields": self.node_fields, "target": self._target}
+                "node_fields": self.node_fields, "target": self._target,
+                "node_map": self.node_map}
 
     def _restore(self, state):
         self._mesh, self._bases = state["mesh"], state["bases"]
         self.ip_fields, self.node_fields = state["ip_fields"], state["node_fields"]
-        self._target = state["target"]
+        self._target, self.node_map = state["target"], state["node_map"]
         self.time, self.step = state["time"], state["step"]
         self._on_wall = state["on_wall"]
 
@@ -251,7 +259,7 @@ class LagrangianMesh3D(LagrangianStep, Injection3D):
         self._on_wall = on_wall
         return x, new
 
-    def _repair(self, x0, x, dt, max_substeps, inject):
+    def _repair(self, x0, x, dt, max_substeps, inject, remove=None):
         """Repair the tetrahedra for the moved nodes (flips, and nodes relocated where flips
         cannot mend); every node must stay a vertex."""
         x, snapped = self._snapped(x)
@@ -270,8 +278,11 @@ class LagrangianMesh3D(LagrangianStep, Injection3D):
         self._bases = {}
         self.time += dt
         self.step += 1
+        n = x.shape[0]
         injected = 0 if inject is None else self.split_long_edges(inject)
+        node_map = np.arange(n) if remove is None else self.remove_crowded(remove)[:n]
+        self.node_map = node_map
         return dict(report, tetrahedra=int(self._mesh.t.shape[1]),
                     tetrahedra_changed=int(np.count_nonzero(~kept)), snapped=snapped,
-                    injected=injected)
+                    injected=injected, removed=int(np.count_nonzero(node_map < 0)))
 

@@ -7,7 +7,8 @@ with exact predicates (:mod:`.delaunay3d_build`) in a spatially coherent order a
 the 3D code paths read from scipy's object: ``points``, ``simplices``, ``neighbors``,
 ``vertex_to_simplex``, ``vertex_neighbor_vertices``, ``convex_hull`` and ``find_simplex``;
 and, for nodes that move, :meth:`Delaunay3D.moved`, the local repair by flips
-(:mod:`.delaunay3d_repair`), and for nodes added, :meth:`Delaunay3D.inserted`.
+(:mod:`.delaunay3d_repair`), and for nodes added or taken away, :meth:`Delaunay3D.inserted`
+and :meth:`Delaunay3D.removed`.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from .delaunay3d_build import DUPLICATE, FLAT, add_points, build
-from .delaunay3d_repair import COINCIDENT, LOST, repair, working
+from .delaunay3d_repair import COINCIDENT, LOST, remove_points, repair, working
 from .nodesets import morton_order
 from .predicates3d import orient3d_sign
 
@@ -149,6 +150,39 @@ class Delaunay3D:
             raise ValueError(f"new point {j - n} at {p[j].tolist()} coincides with {what}")
         out = Delaunay3D.__new__(Delaunay3D)
         out._adopt(p, T, N, ntet)
+        return out
+
+    def removed(self, indices):
+        """The Delaunay tetrahedralisation of these nodes without the nodes ``indices``
+        (the others renumbered in order), each removed from this one (its hole filled by
+        the conflict region of the node in the Delaunay tetrahedralisation of its
+        neighbours; this one stays unchanged). The result is the one :class:`Delaunay3D`
+        builds from the nodes kept. Raises ``ValueError`` for an index out of range or
+        repeated, and where fewer than 5 nodes would be left."""
+        n = self.npoints
+        idx = np.asarray(indices, dtype=np.int64).ravel()
+        bad = idx[(idx < 0) | (idx >= n)]
+        if bad.size:
+            raise ValueError(f"index {int(bad[0])} is out of range for {n} nodes")
+        if np.unique(idx).size != idx.size:
+            raise ValueError("indices must not repeat")
+        if n - idx.size < 5:
+            raise ValueError(f"removing {idx.size} of {n} nodes would leave fewer than 5")
+        T, N = working(*self._raw)
+        T, N, ntet, status, i = remove_points(self.points, T, N, self._raw[2], idx)
+        if status == LOST:
+            raise ValueError(f"node {int(i)} could not be removed (its neighbours leave no "
+                             "tetrahedralisation of the hole)")
+        keep = np.ones(n, bool)
+        keep[idx] = False
+        new = np.full(n + 1, -1, np.int32)
+        new[np.flatnonzero(keep)] = np.arange(n - idx.size, dtype=np.int32)
+        new[n] = n - idx.size                                    # the ghost vertex
+        T, N = T[:ntet].copy(), N[:ntet].copy()
+        live = T[:, 0] >= 0                                      # freed rows: T[t, 0] = -1
+        T[live] = new[T[live]]
+        out = Delaunay3D.__new__(Delaunay3D)
+        out._adopt(np.ascontiguousarray(self.points[keep]), T, N, ntet)
         return out
 
     @property

@@ -339,6 +339,35 @@ def relocate(P, P1, G, T, N, ntet, v2t, order):
     return T, N, ntet, RELOCATED, -1, -1
 
 
+@njit(cache=True)
+def remove_points(P, T, N, ntet, order):
+    """The vertices ``order`` removed from the ghost-closed tetrahedralisation ``T, N,
+    ntet`` of the points P (ghost vertex ``P.shape[0]``), each hole filled as in a
+    relocation (the result stays Delaunay; the rows of the removed points stay in P, in no
+    tet). Returns ``T, N, ntet``, a status (RELOCATED, or LOST with ``i`` the vertex
+    whose removal failed) and ``i``."""
+    G = P.shape[0]
+    v2t = vertex_tets(T, ntet, G)
+    free = np.empty(T.shape[0], np.int32)
+    nfree = 0
+    for t in range(ntet):
+        if T[t, 0] < 0:
+            free[nfree] = t
+            nfree += 1
+    stamp = np.zeros(T.shape[0], np.int64)
+    conf = np.zeros(T.shape[0], np.bool_)
+    star = np.empty(64, np.int32)
+    it = 0
+    for v in order:
+        T, N, stamp, conf, free = reserve(T, N, stamp, conf, free, ntet + _ROOM)
+        it += 1
+        nfree, ntet, star, near, ok = _remove(P, G, T, N, stamp, it, free, nfree, ntet, v,
+                                              v2t, star)
+        if not ok:
+            return T, N, ntet, LOST, v
+    return T, N, ntet, RELOCATED, -1
+
+
 _MAX_ROUNDS = 8  # rounds of freezing the nodes flips could not mend, before a rebuild
 _SPARE = 0.25  # spare rows of the working arrays, a fraction of the tets
 

@@ -41,14 +41,15 @@ def insertion_order(p, seed=0):
     return np.concatenate(parts).astype(np.int64)
 
 
-def _checked(points):
+def _checked(points, fewest=4, rows="n"):
+    """A float copy of ``points`` (``rows``, 3), finite, at least ``fewest`` rows."""
     p = np.array(points, dtype=np.float64, order="C", copy=True)
     if p.ndim != 2 or p.shape[1] != 3:
-        raise ValueError(f"points must have shape (n, 3), got {np.shape(points)}")
+        raise ValueError(f"points must have shape ({rows}, 3), got {np.shape(points)}")
     bad = np.flatnonzero(~np.isfinite(p).all(axis=1))
     if bad.size:
         raise ValueError(f"points[{bad[0]}] = {p[bad[0]].tolist()} is not finite")
-    if p.shape[0] < 4:
+    if p.shape[0] < fewest:
         raise ValueError(f"need at least 4 points in 3D, got {p.shape[0]}")
     return p
 
@@ -132,12 +133,7 @@ class Delaunay3D:
         result is the one :class:`Delaunay3D` builds from all the nodes. Raises
         ``ValueError`` for non-finite points and for a new point on a node or on another
         new point (naming both)."""
-        q = np.array(points, dtype=np.float64, order="C", copy=True)
-        if q.ndim != 2 or q.shape[1] != 3:
-            raise ValueError(f"points must have shape (k, 3), got {np.shape(points)}")
-        bad = np.flatnonzero(~np.isfinite(q).all(axis=1))
-        if bad.size:
-            raise ValueError(f"points[{bad[0]}] = {q[bad[0]].tolist()} is not finite")
+        q = _checked(points, fewest=0, rows="k")
         n = self.npoints
         p = np.concatenate([self.points, q])
         T, N = working(*self._raw)

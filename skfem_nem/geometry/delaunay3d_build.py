@@ -417,10 +417,22 @@ def build(P, order):
         return T, N, 0, FLAT, -1, -1
     _init_tets(P, G, T, N, order[0], order[k1], order[k2], order[k3])
     ntet, nfree = 5, 0
+    skip = np.array([0, k1, k2, k3], np.int64)      # the first tet's
+    return insert_all(P, G, T, N, stamp, conf, free, nfree, ntet, order, skip, 0)
+
+
+@njit(cache=True)
+def insert_all(P, G, T, N, stamp, conf, free, nfree, ntet, order, skip, last):
+    """Insert the points ``order`` (but not those at the positions ``skip`` of it) one by
+    one, each located from the last one's new tets (from tet ``last`` first); the stamps
+    must be fresh. Returns ``(T, N, ntet, status, i, j)`` as :func:`build`."""
     work = new_work()
-    last, seed = 0, 12345
-    for k in range(1, order.shape[0]):
-        if k == k1 or k == k2 or k == k3:
+    seed = 12345
+    for k in range(order.shape[0]):
+        skipped = False
+        for j in range(skip.shape[0]):
+            skipped = skipped or skip[j] == k
+        if skipped:
             continue
         q = order[k]
         t0, seed = locate(P, G, T, N, last, q, seed)
@@ -429,7 +441,7 @@ def build(P, order):
             if v >= 0:
                 return T, N, ntet, DUPLICATE, q, v
         T, N, stamp, conf, free, nfree, ntet, work, nnew = insert_point(
-            P, G, T, N, stamp, conf, free, nfree, ntet, k, t0, q, work)
+            P, G, T, N, stamp, conf, free, nfree, ntet, k + 1, t0, q, work)
         last = work[1][0]
     return T, N, ntet, OK, -1, -1
 
@@ -443,29 +455,28 @@ def add_points(P, T, N, ntet, G0, order):
     coincides with point j. By the symbolic perturbation the result is the one a build of
     all the points gives."""
     G = P.shape[0]
+    last = -1
     for t in range(ntet):
-        if T[t, 0] >= 0 and T[t, 3] == G0:
-            T[t, 3] = G
+        if T[t, 0] >= 0:
+            if last < 0:
+                last = t
+            if T[t, 3] == G0:
+                T[t, 3] = G
+    free, nfree = free_rows(T, ntet)
+    stamp = np.zeros(T.shape[0], np.int64)
+    conf = np.zeros(T.shape[0], np.bool_)
+    return insert_all(P, G, T, N, stamp, conf, free, nfree, ntet, order,
+                      np.empty(0, np.int64), last)
+
+
+@njit(cache=True)
+def free_rows(T, ntet):
+    """The free list of the flat arrays (room for every row) holding the freed rows below
+    ``ntet`` (``T[t, 0] < 0``), and how many there are."""
     free = np.empty(T.shape[0], np.int32)
-    nfree, last = 0, -1
+    nfree = 0
     for t in range(ntet):
         if T[t, 0] < 0:
             free[nfree] = t
             nfree += 1
-        elif last < 0:
-            last = t
-    stamp = np.zeros(T.shape[0], np.int64)
-    conf = np.zeros(T.shape[0], np.bool_)
-    work = new_work()
-    seed = 12345
-    for k in range(order.shape[0]):
-        q = order[k]
-        t0, seed = locate(P, G, T, N, last, q, seed)
-        if T[t0, 3] != G:
-            v = coincident(P, T, t0, q)
-            if v >= 0:
-                return T, N, ntet, DUPLICATE, q, v
-        T, N, stamp, conf, free, nfree, ntet, work, nnew = insert_point(
-            P, G, T, N, stamp, conf, free, nfree, ntet, k + 1, t0, q, work)
-        last = work[1][0]
-    return T, N, ntet, OK, -1, -1
+    return free, nfree

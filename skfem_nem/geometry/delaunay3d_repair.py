@@ -35,7 +35,7 @@ from numba import njit, prange
 from .delaunay3d_flips import (face_fails, flip_to_delaunay, glue, internal, push,
                                release_rows, take_rows)
 from .nodesets import morton_order
-from .delaunay3d_build import (OK, cavity, coincident, o3, reserve, build,
+from .delaunay3d_build import (OK, cavity, coincident, free_rows, o3, reserve, build,
                                insert_point, locate, new_work)
 
 __all__ = ["repair", "RELOCATED", "LOST", "COINCIDENT"]
@@ -304,12 +304,7 @@ def relocate(P, P1, G, T, N, ntet, v2t, order):
     and re-inserted at its position in P1 (P updated). Returns the (grown) ``T, N, ntet``,
     a status (RELOCATED; LOST: a removal failed, ``i`` the node; COINCIDENT: node ``i``
     landed on node ``j``) and ``i, j``."""
-    free = np.empty(T.shape[0], np.int32)
-    nfree = 0
-    for t in range(ntet):
-        if T[t, 0] < 0:
-            free[nfree] = t
-            nfree += 1
+    free, nfree = free_rows(T, ntet)
     stamp = np.zeros(T.shape[0], np.int64)
     conf = np.zeros(T.shape[0], np.bool_)
     work = new_work()
@@ -348,12 +343,7 @@ def remove_points(P, T, N, ntet, order):
     whose removal failed) and ``i``."""
     G = P.shape[0]
     v2t = vertex_tets(T, ntet, G)
-    free = np.empty(T.shape[0], np.int32)
-    nfree = 0
-    for t in range(ntet):
-        if T[t, 0] < 0:
-            free[nfree] = t
-            nfree += 1
+    free, nfree = free_rows(T, ntet)
     stamp = np.zeros(T.shape[0], np.int64)
     conf = np.zeros(T.shape[0], np.bool_)
     star = np.empty(64, np.int32)

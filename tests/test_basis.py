@@ -478,7 +478,7 @@ def test_constant_coefficients_only_for_forms_that_never_touch_w():
     provably ignores ``w``; any use of ``w`` (here through ``copy``, ``get``,
     ``len``, ``in`` and iteration, which a read-watcher could miss) gives the
     per-element probe, and the same matrix as reading ``w["eta"]`` directly."""
-    from skfem_nem.basis import assembly as _assembly
+    from skfem_nem.basis import coefficients as _coefficients
     mesh = delaunay_mesh(box_nodes(120, seed=4))
     b = NaturalNeighbourBasis(mesh)
     eta = np.repeat(1.0 + np.arange(mesh.nelements)[:, None] % 3, b.dx.shape[1], axis=1)
@@ -489,9 +489,9 @@ def test_constant_coefficients_only_for_forms_that_never_touch_w():
     which = np.arange(3)
     for use in uses:
         form = BilinearForm(lambda u, v, w, use=use: use(w) * dot(grad(u), grad(v)))
-        assert _assembly._constant_coefficients(form.form, 1, 1, 2, which, which, 3) is None
+        assert _coefficients.constant_coefficients(form.form, 1, 1, 2, which, which, 3) is None
         assert abs(form.assemble(b, eta=eta) - direct).max() < 1e-12 * abs(direct).max()
-    c = _assembly._constant_coefficients(laplace.form, 1, 1, 2, which, which, 3)
+    c = _coefficients.constant_coefficients(laplace.form, 1, 1, 2, which, which, 3)
     assert c is not None and c.tolist() == [0.0, 1.0, 1.0]
 
 

@@ -34,6 +34,8 @@ from skfem.element import DiscreteField, ElementVector
 
 from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
+from .coefficients import (NotProbeable, probe_coefficients, split_kwargs, tile,
+                           tile_array)
 from .summation import sum_coo
 
 _INSTALLED = False
@@ -61,23 +63,6 @@ class StencilGroup:
 
 def _is_nn(basis) -> bool:
     return isinstance(basis, StencilBasis)
-
-
-def _split_value(v, idx, nelems):
-    if isinstance(v, tuple):
-        return tuple(_split_value(x, idx, nelems) for x in v)
-    if isinstance(v, DiscreteField):
-        if v.ndim >= 2 and v.shape[-2] == nelems:
-            return DiscreteField(*[None if a is None else np.asarray(a)[..., idx, :]
-                                   for a in v.astuple])
-        return v
-    if isinstance(v, np.ndarray) and v.ndim >= 2 and v.shape[-2] == nelems:
-        return v[..., idx, :]
-    return v
-
-
-def _split_kwargs(kwargs, idx, nelems):
-    return {k: _split_value(v, idx, nelems) for k, v in kwargs.items()}
 
 
 def _partner(basis, nn, idx, key):
@@ -129,26 +114,6 @@ def _pairs(ubasis, vbasis):
         u = g if ubasis is nn else _partner(ubasis, nn, idx, ("group", g.Nbfun))
         v = g if vbasis is nn else _partner(vbasis, nn, idx, ("group", g.Nbfun))
         yield idx, u, v
-
-
-def _tile(v, reps, nelems):
-    """Repeat element-wise data ``reps`` times along the element axis."""
-    if isinstance(v, tuple):
-        return tuple(_tile(x, reps, nelems) for x in v)
-    if isinstance(v, DiscreteField):
-        if v.ndim >= 2 and v.shape[-2] == nelems:
-            return DiscreteField(*[None if x is None else _tile_array(np.asarray(x), reps)
-                                   for x in v.astuple])
-        return v
-    if isinstance(v, np.ndarray) and v.ndim >= 2 and v.shape[-2] == nelems:
-        return _tile_array(v, reps)
-    return v
-
-
-def _tile_array(x, reps):
-    sh = x.shape
-    return np.broadcast_to(x[..., None, :, :], sh[:-2] + (reps,) + sh[-2:]).reshape(
-        sh[:-2] + (reps * sh[-2],) + sh[-1:])
 
 
 def _stackable(b):
@@ -230,8 +195,8 @@ def _stacked_bilinear(form, u, v, kwargs):
         reps = p1 - p0
         U = u.stacked(jj[p0:p1])
         V = v.stacked(ii[p0:p1])
-        W = FormExtraParams({k: _tile(x, reps, ne) for k, x in w.items()})
-        dx = _tile_array(u.dx, reps)
+        W = FormExtraParams({k: tile(x, reps, ne) for k, x in w.items()})
+        dx = tile_array(u.dx, reps)
         data[p0:p1] = form._kernel(U, V, W, dx).reshape(reps, ne)
     rows = v.element_dofs[ii].ravel()
     cols = u.element_dofs[jj].ravel()
@@ -249,8 +214,8 @@ def _stacked_linear(form, v, kwargs):
         p1 = min(n, p0 + per)
         reps = p1 - p0
         V = v.stacked(idx[p0:p1])
-        W = FormExtraParams({k: _tile(x, reps, ne) for k, x in w.items()})
-        data[p0:p1] = form._kernel(V, W, _tile_array(v.dx, reps)).reshape(reps, ne)
+        W = FormExtraParams({k: tile(x, reps, ne) for k, x in w.items()})
+        data[p0:p1] = form._kernel(V, W, tile_array(v.dx, reps)).reshape(reps, ne)
     return np.array([v.element_dofs.ravel()]), data.ravel()
 
 
@@ -416,135 +381,13 @@ def _shares_functions(u, v) -> bool:
             and np.array_equal(u.stencil_nodes, v.stencil_nodes))
 
 
-def _unit_fields(D, dim, reps, ne, nq, which):
-    """Unit fields stacked along the element axis: block r (of ``ne``
-    elements) of the result is the unit field ``which[r]``, the component
-    a = c (1 + dim) + k of (value, gradient) of a D-vector (k = 0) or its
-    derivative d/dx_{k-1}. Returns the form argument tuple."""
-    val = np.zeros((D, reps, ne, nq))
-    grad = np.zeros((D, dim, reps, ne, nq))
-    L = 1 + dim
-    for r, a in enumerate(which):
-        c, k = divmod(int(a), L)
-        if k == 0:
-            val[c, r] = 1.0
-        else:
-            grad[c, k - 1, r] = 1.0
-    val = val.reshape(D, reps * ne, nq)
-    grad = grad.reshape(D, dim, reps * ne, nq)
-    if D == 1:
-        return (DiscreteField(val[0], grad[0]),)
-    return (DiscreteField(val, grad),)
-
-
-def _chunks(ne, calls, lo=0, hi=None):
-    """Ranges of the elements ``lo .. hi - 1`` (default all ``ne``) such that ``calls``
-    stacked copies of one make about 65,536 elements per form call."""
-    hi = ne if hi is None else hi
-    step = max(1, (1 << 16) // max(1, calls))
-    return [(e0, min(hi, e0 + step)) for e0 in range(lo, hi, step)]
-
-
-class _Touched(Exception):
-    """The form used ``w``: its coefficients may vary between elements."""
-
-
-def _touched(self, *args, **kwargs):
-    raise _Touched
-
-
-class _NoParams:
-    """Stands in for ``w`` on the first call of a form: any use of it (an
-    attribute, a method such as ``w.copy()``, an item, ``in``, ``len``,
-    iteration, truth, comparison, arithmetic, conversion) raises
-    :class:`_Touched`. A form that returns without touching it computes its
-    coefficients from the unit fields alone, which are the same on every
-    element: that proves them constant. Anything else is probed element by
-    element with the real parameters."""
-
-    __slots__ = ()
-    __getattribute__ = __getattr__ = _touched
-    __getitem__ = __contains__ = __iter__ = __len__ = __bool__ = _touched
-    __eq__ = __ne__ = __lt__ = __le__ = __gt__ = __ge__ = __hash__ = _touched
-    __add__ = __radd__ = __sub__ = __rsub__ = __mul__ = __rmul__ = _touched
-    __truediv__ = __rtruediv__ = __pow__ = __rpow__ = __neg__ = __matmul__ = _touched
-    __array__ = __float__ = __int__ = __index__ = __call__ = _touched
-    __repr__ = __str__ = __format__ = _touched
-
-
-def _constant_coefficients(form_fn, Du, Dv, dim, which_u, which_v, nq):
-    """The coefficients of a form that does not use ``w``, as (pairs,)
-    scalars, from one call on one element; None if the form uses ``w`` (or
-    fails, or gives different values at the points)."""
-    reps = len(which_u)
-    U = _unit_fields(Du, dim, reps, 1, nq, which_u)
-    try:
-        if which_v is None:
-            out = form_fn(*U, _NoParams())
-        else:
-            out = form_fn(*U, *_unit_fields(Dv, dim, reps, 1, nq, which_v), _NoParams())
-        out = np.broadcast_to(np.asarray(out, dtype=np.float64), (reps, nq))
-    except Exception:  # noqa: BLE001 -- _Touched, or any failure: not provably constant
-        return None
-    if not (out == out[:, :1]).all():
-        return None
-    return out[:, 0].copy()
-
-
-def _probe(form_fn, args_u, args_v, w, ne, reps, nq, dx):
-    """Call ``form_fn`` once on stacked unit fields (``args_v`` None for a
-    linear form); returns the values times dx, (reps, ne, nq)."""
-    W = FormExtraParams({k: _tile(x, reps, ne) for k, x in w.items()})
-    out = np.asarray(form_fn(*args_u, *args_v, W) if args_v is not None
-                     else form_fn(*args_u, W), dtype=np.float64)
-    return np.broadcast_to(out, (reps * ne, nq)).reshape(reps, ne, nq) * dx[None]
-
-
-class _NotProbeable(Exception):
-    """The form cannot be called on unit fields (e.g. it reads u.hess)."""
-
-
-def _coefficients(form, basis, kwargs, Du, Dv, which_u, which_v, lo=0, hi=None):
-    """The form's coefficients, chunk by chunk of elements: yields
-    ``(e0, e1, C, active)`` with C (len(active), e1 - e0, nq) the coefficients
-    (times dx) of the nonzero unit-field pairs ``active`` (indices into
-    ``which_u`` / ``which_v``; ``which_v`` and ``Dv`` None for a linear form,
-    whose test function is then the ``which_u`` field). Raises
-    :class:`_NotProbeable` if the form fails on the first chunk."""
-    dim = basis.mesh.dim()
-    ne, nq = basis.dx.shape
-    w = {**basis.default_parameters(), **form._normalize_asm_kwargs(kwargs, basis)}
-    reps = len(which_u)
-    const = _constant_coefficients(form.form, Du, Dv, dim, which_u, which_v, nq)
-    fields = {}
-    for e0, e1 in _chunks(ne, 1 if const is not None else reps, lo, hi):
-        if const is not None:
-            active = np.flatnonzero(const)
-            yield e0, e1, const[active, None, None] * basis.dx[None, e0:e1], active
-            continue
-        n = e1 - e0
-        if n not in fields:
-            fields[n] = (_unit_fields(Du, dim, reps, n, nq, which_u),
-                         None if which_v is None else
-                         _unit_fields(Dv, dim, reps, n, nq, which_v))
-        try:
-            C = _probe(form.form, *fields[n], _split_kwargs(w, slice(e0, e1), ne), n, reps,
-                       nq, basis.dx[e0:e1])
-        except (AttributeError, TypeError, IndexError) as err:
-            if e0 == 0:
-                raise _NotProbeable from err
-            raise
-        active = np.flatnonzero(np.any(C != 0.0, axis=(1, 2)))
-        yield e0, e1, np.ascontiguousarray(C[active]), active
-
-
 def _element_matrices(form, u, v, kwargs):
     """``(Du, Dv, blocks)``: the element matrices of a bilinear form on two
     natural-neighbour bases that share their functions, made block by block of
     elements (``blocks`` yields ``(e0, e1, off, K)``, element e's matrix, (Dv S) x (Du S)
     row-major, at ``K[off[e]:off[e + 1]]``, at most :data:`ELEMENT_MATRIX_BUDGET` numbers
     a block); None if the form cannot be probed (the generator raises
-    :class:`_NotProbeable` on its first block then)."""
+    :class:`NotProbeable` on its first block then)."""
     if form.dtype != np.float64:
         return None
     Du, dim = _components(u)
@@ -565,7 +408,7 @@ def _blocks_of_matrices(form, u, kwargs, Du, Dv, dim, off):
     for b0, b1 in _budget_blocks(off):
         offb = off - off[b0]
         K = np.empty(offb[b1])
-        for e0, e1, C, active in _coefficients(form, u, kwargs, Du, Dv, pa, pb, b0, b1):
+        for e0, e1, C, active in probe_coefficients(form, u, kwargs, Du, Dv, pa, pb, b0, b1):
             kernel(e0, e1, u.stencil_ptr, u.stencil_nodes, Phi.indptr, Phi.indices, Phi.data,
                    G, u.dx.shape[1], C, pa[active], pb[active], Du, Dv, offb, K, const_grad)
         yield b0, b1, offb, K
@@ -596,7 +439,7 @@ def _whole_bilinear(form, u, v, kwargs):
         return None
     try:
         return sum_coo(u, v, *out, parallel=_parallel(u))
-    except _NotProbeable:
+    except NotProbeable:
         return None  # take the group road
 
 
@@ -617,10 +460,10 @@ def _whole_linear(form, v, kwargs):
     ndv = np.ascontiguousarray(v.function_dofs[:Dv], dtype=np.int64)
     kernel = _contract_linear if _parallel(v) else _contract_linear_serial
     try:
-        for e0, e1, C, active in _coefficients(form, v, kwargs, Dv, None, pb, None):
+        for e0, e1, C, active in probe_coefficients(form, v, kwargs, Dv, None, pb, None):
             kernel(e0, e1, ptr, sten, Phi.indptr, Phi.indices, Phi.data, G, nq,
                    C, pb[active], Dv, ndv, off, rows, data)
-    except _NotProbeable:
+    except NotProbeable:
         return None
     return np.array([rows]), data
 
@@ -668,7 +511,7 @@ def install():
                 return out[0], out[1], shape, None
         rows, data = [], []
         for idx, u, v in _pairs(ubasis, vbasis):
-            kw = _split_kwargs(kwargs, idx, nelems)
+            kw = split_kwargs(kwargs, idx, nelems)
             if PROBE and _stackable(u) and _stackable(v) and _probe_pays(u, v):
                 ind, d = _probed_bilinear(self, u, v, kw)
             elif STACK_SIZE > 0 and _stackable(u) and _stackable(v):
@@ -691,7 +534,7 @@ def install():
                 return out[0], out[1], shape, None
         rows, data = [], []
         for g in ubasis.groups:
-            kw = _split_kwargs(kwargs, g.tind, ubasis.nelems)
+            kw = split_kwargs(kwargs, g.tind, ubasis.nelems)
             if STACK_SIZE > 0:
                 ind, d = _stacked_linear(self, g, kw)
             else:

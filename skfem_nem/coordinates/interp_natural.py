@@ -16,9 +16,10 @@ import numpy as np
 from ..geometry.triangulation import Triangulation
 from .dispatch import natural_neighbour_coordinates
 from .interp_scatter import SibsonScatter, scatter_applies
+from .interp_watson3d import SibsonWatson3D, watson_applies
 
 __all__ = ["BlendedInterpolant", "NaturalInterpolant", "coordinates_of", "row_sums",
-           "SCATTER_MIN", "SCATTER_PER_TRIANGLE"]
+           "SCATTER_MIN", "SCATTER_PER_TRIANGLE", "WATSON_MIN"]
 
 # Sibson's values of at least SCATTER_MIN queries, and of at least SCATTER_PER_TRIANGLE per
 # triangle near them, go to the scatter (below that its pass over the triangles costs more
@@ -28,6 +29,9 @@ SCATTER_PER_TRIANGLE = 0.25
 # the scatter's chunks of queries: up to this many bytes of work space (a parallel pass per
 # chunk, and one for the flagged queries, cost more than the queries on a busy machine)
 SCATTER_BYTES = 1 << 27
+# Sibson's values of at least WATSON_MIN 3D queries go to Watson's decomposition (its
+# records of the tetrahedra cost about what a few hundred queries by the coordinates do)
+WATSON_MIN = 1000
 
 
 def row_sums(indptr, a):
@@ -63,15 +67,21 @@ class NaturalInterpolant:
         self.values = values
         self.kind = kind
         self.chunk = chunk
-        self.scatter = None     # the SibsonScatter, built on the first large batch
+        self.scatter = None     # the SibsonScatter, built on the first large batch (2D)
+        self.watson = None      # the SibsonWatson3D, likewise (3D)
 
     def scatters(self, q) -> bool:
-        """True if the values at the points q (m, 2) are the scatter's to evaluate."""
+        """True if the values at the points q (m, d) are the scatter's (2D) or Watson's
+        decomposition's (3D) to evaluate."""
+        if self._watson_for(q.shape[0]):
+            return True
         return self._scatter_for(q.shape[0]) and \
             q.shape[0] >= SCATTER_PER_TRIANGLE * self.scatter.triangles_near(q)
 
     def chunk_size(self, m: int) -> int:
         """How many of m queries to pass at a time for their values: more for the scatter."""
+        if self._watson_for(m):
+            return max(self.chunk, SCATTER_BYTES // self.watson.bytes_per_query)
         if not self._scatter_for(m):
             return self.chunk
         return max(self.chunk, SCATTER_BYTES // self.scatter.bytes_per_query)
@@ -85,9 +95,19 @@ class NaturalInterpolant:
             self.scatter = SibsonScatter(tri, self.values) if scatter_applies(tri) else False
         return bool(self.scatter)
 
+    def _watson_for(self, m: int) -> bool:
+        """True if m queries are enough for Watson's 3D decomposition and it applies (built
+        here, or before for fewer queries)."""
+        if self.watson is None:
+            if self.kind != "sibson" or m < WATSON_MIN or \
+                    not watson_applies(self.triangulation):
+                return False
+            self.watson = SibsonWatson3D(self.triangulation, self.values)
+        return bool(self.watson)
+
     def __call__(self, q, gradient: bool):
         if not gradient and self.scatters(q):
-            v, redo = self.scatter(q)
+            v, redo = (self.watson if self.watson else self.scatter)(q)
             if redo.size:
                 v[redo] = self.gathered(q[redo])
             return v, None

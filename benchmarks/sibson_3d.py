@@ -1,13 +1,17 @@
-"""3D Sibson interpolation: skfem-nem's Box 1 coordinates against natinterp3d, in one run.
+"""3D Sibson interpolation: skfem-nem's interpolator and Box 1 coordinates against natinterp3d.
 
 natinterp3d (PyPI, exact 3D Sibson coordinates in C with OpenMP; an optional benchmark
 peer, never a dependency: ``pip install natinterp3d``) and
-``skfem_nem.sibson_coordinates`` interpolate the same values at the same queries: ``--points``
-random nodes in the unit cube (plus its corners), ``--queries`` random points inside, seed 0.
-Both are timed warm (a first small call loads the kernels; the one-time load is printed
-apart), best of ``--repeat``, with all threads; our time is split into the Delaunay
-tetrahedralisation (the package's own ``Delaunay3D``, once per node set; Qhull's time on the
-same points printed beside it) and the coordinates. Printed beside the
+skfem-nem interpolate the same values at the same queries: ``--points`` random nodes in the
+unit cube (plus its corners), ``--queries`` random points inside, seed 0. Ours two ways:
+``NaturalNeighbourInterpolator(points, values)(queries)``, the like of natinterp3d's call
+(Sibson's values by Watson's decomposition, :mod:`skfem_nem.coordinates.interp_watson3d`, the
+tetrahedralisation built inside the call), and ``sibson_coordinates`` (the whole sparse
+matrix of coordinates by the paper's Box 1, whose rows also give exact gradients) times the
+values. All are timed warm (a first small call loads the kernels; the one-time load is
+printed apart), best of ``--repeat``, with all threads; the coordinates' time is split into
+the Delaunay tetrahedralisation (the package's own ``Delaunay3D``, once per node set;
+Qhull's time on the same points printed beside it) and the coordinates. Printed beside the
 times: how many queries' values differ by more than 1e-10, and each method's worst
 violation of linear precision (``|sum_i phi_i(x) x_i - x|`` over the queries; natinterp3d's
 weights from its ``get_weights``). On the default set the two differ at 20 of the 100,000
@@ -22,7 +26,7 @@ import time
 import numpy as np
 from scipy.spatial import Delaunay
 
-from skfem_nem import sibson_coordinates
+from skfem_nem import NaturalNeighbourInterpolator, sibson_coordinates
 from skfem_nem.geometry.delaunay3d import Delaunay3D
 
 
@@ -61,12 +65,15 @@ def main(argv=None):
     small_p, small_q, small_f = data(200, 100, seed=1)
     sibson_coordinates(Delaunay3D(small_p), small_q)
     natinterp3d.Interpolator(small_p).interpolate(small_q, small_f)
+    NaturalNeighbourInterpolator(small_p, small_f)(np.tile(small_q, (20, 1)))
     print(f"one-time kernel load: {time.perf_counter() - t0:.1f} s\n")
 
     tri, t_del = best(lambda: Delaunay3D(p), a.repeat)
     t_qhull = best(lambda: Delaunay(p), a.repeat)[1]
     Phi, t_ours = best(lambda: sibson_coordinates(tri, q), a.repeat)
     ours = Phi @ f
+    values, t_itp = best(lambda: NaturalNeighbourInterpolator(p, f)(q), a.repeat)
+    itp_diff = float(np.abs(values - ours).max())
     theirs, t_peer = best(lambda: natinterp3d.Interpolator(p).interpolate(q, f), a.repeat)
     diff = np.abs(ours - theirs)
     lin_ours = float(np.abs(Phi @ p - q).max())
@@ -78,15 +85,19 @@ def main(argv=None):
     total = t_del + t_ours
     rows = ["| method | Delaunay s | coordinates s | total s | total / natinterp3d | "
             "linear precision |", "|---|---|---|---|---|---|",
+            f"| skfem-nem NaturalNeighbourInterpolator (Watson) | | | {t_itp:.3f} | "
+            f"{t_itp / t_peer:.2f} | |",
             f"| skfem-nem (Box 1) | {t_del:.3f} | {t_ours:.3f} | {total:.3f} | "
             f"{total / t_peer:.2f} | {lin_ours:.1e} |",
             f"| natinterp3d | | | {t_peer:.3f} | 1.00 | {lin_peer:.1e} |"]
     print(f"{a.points:,} points, {a.queries:,} queries, best of {a.repeat}; the values "
           f"differ by more than 1e-10 at {int((diff > 1e-10).sum())} queries (at most "
           f"{diff.max():.1e}), at {peer_off} of them natinterp3d's weights miss linear "
-          f"precision; Qhull's Delaunay of the points takes {t_qhull:.3f} s\n")
+          f"precision; Qhull's Delaunay of the points takes {t_qhull:.3f} s; the interpolator's "
+          f"values differ from the coordinates' by at most {itp_diff:.1e}\n")
     print("\n".join(rows))
-    return {"ours": total, "coordinates": t_ours, "delaunay": t_del, "qhull": t_qhull,
+    return {"ours": total, "interpolator": t_itp, "interpolator_difference": itp_diff,
+            "coordinates": t_ours, "delaunay": t_del, "qhull": t_qhull,
             "peer": t_peer,
             "difference": float(diff.max()), "differing": int((diff > 1e-10).sum()),
             "differing_peer_imprecise": peer_off,

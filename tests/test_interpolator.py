@@ -645,3 +645,24 @@ def test_natural_neighbour_to_grid_as_metpy_calls_it():
         natural_neighbour_to_grid(xp, yp[:-1], z, gx, gy)
     with pytest.raises(ValueError, match="grid_x and grid_y"):
         natural_neighbour_to_grid(xp, yp, z, gx, gy[:-1])
+
+
+@pytest.mark.parametrize("method", ["sibson", "sibson1", "farin"])
+def test_c1_across_delaunay_edges(method):
+    """Across interior Delaunay edges (where the triangles whose circumcircles hold a point
+    change) the gradient of every C1 interpolant is continuous: its jump between the points
+    at distance r on either side of an edge's midpoint vanishes like r."""
+    p = data(200, seed=21)
+    f = np.sin(3 * p[:, 0]) * np.cos(2 * p[:, 1]) + p[:, 0] * p[:, 1] ** 2
+    tri = Delaunay(p)
+    edges = {tuple(sorted((int(s[i]), int(s[(i + 1) % 3])))) for s in tri.simplices
+             for i in range(3)}
+    mid = np.array([(p[a] + p[b]) / 2 for a, b in sorted(edges)])
+    keep = (np.abs(mid - 0.5) < 0.35).all(axis=1)
+    mid = mid[keep][:40]
+    ab = np.array([p[b] - p[a] for a, b in sorted(edges)])[keep][:40]
+    n = np.c_[-ab[:, 1], ab[:, 0]] / np.linalg.norm(ab, axis=1)[:, None]
+    itp = NaturalNeighbourInterpolator(p, f, method=method)
+    jumps = [np.abs(itp.gradient(mid + r * n) - itp.gradient(mid - r * n)).max()
+             for r in (1e-4, 1e-6)]
+    assert jumps[1] < 1e-3 and jumps[1] < jumps[0] / 30, jumps

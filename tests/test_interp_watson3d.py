@@ -169,3 +169,70 @@ def test_interpolator_takes_watson_for_large_3d_batches(monkeypatch):
     assert calls == [3000]
     g = itp.gradient(q[:5])
     assert g.shape == (5, 3) and calls == [3000]
+
+
+# --------------------------------------------------------------------------
+# whole rows of coordinates (watson3d.rows_3d), inside tetrahedra and on their faces
+# --------------------------------------------------------------------------
+
+def _centroid_and_face_queries(p, T):
+    """The centroids of the tetrahedra T (slot -1) and of all their faces (slot: the
+    opposite vertex), with the tetrahedron each lies in."""
+    nt = T.shape[0]
+    faces = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+    k = np.tile(np.arange(4), nt)
+    tt = np.repeat(np.arange(nt), 4)
+    qf = p[T[tt][np.arange(4 * nt)[:, None], faces[k]]].mean(axis=1)
+    return (np.vstack([p[T].mean(axis=1), qf]), np.r_[np.arange(nt), tt],
+            np.r_[np.full(nt, -1), k])
+
+
+@settings(max_examples=15, deadline=None)
+@given(n=st.integers(10, 300), seed=st.integers(0, 2 ** 31),
+       scale=st.sampled_from([1e-3, 1.0, 1e4]))
+def test_rows_on_faces_and_inside_equal_the_box1_coordinates(n, seed, scale):
+    """Rows at every tetrahedron's centroid and every face's centroid (where the two
+    tetrahedra at the face take the closed-form limit): the Box 1 coordinates to round-off,
+    linear precision, rows summing to one; hull faces and cancelling queries flagged."""
+    from skfem_nem.coordinates.watson3d import TetrahedraRecords, rows_3d
+    p = cube(n, seed) * scale
+    tri = Delaunay3D(p)
+    rec = TetrahedraRecords(p, tri.simplices)
+    assert rec.usable
+    q, start, slot = _centroid_and_face_queries(p, rec.T)
+    ptr, idx, val, flagged = rows_3d(rec.R, rec.T, rec.NB, p.shape[0], q, start, slot)
+    import scipy.sparse as sp
+    M = sp.csr_matrix((val, idx, ptr), shape=(q.shape[0], p.shape[0]))
+    hull_face = (slot >= 0) & (rec.NB[start, np.maximum(slot, 0)] < 0)
+    assert np.isin(np.flatnonzero(hull_face), flagged).all()
+    ok = np.setdiff1d(np.arange(q.shape[0]), flagged)
+    ref = sibson_coordinates(tri, q[ok])
+    assert abs(M[ok] - ref).max() < 1e-11
+    np.testing.assert_allclose(M[ok] @ p / scale, q[ok] / scale, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(np.asarray(M[ok].sum(axis=1)).ravel(), 1.0, atol=1e-13)
+    assert flagged.size <= hull_face.sum() + 0.05 * q.shape[0]
+
+
+def test_tetrahedra_records_merge_the_fallback_rows_and_refuse_flat_meshes():
+    """coordinates() puts the flagged queries' rows from the fallback in their places; a
+    mesh with a flat tetrahedron (Qhull's on a lattice) is not usable."""
+    from helpers import qhull_mesh
+    from skfem_nem.coordinates.watson3d import TetrahedraRecords
+    p = cube(200, 9)
+    tri = Delaunay3D(p)
+    rec = TetrahedraRecords(p, tri.simplices)
+    q, start, slot = _centroid_and_face_queries(p, rec.T)
+    calls = []
+
+    def fallback(x):
+        calls.append(x.shape[0])
+        return sibson_coordinates(tri, x)
+
+    M = rec.coordinates(q, start, slot, fallback)
+    assert calls and calls[0] >= np.sum(rec.NB < 0)        # the hull faces, at least
+    assert abs(M - sibson_coordinates(tri, q)).max() < 1e-11
+    g = np.linspace(0.0, 1.0, 4)
+    lattice = np.array(np.meshgrid(g, g, g, indexing="ij")).reshape(3, -1).T
+    flat = qhull_mesh(lattice)
+    assert not TetrahedraRecords(flat.p.T, flat.t.T).usable
+    assert TetrahedraRecords(lattice, Delaunay3D(lattice).simplices).usable

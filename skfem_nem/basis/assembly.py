@@ -36,7 +36,7 @@ from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 from .coefficients import (NotProbeable, probe_coefficients, split_kwargs, tile,
                            tile_array)
-from .summation import sum_coo
+from .summation import sum_coo, sum_coo_gradients
 
 _INSTALLED = False
 #: element-pairs evaluated per form call in the stacked assembly
@@ -434,6 +434,14 @@ def parallel_kernels(basis) -> bool:
 def _whole_bilinear(form, u, v, kwargs):
     """COO data of a bilinear form on two natural-neighbour bases that share
     their functions, without groups; None if the form cannot be probed."""
+    if form.dtype == np.float64 and getattr(u, "gradients_constant_per_element", False):
+        Du, dim = _components(u)
+        Dv, _ = _components(v)
+        chunks = _gradient_chunks(form, u, kwargs, Du, Dv, dim)
+        try:
+            return sum_coo_gradients(u, v, Du, Dv, chunks, parallel=_parallel(u))
+        except NotProbeable:
+            return None
     out = _element_matrices(form, u, v, kwargs)
     if out is None:
         return None
@@ -441,6 +449,33 @@ def _whole_bilinear(form, u, v, kwargs):
         return sum_coo(u, v, *out, parallel=_parallel(u))
     except NotProbeable:
         return None  # take the group road
+
+
+def _gradient_chunks(form, u, kwargs, Du, Dv, dim):
+    """The chunks of :func:`~skfem_nem.basis.summation.sum_coo_gradients` for a form on a
+    basis whose gradients are the same at all of an element's points: the gradient pairs'
+    coefficients summed over the points (no element matrix), and element matrices of the
+    pairs with a value, if the form has any."""
+    L = 1 + dim
+    pa, pb = (x.ravel() for x in np.meshgrid(np.arange(Du * L), np.arange(Dv * L),
+                                             indexing="ij"))
+    both = (pa % L > 0) & (pb % L > 0)
+    Phi, G = u.values_matrix, u.gradient_entries
+    kernel = _contract_bilinear if _parallel(u) else _contract_bilinear_serial
+    S = np.diff(u.stencil_ptr)
+    for e0, e1, C, active in probe_coefficients(form, u, kwargs, Du, Dv, pa, pb):
+        grad = both[active]
+        if grad.any():
+            yield e0, e1, "gradients", (np.ascontiguousarray(C[grad].sum(axis=2)),
+                                        pa[active[grad]], pb[active[grad]])
+        if not grad.all():
+            off = np.zeros(S.shape[0] + 1, dtype=np.int64)
+            np.cumsum(Du * Dv * S[e0:e1] ** 2, out=off[e0 + 1:e1 + 1])
+            K = np.empty(off[e1])
+            kernel(e0, e1, u.stencil_ptr, u.stencil_nodes, Phi.indptr, Phi.indices, Phi.data,
+                   G, u.dx.shape[1], np.ascontiguousarray(C[~grad]), pa[active[~grad]],
+                   pb[active[~grad]], Du, Dv, off, K, False)
+            yield e0, e1, "matrices", (off, K)
 
 
 def _whole_linear(form, v, kwargs):

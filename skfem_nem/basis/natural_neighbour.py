@@ -38,6 +38,7 @@ from skfem.element import DiscreteField, Element, ElementVector
 
 from . import assembly, nonlinear, plotting
 from ..coordinates import natural_neighbour_coordinates
+from ..coordinates.watson3d import TetrahedraRecords
 from ..geometry.meshes import adopt, own_triangulation
 from .domain import check_used_nodes, into_domain
 from .elements import (coordinate_method, element_for, element_order, gauss_rule,
@@ -63,8 +64,17 @@ class NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
     method: str
     triangulation: object  # Triangulation (2D area method) or scipy Delaunay
 
-    def _coordinates(self, pts, gradient=False, hint=None, undefined="nan"):
-        """Coordinates (and gradients) at the (m, dim) points pts."""
+    def _coordinates(self, pts, gradient=False, hint=None, undefined="nan", faces=None):
+        """Coordinates (and gradients) at the (m, dim) points pts. In 3D, ``faces`` (m,)
+        says that point i lies in the mesh's tetrahedron ``hint[i]``, on its face opposite
+        the vertex slot ``faces[i]`` (-1: inside): Sibson's values there come from Watson's
+        decomposition (:mod:`~skfem_nem.coordinates.watson3d`), the same coordinates as
+        the Box 1 method's at a fraction of the cost."""
+        if faces is not None and not gradient and self.coordinates == "sibson":
+            records = self._tetrahedra_records()
+            if records is not None:
+                return records.coordinates(
+                    pts, hint, faces, lambda q: self._coordinates(q, undefined=undefined))
         kw = {}
         if self.method == "area" and hint is not None and self._hints_valid():
             kw["hint"] = hint
@@ -74,6 +84,16 @@ class NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         return natural_neighbour_coordinates(
             self.triangulation, pts, gradient=gradient, kind=self.coordinates,
             undefined=undefined, method=self.method, **kw)
+
+    def _tetrahedra_records(self):
+        """The mesh's :class:`~skfem_nem.coordinates.watson3d.TetrahedraRecords` (cached on
+        the mesh, whose tetrahedra the adoption checked to be Delaunay), None where a flat
+        tetrahedron rules Watson's decomposition out."""
+        rec = getattr(self.mesh, "_skfem_nem_watson", None)
+        if rec is None or not rec.describes(self.mesh.p.T, self.mesh.t.T):
+            rec = TetrahedraRecords(self.mesh.p.T, self.mesh.t.T)
+            self.mesh._skfem_nem_watson = rec
+        return rec if rec.usable else None
 
     def _hints_valid(self) -> bool:
         """Are the mesh's triangles those of the triangulation, one for one (so that a

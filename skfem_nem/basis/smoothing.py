@@ -225,7 +225,9 @@ def _cells_2d(p, t, t2f, facets, elems, s, w):
 def cells_3d(p, t, t2f, facets, elems):
     """Face points of the tetrahedra ``elems`` (one cell each); as
     :func:`cells_2d`, with cell j the tetrahedron elems[j], except that an index
-    ``pts >= len(points)`` names the node ``pts - len(points)``.
+    ``pts >= len(points)`` names the node ``pts - len(points)``, and a fifth array
+    ``slot``: the face point i lies on the face of tetrahedron ``own[i]`` opposite its
+    vertex ``slot[i]``.
 
     Each face is integrated by its centroid (weight 3/4) and its vertices (1/12
     each), the positive rule of degree 2 on a triangle whose vertex values are
@@ -242,11 +244,13 @@ def cells_3d(p, t, t2f, facets, elems):
     finv = finv.reshape(F.shape)
     FV = np.asarray(facets)[:, fac]                     # (3, nf)
     points = (p[FV[0]] + p[FV[1]] + p[FV[2]]) / 3.0
-    own = np.empty(fac.size, dtype=np.int64)
-    own[finv.ravel()] = np.repeat(elems, 4)
     # the vertex opposite each face: the tetrahedron's node not on it
     opposite = T.sum(axis=0) - FV[:, finv].sum(axis=0)  # (4, k) node numbers
     o = (T[None, :, :] == opposite[:, None, :]).argmax(axis=1)   # (4, k) local vertex
+    own = np.empty(fac.size, dtype=np.int64)
+    own[finv.ravel()] = np.tile(elems, 4)
+    slot = np.empty(fac.size, dtype=np.int64)
+    slot[finv.ravel()] = o.ravel()
     V = p[T.T]                                          # (k, 4, 3)
     E = V[:, 1:] - V[:, :1]                             # (k, 3, 3) edges from vertex 0
     cof = np.stack([np.cross(E[:, 1], E[:, 2]), np.cross(E[:, 2], E[:, 0]),
@@ -259,7 +263,7 @@ def cells_3d(p, t, t2f, facets, elems):
     G[:, 0] = -G[:, 1:].sum(axis=1)
     pts = np.concatenate([finv.T, fac.size + T.T], axis=1)          # (k, 8)
     coef = np.concatenate([-2.25 * G[np.arange(k)[:, None], o.T], 0.25 * G], axis=1)
-    return points, own, pts, np.ascontiguousarray(coef)
+    return points, own, pts, np.ascontiguousarray(coef), slot
 
 
 # ---------------------------------------------------------------------------
@@ -454,8 +458,9 @@ def smoothed_functions(mesh, coordinates, x, elems, cell_of, nodal=None):
     dim, ne, nq = x.shape
     pts = x.transpose(1, 2, 0).reshape(-1, dim)
     cells = np.unique(elems)
+    faces = {}
     if dim == 3:
-        points, hint, cp, coef = cells_3d(mesh.p.T, mesh.t, mesh.t2f, mesh.facets, cells)
+        points, hint, cp, coef, slot = cells_3d(mesh.p.T, mesh.t, mesh.t2f, mesh.facets, cells)
     elif elems.size < mesh.nelements:
         # a subdomain or an update: without numbering all the mesh's edges
         points, hint, cp, coef = cells_2d_alone(mesh.p.T, mesh.t, cells)
@@ -464,8 +469,11 @@ def smoothed_functions(mesh, coordinates, x, elems, cell_of, nodal=None):
     ask = slice(None) if nodal is None else nodal < 0
     # one batch: the integration points, then the cells' boundary points
     m = pts[ask].shape[0]
+    if dim == 3:
+        # the points in their tetrahedra (on the faces), for Watson's decomposition
+        faces = {"faces": np.concatenate([np.full(m, -1, np.int64), slot])}
     Phi = coordinates(np.concatenate([pts[ask], points]),
-                      hint=np.concatenate([np.repeat(elems, nq)[ask], hint]))
+                      hint=np.concatenate([np.repeat(elems, nq)[ask], hint]), **faces)
     V = Phi[:m] if nodal is None else with_nodes(Phi[:m], nodal)
     # 3D: rows past the boundary points are the nodes (cells_3d)
     S = Phi[m:] if dim == 2 else sp.vstack([Phi[m:], sp.identity(Phi.shape[1], format="csr")],

@@ -20,7 +20,8 @@ from numba import njit, prange
 from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 
-__all__ = ["blocks", "incidence", "node_pattern", "stencil_union", "sum_coo"]
+__all__ = ["blocks", "incidence", "node_pattern", "stencil_gradients", "stencil_union", "sum_coo",
+           "sum_coo_gradients"]
 
 
 @njit(cache=True)
@@ -143,9 +144,82 @@ def _sum_rows(ptr, sten, off, K, e0, e1, init, inc_ptr, inc_e, inc_l, cptr, cols
                             data_out[dst + k * Du + cu] += K[src + Du * i + cu]
 
 
+@njit(cache=True, parallel=True)
+def _sum_gradient_rows(ptr, sten, Gs, Ce, pa, pb, L, e0, e1, inc_ptr, inc_e, inc_l, cptr,
+                       cols, Du, Dv, nblocks, data_out):
+    """Add the gradient-gradient terms of the elements ``e0 .. e1 - 1`` into the global
+    matrix (laid out as by :func:`_sum_rows`, which must have set it up), computing each
+    element's row where it adds it: the gradients are the same at all of an element's
+    points (``Gs`` (dim, nnz of the stencils): the gradient of stencil function s), so
+    its test function j's row is ``sum_p Ce[p, e - e0] Gs[gv, j] Gs[gu, i]`` over the
+    pairs p = (component cu, d/dx_gu of u; cv, d/dx_gv of v), ``a = c L + 1 + g``. No
+    element matrix is stored: the work is that of summing them."""
+    n = cptr.shape[0] - 1
+    dim = Gs.shape[0]
+    for blk in prange(nblocks):
+        pos = np.full(n, -1, np.int64)
+        w = np.empty((Dv, Du, dim))
+        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+            nv = cptr[v + 1] - cptr[v]
+            base = Dv * Du * cptr[v]
+            for k in range(nv):
+                pos[cols[cptr[v] + k]] = k
+            for t in range(inc_ptr[v], inc_ptr[v + 1]):
+                e = inc_e[t]
+                if e < e0 or e >= e1:
+                    continue
+                s0 = ptr[e]
+                _test_row(Ce, pa, pb, L, e - e0, Gs, s0 + inc_l[t], w)
+                for s in range(s0, ptr[e + 1]):
+                    at = base + pos[sten[s]] * Du
+                    for cv in range(Dv):
+                        for cu in range(Du):
+                            x = 0.0
+                            for g in range(dim):
+                                x += w[cv, cu, g] * Gs[g, s]
+                            data_out[at + cv * nv * Du + cu] += x
+
+
+@njit(cache=True, inline="always")
+def _test_row(Ce, pa, pb, L, c, Gs, sj, w):
+    """``w[cv, cu, gu] = sum_p Ce[p, c] Gs[gv, sj]`` over the pairs p = (cu, gu; cv, gv):
+    test function sj's row of its element's matrix is ``w . Gs[:, s]`` for trial function
+    s."""
+    w[:] = 0.0
+    for p in range(pa.shape[0]):
+        cu, gu = pa[p] // L, pa[p] % L - 1
+        cv, gv = pb[p] // L, pb[p] % L - 1
+        w[cv, cu, gu] += Ce[p, c] * Gs[gv, sj]
+
+
+@njit(cache=True, parallel=True)
+def _stencil_gradients(ptr, sten, indptr, indices, grads, nq, Gs):
+    """``Gs[:, s]``: the gradient of stencil function s of its element at the element's
+    first point (CSR row ``e nq``), zero where the row has none."""
+    dim = grads.shape[0]
+    for e in prange(ptr.shape[0] - 1):
+        s0, s1 = ptr[e], ptr[e + 1]
+        for s in range(s0, s1):
+            for g in range(dim):
+                Gs[g, s] = 0.0
+        r = e * nq
+        for kk in range(indptr[r], indptr[r + 1]):
+            lo, hi = s0, s1 - 1
+            while lo < hi:          # the stencil is sorted
+                mid = (lo + hi) // 2
+                if sten[mid] < indices[kk]:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            for g in range(dim):
+                Gs[g, lo] = grads[g, kk]
+
+
 # Serial twins of the parallel kernels (small meshes: see assembly.PARALLEL_MIN)
 _node_pattern_serial = serial_twin(_node_pattern)
 _sum_rows_serial = serial_twin(_sum_rows)
+_sum_gradient_rows_serial = serial_twin(_sum_gradient_rows)
+_stencil_gradients_serial = serial_twin(_stencil_gradients)
 
 
 def node_pattern(basis, parallel: bool = False) -> tuple:
@@ -197,6 +271,54 @@ def _summed(u, v, Du, Dv, element_blocks, parallel, idt):
         kernel(u.stencil_ptr, u.stencil_nodes, off, K, e0, e1, k == 0, inc_ptr, inc_e,
                inc_l, cptr, cols, Du, Dv, ndu, ndv, blocks(n), ind[0], ind[1], data)
     return ind, data, cptr
+
+
+def stencil_gradients(basis, parallel: bool = False):
+    """(dim, nnz of the stencils): the gradient of each stencil function of a basis whose
+    gradients are the same at all of an element's points, cached with the basis."""
+    Gs = basis.__dict__.get("_stencil_gradients")
+    if Gs is None:
+        G = basis.gradient_entries
+        Phi = basis.values_matrix
+        Gs = np.empty((G.shape[0], basis.stencil_nodes.shape[0]))
+        kernel = _stencil_gradients if parallel else _stencil_gradients_serial
+        kernel(basis.stencil_ptr, basis.stencil_nodes, Phi.indptr, Phi.indices, G,
+               basis.dx.shape[1], Gs)
+        basis.__dict__["_stencil_gradients"] = Gs
+    return Gs
+
+
+def sum_coo_gradients(u, v, Du, Dv, chunks, parallel: bool = False):
+    """As :func:`sum_coo`, for bases whose gradients are the same at all of an element's
+    points: ``chunks`` yields ``(e0, e1, kind, data)``, consecutive ascending element
+    ranges, either ``("gradients", (Ce, pa, pb))`` (the coefficients Ce (npair, e1 - e0)
+    summed over the points of the gradient pairs ``(pa, pb)``, added by
+    :func:`_sum_gradient_rows`) or ``("matrices", (off, K))`` (element matrices of the
+    other pairs, as for :func:`sum_coo`); both kinds may come for one range."""
+    inc_ptr, inc_e, inc_l, cptr, cols = node_pattern(u, parallel)
+    n = cptr.shape[0] - 1
+    ind = np.empty((2, Du * Dv * int(cptr[-1])), dtype=index_dtype(max(u.N, v.N), 0))
+    data = np.empty(ind.shape[1])
+    ndu = np.ascontiguousarray(u.function_dofs[:Du], dtype=np.int64)
+    ndv = np.ascontiguousarray(v.function_dofs[:Dv], dtype=np.int64)
+    ptr, sten = u.stencil_ptr, u.stencil_nodes
+    dim = u.mesh.dim()
+    Gs = stencil_gradients(u, parallel)
+    rows = _sum_rows if parallel else _sum_rows_serial
+    grads = _sum_gradient_rows if parallel else _sum_gradient_rows_serial
+    empty = np.zeros(1)
+    rows(ptr, sten, np.zeros(ptr.shape[0], np.int64), empty, 0, 0, True, inc_ptr, inc_e,
+         inc_l, cptr, cols, Du, Dv, ndu, ndv, blocks(n), ind[0], ind[1], data)
+    for e0, e1, kind, what in chunks:
+        if kind == "gradients":
+            Ce, pa, pb = what
+            grads(ptr, sten, Gs, Ce, pa, pb, 1 + dim, e0, e1, inc_ptr, inc_e, inc_l, cptr,
+                  cols, Du, Dv, blocks(n), data)
+        else:
+            off, K = what
+            rows(ptr, sten, off, K, e0, e1, False, inc_ptr, inc_e, inc_l, cptr, cols, Du,
+                 Dv, ndu, ndv, blocks(n), ind[0], ind[1], data)
+    return ind, data
 
 
 def sum_coo(u, v, Du, Dv, element_blocks, parallel: bool = False):

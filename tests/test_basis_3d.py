@@ -280,3 +280,31 @@ def test_smoothed_values_at_a_chosen_rule(mesh, basis):
     tri = delaunay_mesh(np.random.default_rng(0).random((30, 2)))
     with pytest.raises(ValueError, match="intorder chooses a Gauss rule"):
         NaturalNeighbourBasis(tri, integration="smoothed", intorder=2)
+
+
+def test_gradient_rows_assembly_equals_the_element_matrices(mesh, monkeypatch):
+    """On the smoothed tetrahedral basis (one gradient per element) forms are summed row by
+    row from the gradients, no element matrix stored: the same matrices as the element
+    matrices' road, for a Laplacian, elasticity, a form with values and gradients
+    (mass + varying coefficient) and a non-symmetric convection form."""
+    from skfem_nem.basis import summation
+    vec = NaturalNeighbourBasis(mesh, ElementVector(ElementTetNaturalNeighbour()))
+    sca = NaturalNeighbourBasis(mesh)
+
+    @BilinearForm
+    def mixed(u, v, w):
+        return (1 + w.x[0] ** 2) * dot(u.grad, v.grad) + 3.0 * u * v + u.grad[0] * v
+
+    forms = [(laplace, sca), (linear_elasticity(*lame_parameters(1e3, 0.3)), vec),
+             (mixed, sca)]
+    calls = []
+    real = summation.sum_coo_gradients
+    monkeypatch.setattr("skfem_nem.basis.assembly.sum_coo_gradients",
+                        lambda *a, **k: calls.append(1) or real(*a, **k))
+    new = [form.assemble(b) for form, b in forms]
+    assert len(calls) == 3
+    monkeypatch.setattr(type(sca), "gradients_constant_per_element", property(lambda s: False))
+    for A, (form, b) in zip(new, forms):
+        B = form.assemble(b)
+        assert abs(A - B).max() <= 1e-12 * abs(B).max()
+    assert len(calls) == 3

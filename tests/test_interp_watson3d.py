@@ -236,3 +236,9 @@ def test_tetrahedra_records_merge_the_fallback_rows_and_refuse_flat_meshes():
     flat = qhull_mesh(lattice)
     assert not TetrahedraRecords(flat.p.T, flat.t.T).usable
     assert TetrahedraRecords(lattice, Delaunay3D(lattice).simplices).usable
+    # the neighbours a basis passes in, from scikit-fem's facets, are the same
+    from skfem_nem import delaunay_mesh
+    from skfem_nem.geometry.meshes import tetrahedron_neighbours
+    mesh = delaunay_mesh(p)
+    np.testing.assert_array_equal(tetrahedron_neighbours(mesh),
+                                  TetrahedraRecords(mesh.p.T, mesh.t.T).NB)

@@ -20,8 +20,12 @@ coefficients ``C`` are read off by calling the form on unit fields (all of them 
 one call per chunk of elements) and a numba kernel contracts them, element by element, with
 the values and gradients of the element's stencil functions. The form is called a fixed
 number of times whatever the stencil sizes, and the work is the sum over elements of the
-stencil size squared. Functionals need no wrapper: they read only the quadrature data, which
-a natural-neighbour basis has over all its elements.
+stencil size squared. On a basis whose gradients are the same at all of an element's points
+(the smoothed basis on tetrahedra) the gradient-gradient terms skip the element matrices:
+their coefficients are summed over the points and the global rows are computed from the
+elements' gradients (:func:`~skfem_nem.basis.summation.sum_coo_gradients`). Functionals
+need no wrapper: they read only the quadrature data, which a natural-neighbour basis has
+over all its elements.
 """
 from __future__ import annotations
 

@@ -39,7 +39,7 @@ from skfem.element import DiscreteField, Element, ElementVector
 from . import assembly, nonlinear, plotting
 from ..coordinates import natural_neighbour_coordinates
 from ..coordinates.watson3d import TetrahedraRecords
-from ..geometry.meshes import adopt, own_triangulation
+from ..geometry.meshes import adopt, own_triangulation, tetrahedron_neighbours
 from .domain import check_used_nodes, into_domain
 from .elements import (coordinate_method, element_for, element_order, gauss_rule,
                        integration_scheme)
@@ -91,7 +91,8 @@ class NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         tetrahedron rules Watson's decomposition out."""
         rec = getattr(self.mesh, "_skfem_nem_watson", None)
         if rec is None or not rec.describes(self.mesh.p.T, self.mesh.t.T):
-            rec = TetrahedraRecords(self.mesh.p.T, self.mesh.t.T)
+            rec = TetrahedraRecords(self.mesh.p.T, self.mesh.t.T,
+                                    tetrahedron_neighbours(self.mesh))
             self.mesh._skfem_nem_watson = rec
         return rec if rec.usable else None
 

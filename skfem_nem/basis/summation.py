@@ -8,9 +8,12 @@ matrices of the whole-mesh assembly (:mod:`skfem_nem.basis.assembly`) into it ro
 each entry once and, with the dofs numbered ``D node + c`` (scikit-fem's vector
 numbering), in canonical CSR order. The condensed viscous block of the Stokes solver
 (:mod:`skfem_nem.models.condensation`) fills the same pattern row by row with a kernel of
-its own, which computes each element's row where it adds it. In both, an entry sums its
-elements in ascending order, so element matrices exactly symmetric give a sum exactly
-symmetric.
+its own, which computes each element's row where it adds it, and so does
+:func:`sum_coo_gradients` for bases whose gradients are the same at all of an element's
+points (the smoothed basis on tetrahedra): the gradient terms of a row come from the
+elements' gradients and the form's coefficients summed over the points, no element matrix
+stored. In all of them an entry sums its elements in ascending order, so element matrices
+exactly symmetric give a sum exactly symmetric (the gradient rows: symmetric to round-off).
 """
 from __future__ import annotations
 

@@ -28,7 +28,8 @@ from .delaunay_nd import delaunay_of
 from .predicates import orient2d
 from .triangulation import Triangulation, unused_nodes, validate_nodes
 
-__all__ = ["adopt", "delaunay_mesh", "outside_domain", "triangulation_mesh", "triangulation_of"]
+__all__ = ["adopt", "delaunay_mesh", "outside_domain", "tetrahedron_neighbours",
+           "triangulation_mesh", "triangulation_of"]
 
 
 # the constrained triangulations of delaunay_mesh(points, segments=...) by the digest of
@@ -395,6 +396,20 @@ def _in_mesh(mesh, x):
         d = np.array(d)
         out[i] = bool((((d >= 0).all(axis=0)) | ((d <= 0).all(axis=0))).any())
     return out
+
+
+def tetrahedron_neighbours(mesh: MeshTet) -> np.ndarray:
+    """(nt, 4) int64: the tetrahedron across the face of each tetrahedron of ``mesh`` opposite
+    its vertex slot k (``mesh.t[k]``), -1 on the boundary; from scikit-fem's facet numbering
+    (``t2f``, ``f2t``), which a basis on the mesh builds anyway."""
+    t, t2f, f2t = mesh.t, mesh.t2f, mesh.f2t
+    ne = t.shape[1]
+    other = f2t[0, t2f] + f2t[1, t2f] - np.arange(ne)[None, :]     # (4, ne), -1 outside
+    opposite = t.sum(axis=0)[None, :] - mesh.facets[:, t2f].sum(axis=0)  # node not on it
+    slot = (t[None, :, :] == opposite[:, None, :]).argmax(axis=1)        # (4, ne)
+    NB = np.empty((ne, 4), np.int64)
+    NB[np.arange(ne)[None, :], slot] = other
+    return NB
 
 
 def own_triangulation(mesh, tri) -> bool:

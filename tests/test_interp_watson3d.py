@@ -16,6 +16,12 @@ from skfem_nem.geometry.delaunay3d import Delaunay3D
 TOL = 1e-12
 
 
+def box1(tri, q):
+    """The Box 1 coordinates (Lasserre's volumes) at q: with their gradients, which only
+    Box 1 gives (3D values alone of large batches come from Watson's decomposition too)."""
+    return sibson_coordinates(tri, q, gradient=True, undefined="nan")[0]
+
+
 def cube(n, seed):
     """n random points in the unit cube and its corners."""
     rng = np.random.default_rng(seed)
@@ -30,7 +36,7 @@ def watson(tri, q, f):
     F = np.asarray(f).reshape(len(f), -1)
     v, bad = SibsonWatson3D(tri, F)(q)
     assert np.isnan(v[bad]).all() and np.isfinite(np.delete(v, bad, axis=0)).all()
-    v[bad] = sibson_coordinates(tri, q[bad]) @ F
+    v[bad] = box1(tri, q[bad]) @ F
     return v.reshape((len(q),) + np.shape(f)[1:]), bad
 
 
@@ -74,6 +80,30 @@ def test_applies_to_the_package_tetrahedralisation_only():
     assert not watson_applies(Delaunay(p))
 
 
+def test_sibson_coordinates_take_watson_for_large_3d_batches(monkeypatch):
+    """sibson_coordinates without gradients on a Delaunay3D: Watson's rows from WATSON_MIN
+    queries (the Box 1 method's for the flagged ones), the Box 1 coordinates to round-off;
+    a query outside the hull is named by its index in the whole batch."""
+    from skfem_nem.coordinates import lasserre, watson3d
+    p = cube(400, 12)
+    tri = Delaunay3D(p)
+    q = 0.05 + 0.9 * np.random.default_rng(13).random((3000, 3))
+    calls = []
+    real = watson3d.TetrahedraRecords.coordinates
+    monkeypatch.setattr(watson3d.TetrahedraRecords, "coordinates",
+                        lambda *a: calls.append(1) or real(*a))
+    M = sibson_coordinates(tri, q)
+    assert calls == [1]
+    assert abs(M - box1(tri, q)).max() < 1e-11
+    np.testing.assert_allclose(M @ p, q, rtol=0, atol=1e-12)
+    q[2017] = [0.5, 0.5, 1.5]
+    with pytest.raises(ValueError, match=r"x\[2017\]"):
+        sibson_coordinates(tri, q)
+    monkeypatch.setattr(lasserre, "WATSON_MIN", 10 ** 9)
+    sibson_coordinates(tri, 0.25 + 0.5 * np.random.default_rng(14).random((3000, 3)))
+    assert len(calls) == 2          # the batch with a query outside tried it, not this one
+
+
 def test_random_data_equal_to_the_coordinates_and_few_flagged():
     p = cube(3000, 1)
     tri = Delaunay3D(p)
@@ -81,7 +111,7 @@ def test_random_data_equal_to_the_coordinates_and_few_flagged():
     q = 0.02 + 0.96 * rng.random((20000, 3))
     f = np.sin(3 * p[:, 0]) * np.cos(2 * p[:, 1]) + p[:, 2] ** 2
     v, bad = watson(tri, q, f)
-    np.testing.assert_allclose(v, sibson_coordinates(tri, q) @ f, rtol=0, atol=TOL)
+    np.testing.assert_allclose(v, box1(tri, q) @ f, rtol=0, atol=TOL)
     assert bad.size < 0.03 * q.shape[0]      # slivers' cancelling terms: about 1%
 
 
@@ -91,7 +121,7 @@ def test_rational_decomposition_equals_the_coordinates():
     tri = Delaunay3D(p)
     f = p[:, 0] ** 2 - p[:, 1] * p[:, 2]
     q = np.array([[0.31, 0.52, 0.47], [0.7, 0.2, 0.65], [0.5, 0.5, 0.5]])
-    for x, ref in zip(q, sibson_coordinates(tri, q) @ f):
+    for x, ref in zip(q, box1(tri, q) @ f):
         assert exact_watson(p, tri.simplices, x, f) == pytest.approx(ref, abs=1e-13)
 
 
@@ -114,7 +144,7 @@ def test_linear_precision_and_agreement_property(n, seed, scale, cluster):
     v, _ = watson(tri, q, lin)
     np.testing.assert_allclose(v[:, 0], 1.0 + q @ [1.0, -2.0, 0.5] / scale, rtol=0,
                                atol=1e-11)
-    np.testing.assert_allclose(v, sibson_coordinates(tri, q) @ lin, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(v, box1(tri, q) @ lin, rtol=0, atol=1e-11)
 
 
 def test_lattice_queries_on_faces_edges_nodes_and_hull_are_flagged_or_exact():
@@ -128,7 +158,7 @@ def test_lattice_queries_on_faces_edges_nodes_and_hull_are_flagged_or_exact():
                                                  [1.0, 0.4, 0.3], [0.0, 0.0, 0.7]]])
     f = np.cos(2 * p[:, 0]) + p[:, 1] * p[:, 2]
     v, bad = watson(tri, q, f)
-    np.testing.assert_allclose(v, sibson_coordinates(tri, q) @ f, rtol=0, atol=TOL)
+    np.testing.assert_allclose(v, box1(tri, q) @ f, rtol=0, atol=TOL)
     at_nodes = np.arange(500, 500 + p[::7].shape[0])
     on_hull = np.arange(q.shape[0] - 2, q.shape[0])
     assert np.isin(at_nodes, bad).all() and np.isin(on_hull, bad).all()
@@ -141,7 +171,7 @@ def test_trailing_and_complex_values():
     f = np.stack([p[:, 0] + 1j * p[:, 1], p[:, 2] ** 2 - 2j], axis=1)
     v, bad = SibsonWatson3D(tri, f)(q)
     ok = np.setdiff1d(np.arange(q.shape[0]), bad)
-    np.testing.assert_allclose(v[ok], (sibson_coordinates(tri, q) @ f)[ok], rtol=0, atol=TOL)
+    np.testing.assert_allclose(v[ok], (box1(tri, q) @ f)[ok], rtol=0, atol=TOL)
     v0, bad0 = SibsonWatson3D(tri, f[:, :0])(q)
     assert v0.shape == (400, 0) and bad0.size == 0
 
@@ -162,7 +192,7 @@ def test_interpolator_takes_watson_for_large_3d_batches(monkeypatch):
     v = itp(q)
     assert calls == [3000]
     assert np.isnan(v[-1])
-    np.testing.assert_allclose(v[:-1], sibson_coordinates(p, q[:-1]) @ f, rtol=0, atol=TOL)
+    np.testing.assert_allclose(v[:-1], box1(p, q[:-1]) @ f, rtol=0, atol=TOL)
     monkeypatch.setattr(interp_natural, "WATSON_MIN", 10 ** 9)
     fresh = NaturalNeighbourInterpolator(p, f)
     np.testing.assert_allclose(fresh(q), v, rtol=0, atol=TOL)
@@ -206,7 +236,7 @@ def test_rows_on_faces_and_inside_equal_the_box1_coordinates(n, seed, scale):
     hull_face = (slot >= 0) & (rec.NB[start, np.maximum(slot, 0)] < 0)
     assert np.isin(np.flatnonzero(hull_face), flagged).all()
     ok = np.setdiff1d(np.arange(q.shape[0]), flagged)
-    ref = sibson_coordinates(tri, q[ok])
+    ref = box1(tri, q[ok])
     assert abs(M[ok] - ref).max() < 1e-11
     np.testing.assert_allclose(M[ok] @ p / scale, q[ok] / scale, rtol=0, atol=1e-11)
     np.testing.assert_allclose(np.asarray(M[ok].sum(axis=1)).ravel(), 1.0, atol=1e-13)
@@ -226,11 +256,11 @@ def test_tetrahedra_records_merge_the_fallback_rows_and_refuse_flat_meshes():
 
     def fallback(x):
         calls.append(x.shape[0])
-        return sibson_coordinates(tri, x)
+        return box1(tri, x)
 
     M = rec.coordinates(q, start, slot, fallback)
     assert calls and calls[0] >= np.sum(rec.NB < 0)        # the hull faces, at least
-    assert abs(M - sibson_coordinates(tri, q)).max() < 1e-11
+    assert abs(M - box1(tri, q)).max() < 1e-11
     g = np.linspace(0.0, 1.0, 4)
     lattice = np.array(np.meshgrid(g, g, g, indexing="ij")).reshape(3, -1).T
     flat = qhull_mesh(lattice)

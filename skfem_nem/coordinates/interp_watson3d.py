@@ -43,8 +43,8 @@ from numba import njit, prange
 
 from ..geometry.delaunay3d import Delaunay3D
 from ..geometry.nodesets import morton_order
-from .watson3d import (CAVITY_CAP, HULL_LAMBDA, RECORD_VALUES, conflict_tetrahedra,
-                       power_and_volumes, records)
+from .watson3d import (CAVITY_CAP, HULL_LAMBDA, RECORD_VALUES, conflict_tetrahedra, records,
+                       walk)
 
 __all__ = ["SibsonWatson3D", "watson_applies"]
 
@@ -53,8 +53,6 @@ __all__ = ["SibsonWatson3D", "watson_applies"]
 # (watson3d.DEN_MIN, 1e-2): on 100,000 random queries among 20,000 random nodes, 1.1% are
 # flagged and the others agree with the Box 1 coordinates to 5e-13 (at 1e-2: 8.6%, 6e-14).
 DEN_MIN = 1e-3
-# steps of a walk; past them the query is flagged
-WALK_STEPS = 1 << 16
 # queries per block of the parallel loop: blocks per thread
 BLOCKS_PER_THREAD = 4
 
@@ -64,29 +62,6 @@ def watson_applies(triangulation) -> bool:
     (every tetrahedron a Delaunay one, none flat: the cavity of a query is the tetrahedra
     whose sphere holds it)."""
     return isinstance(triangulation, Delaunay3D)
-
-
-@njit(cache=True, error_model="numpy")
-def _walk(R, NB, x, y, z, t):
-    """The tetrahedron that holds (x, y, z), walking from t across the face of the most
-    negative barycentric; -1 outside the hull, -2 at a node (on the sphere of the tetrahedron
-    that holds it), -3 too long a walk. (D far from a tetrahedron is too inaccurate to stop
-    at the first sphere that holds the query.)"""
-    for _ in range(WALK_STEPS):
-        D, l0, l1, l2, l3 = power_and_volumes(R, t, x, y, z)
-        k, lo = 0, l0
-        if l1 < lo:
-            k, lo = 1, l1
-        if l2 < lo:
-            k, lo = 2, l2
-        if l3 < lo:
-            k, lo = 3, l3
-        if lo >= 0:
-            return t if D > 0 else -2
-        t = NB[t, k]
-        if t < 0:
-            return -1
-    return -3
 
 
 @njit(cache=True, error_model="numpy")
@@ -132,7 +107,7 @@ def _queries(R, NB, Q, order, nblocks, out, bad):
         for s in range(b * m // nblocks, (b + 1) * m // nblocks):
             j = order[s]
             x, y, z = Q[j, 0], Q[j, 1], Q[j, 2]
-            t1 = _walk(R, NB, x, y, z, t)
+            t1 = walk(R, NB, x, y, z, t)
             ok = t1 >= 0 and _cavity(R, NB, x, y, z, t1, stamp, s, tets, E, acc)
             if t1 >= 0:
                 t = t1

@@ -57,9 +57,11 @@ from ..geometry.hull import FACET_PLANE, HULL_TOLERANCE
 from ..geometry.status import ON_HULL, OUTSIDE, OVERFLOW, UNBOUNDED
 from ..geometry.delaunay_nd import (check_delaunay, check_nodes, delaunay_of, sealed_neighbours,
                                     triangulate)
+from ..geometry.delaunay3d import Delaunay3D
 from ..geometry.nodesets import morton_order
 from ..geometry.simplices_nd import FLAT, circumcentre_cache, facet_planes
 from .lasserre_query import query_batch, query_batch_serial
+from .watson3d import coordinates_3d
 
 __all__ = ["sibson_coordinates_nd"]
 
@@ -100,6 +102,12 @@ _CAPS = {2: (32, 64, 24), 3: (96, 384, 64), 4: (256, 2048, 256)}
 # queries among 20,000 nodes take half the time; below a few thousand the
 # triangulation's pieces the batch touches stay in cache anyway
 _SORT_MIN = 4096
+
+
+# 3D Sibson values (no gradient) of at least WATSON_MIN queries on the package's own
+# tetrahedralisation come from Watson's decomposition (watson3d: a third of the time), the
+# queries it flags from Box 1 (below, the records it builds cost a few hundred queries)
+WATSON_MIN = 1000
 
 
 # queries per batch from which the parallel kernel is used (a 3D query costs
@@ -345,7 +353,11 @@ def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
     """Sibson natural-neighbour coordinates (and gradients) in 2, 3 or 4 dimensions.
 
     Volumes of second-order Voronoi cells by Lasserre's recursive formula
-    (the paper's Box 1); see the module docstring for the method.
+    (the paper's Box 1); see the module docstring for the method. In 3D, the values
+    alone (no gradients) of ``WATSON_MIN`` queries or more on the package's own
+    tetrahedralisation come from Watson's decomposition
+    (:mod:`~skfem_nem.coordinates.watson3d`, a third of the time, the same coordinates to
+    ~1e-12), the queries it flags from Box 1.
 
     Parameters
     ----------
@@ -397,4 +409,10 @@ def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
         tri = delaunay_of(p)
     if not (isinstance(chunk, (int, np.integer)) and chunk > 0):
         raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
+    if not gradient and not _raw and isinstance(tri, Delaunay3D) and q.shape[0] >= WATSON_MIN:
+        try:
+            return coordinates_3d(tri, q, lambda x: _coordinates(p, x, False, tri, undefined,
+                                                                  0, chunk=int(chunk)))
+        except ValueError:
+            pass    # a query outside the hull: the error below names it by its index in x
     return _coordinates(p, q, gradient, tri, undefined, 1 if _raw else 0, chunk=int(chunk))

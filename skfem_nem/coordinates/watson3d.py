@@ -27,6 +27,8 @@ The limit on a face
 """
 from __future__ import annotations
 
+import weakref
+
 import numba
 import numpy as np
 from numba import njit, prange
@@ -36,7 +38,8 @@ from ..geometry.nodesets import morton_order
 __all__ = ["RECORD_VALUES", "DEN_MIN", "HULL_LAMBDA", "CAVITY_SLACK", "CAVITY_CAP",
            "conflict_tetrahedra", "face_volume", "power_and_volumes", "power_and_volumes_at",
            "records",
-           "neighbours_of", "rows_3d", "TetrahedraRecords", "FLAT_SHAPE"]
+           "neighbours_of", "rows_3d", "TetrahedraRecords", "FLAT_SHAPE", "walk",
+           "coordinates_3d"]
 
 # A query is flagged when the sum of its terms (x's new cell) is at most DEN_MIN times the
 # sum of their magnitudes (per tetrahedron, and per part of the limit on a face): it would lose
@@ -55,6 +58,8 @@ CAVITY_SLACK = 1e-12
 # them the query is flagged
 CAVITY_CAP = 4096
 ROW_CAP = 96
+# steps of a walk; past them the query is flagged
+WALK_STEPS = 1 << 16
 # queries per pass of the row kernel (its padded rows take ROW_CAP * 16 bytes a query)
 ROW_CHUNK = 1 << 15
 
@@ -216,6 +221,29 @@ def conflict_tetrahedra(R, NB, x, y, z, t0, sc, stamp, m, tets, E):
     return k
 
 
+@njit(cache=True, error_model="numpy")
+def walk(R, NB, x, y, z, t):
+    """The tetrahedron that holds (x, y, z), walking from t across the face of the most
+    negative barycentric; -1 outside the hull, -2 at a node (on the sphere of the tetrahedron
+    that holds it), -3 too long a walk. (D far from a tetrahedron is too inaccurate to stop
+    at the first sphere that holds the query.)"""
+    for _ in range(WALK_STEPS):
+        D, l0, l1, l2, l3 = power_and_volumes(R, t, x, y, z)
+        k, lo = 0, l0
+        if l1 < lo:
+            k, lo = 1, l1
+        if l2 < lo:
+            k, lo = 2, l2
+        if l3 < lo:
+            k, lo = 3, l3
+        if lo >= 0:
+            return t if D > 0 else -2
+        t = NB[t, k]
+        if t < 0:
+            return -1
+    return -3
+
+
 def neighbours_of(T) -> np.ndarray:
     """(nt, 4) int64: the tetrahedron across the face opposite each vertex slot of the
     tetrahedra T (nt, 4), -1 on the hull."""
@@ -319,6 +347,8 @@ def _pair(R, T, NB, t1, k1, x, y, z, sc, mark, m, where, oi, ov, cnt):
 def _row(R, T, NB, x, y, z, t0, k0, stamp, m, tets, E, mark, where, oi, ov):
     """The row of coordinates of the query (x, y, z) in tetrahedron t0 (on its face opposite
     slot k0 if k0 >= 0): its length, entries unnormalised in ``oi``, ``ov``; -1 if flagged."""
+    if t0 < 0:
+        return -1                      # not placed by a walk
     t2 = NB[t0, k0] if k0 >= 0 else -1
     if k0 >= 0 and t2 < 0:
         return -1                      # on the hull
@@ -513,3 +543,38 @@ class TetrahedraRecords:
         at = np.repeat(ptr[flagged] - F.indptr[:-1], np.diff(F.indptr)) + np.arange(F.nnz)
         idx[at], val[at] = F.indices, F.data
         return sp.csr_matrix((val, idx, ptr), shape=(m, n))
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _locate(R, NB, Q, order, nblocks, out):
+    """``out[j]``: the tetrahedron that holds query j (:func:`walk`; negative where the walk
+    fails), the queries taken in ``order`` in ``nblocks`` blocks, each walk from the last."""
+    m = order.shape[0]
+    for b in prange(nblocks):
+        t = 0
+        for s in range(b * m // nblocks, (b + 1) * m // nblocks):
+            j = order[s]
+            t1 = walk(R, NB, Q[j, 0], Q[j, 1], Q[j, 2], t)
+            out[j] = t1
+            if t1 >= 0:
+                t = t1
+
+
+_RECORDS = weakref.WeakKeyDictionary()
+
+
+def coordinates_3d(tri, q, fallback):
+    """CSR (m, n) of Sibson's coordinates at the points q (m, 3) on the package's
+    :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D` ``tri`` by Watson's decomposition
+    (records kept while ``tri`` lives); points the walk does not place inside a
+    tetrahedron (outside the hull, at a node) and flagged points get ``fallback(points)``'s
+    rows."""
+    rec = _RECORDS.get(tri)
+    if rec is None:
+        rec = _RECORDS[tri] = TetrahedraRecords(tri.points, tri.simplices, tri.neighbors)
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    start = np.empty(q.shape[0], np.int64)
+    if q.shape[0]:
+        nblocks = max(1, min(q.shape[0] // 64, 4 * numba.get_num_threads()))
+        _locate(rec.R, rec.NB, q, morton_order(q), nblocks, start)
+    return rec.coordinates(q, start, np.full(q.shape[0], -1, np.int64), fallback)

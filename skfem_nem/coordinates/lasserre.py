@@ -259,6 +259,20 @@ def _extrapolate_to_hull(p, tri, x, nodes):
     return sp.csr_matrix((F.data, (F.row, nodes[F.col])), shape=(x.shape[0], n))
 
 
+def _walk_starts(p, q, order, tri):
+    """A simplex at the node nearest each query, where its walk starts, found on the
+    kernels' threads (a tenth of a 3D call at 1e5 queries on one; one worker for a few
+    queries, where starting threads costs more than the search). scipy's find_simplex is
+    avoided: its first call computes barycentric transforms through LAPACK, very slow with
+    a threaded BLAS."""
+    start = np.zeros(q.shape[0], np.int64)
+    if q.shape[0]:
+        workers = numba.get_num_threads() if q.shape[0] >= _PARALLEL_MIN else 1
+        near = cKDTree(p).query(q[order], workers=workers)[1]
+        start[order] = tri.vertex_to_simplex[near]
+    return start
+
+
 def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=1 << 15):
     """Coordinates (kind 0), second-order volumes (1) or hull-facet weights (2)
     of the points q; see :func:`sibson_coordinates_nd`."""
@@ -268,14 +282,8 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
     m, n = q.shape[0], p.shape[0]
     S = np.ascontiguousarray(tri.simplices, dtype=np.int64)
     NB = sealed_neighbours(p, tri)
-    # start each walk from a simplex at the nearest node, found on the kernels' threads (a
-    # tenth of a 3D call at 1e5 queries on one); scipy's find_simplex is avoided: its first
-    # call computes barycentric transforms through LAPACK, very slow with a threaded BLAS
     order = morton_order(q) if m >= _SORT_MIN else np.arange(m)
-    start = np.zeros(m, np.int64)
-    if m:
-        near = cKDTree(p).query(q[order], workers=numba.get_num_threads())[1]
-        start[order] = tri.vertex_to_simplex[near]
+    start = _walk_starts(p, q, order, tri)
     status = np.full(m, OUTSIDE, np.int64)
     info = np.zeros(m, np.int64)
     parts = []

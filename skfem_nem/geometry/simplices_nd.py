@@ -39,6 +39,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..jit import serial_twin
 from .status import AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW
 
 __all__ = ["det_small", "circumcentre", "circumcentres", "in_conflict", "hull_distance",
@@ -140,6 +141,12 @@ def circumcentres(P, S, flat, CC, SH):
             SH[s] = circumcentre(P, S, s, d, E, rhs, flat)
             for k in range(d):
                 CC[s, k] = rhs[k]
+
+
+_circumcentres_serial = serial_twin(circumcentres)
+#: below this many simplices circumcentres are computed on one thread: on a busy machine each
+#: wake-up of the thread pool took ~7 ms, and a hull query's facets are triangulated anew
+SERIAL_BELOW = 4096
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -515,7 +522,8 @@ def circumcentre_cache(P, S, m):
         return False, np.empty((0, d)), np.empty(0)
     CC = np.empty((ns, d))
     SH = np.empty(ns)
-    circumcentres(P, S, FLAT, CC, SH)
+    # (few simplices, hull facets' triangulations: waking the threads cost more than this)
+    (circumcentres if ns >= SERIAL_BELOW else _circumcentres_serial)(P, S, FLAT, CC, SH)
     return True, CC, SH
 
 

@@ -38,7 +38,7 @@ from ..geometry.nodesets import morton_order
 __all__ = ["RECORD_VALUES", "DEN_MIN", "HULL_LAMBDA", "CAVITY_SLACK", "CAVITY_CAP",
            "conflict_tetrahedra", "face_volume", "power_and_volumes", "power_and_volumes_at",
            "records",
-           "neighbours_of", "rows_3d", "TetrahedraRecords", "FLAT_SHAPE", "walk",
+           "rows_3d", "TetrahedraRecords", "FLAT_SHAPE", "walk",
            "coordinates_3d"]
 
 # A query is flagged when the sum of its terms (x's new cell) is at most DEN_MIN times the
@@ -242,23 +242,6 @@ def walk(R, NB, x, y, z, t):
         if t < 0:
             return -1
     return -3
-
-
-def neighbours_of(T) -> np.ndarray:
-    """(nt, 4) int64: the tetrahedron across the face opposite each vertex slot of the
-    tetrahedra T (nt, 4), -1 on the hull."""
-    nt = T.shape[0]
-    F = np.sort(np.stack([T[:, [1, 2, 3]], T[:, [0, 2, 3]], T[:, [0, 1, 3]], T[:, [0, 1, 2]]],
-                         axis=1), axis=2).reshape(-1, 3).astype(np.int64)
-    n = int(T.max()) + 1
-    key = (F[:, 0] * n + F[:, 1]) * n + F[:, 2]
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    same = np.flatnonzero(ks[1:] == ks[:-1])
-    NB = np.full(4 * nt, -1, np.int64)
-    NB[order[same]] = order[same + 1] // 4
-    NB[order[same + 1]] = order[same] // 4
-    return NB.reshape(nt, 4)
 
 
 @njit(cache=True, inline="always")
@@ -504,13 +487,14 @@ FLAT_SHAPE = 1e-9
 
 class TetrahedraRecords:
     """The state of Watson's decomposition on a Delaunay tetrahedralisation: the tetrahedra T
-    (nt, 4) of the nodes p (n, 3), their neighbours (``NB``: computed here if not given) and
-    records; ``usable`` is False where a tetrahedron is flat (``FLAT_SHAPE``)."""
+    (nt, 4) of the nodes p (n, 3), their neighbours ``NB`` across the face opposite each
+    vertex slot (the triangulation's, or the mesh's) and records; ``usable`` is False where a
+    tetrahedron is flat (``FLAT_SHAPE``)."""
 
-    def __init__(self, p, T, NB=None):
+    def __init__(self, p, T, NB):
         self.p = np.ascontiguousarray(p, dtype=np.float64)
         self.T = np.ascontiguousarray(T, dtype=np.int64)
-        self.NB = neighbours_of(self.T) if NB is None else np.ascontiguousarray(NB, np.int64)
+        self.NB = np.ascontiguousarray(NB, np.int64)
         self.R = records(self.p, self.T, np.empty((self.p.shape[0], 0)))
         self.usable = _flat(self.p, self.T, self.R[:, 30], FLAT_SHAPE) == 0
 

@@ -108,7 +108,8 @@ from skfem import BilinearForm, LinearForm
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from .condensation import condensed_divergence, condensed_viscous
-from .condensation_tet import condensed_divergence_tet, condensed_viscous_tet, divergence_tet
+from .condensation_tet import (condensed_divergence_tet, condensed_viscous_tet, divergence_tet,
+                               loads_tet)
 from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
 from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_columns,
                            outline_flux, wall_dofs, walls_fix_pressure)
@@ -335,7 +336,8 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         return b
 
     cache = _blocks_once(spaces)
-    b = loads(ub)
+    nem3 = spaces.dim == 3 and spaces.bbasis is not None and spaces.method == "nem"
+    b = loads_tet(ub, fv, t) if nem3 else loads(ub)
     inv = 1.0 / e
     Mp = weighted_mass.assemble(pb, c=inv).tocsr()
     m = cache["m"]

@@ -156,7 +156,8 @@ def test_the_default_run_leaves_the_mpi_tests_to_the_mpi_step():
                          capture_output=True, text=True, cwd=ROOT).stdout
     assert "tests/mpi" not in out and "test_parallel.py" in out
     assert sorted(p.name for p in (ROOT / "tests" / "mpi").glob("test_*.py")) == \
-        ["test_petsc_plate.py", "test_petsc_solver.py", "test_petsc_stokes.py"]
+        ["test_petsc_failures.py", "test_petsc_plate.py", "test_petsc_solver.py",
+         "test_petsc_stokes.py"]
     ci = (ROOT / ".ci" / "run").read_text()
     for ranks in (1, 2):
         assert f"mpiexec --allow-run-as-root -n {ranks} python -m pytest" in ci

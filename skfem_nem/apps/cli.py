@@ -149,10 +149,15 @@ def _run_plate(sim, cfg, args) -> int:
         sim.checkpoint()
         print(f"interrupted at t = {sim.lm.time:g}; continue with --restart")
         return 130
-    except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError) as err:
+    except Exception as err:
+        stop = isinstance(err, (ValueError, RuntimeError, ArithmeticError,
+                                np.linalg.LinAlgError))
+        if _ranks(sim) > 1 and not (stop and sim.failures.all_failed()):
+            _abort_rank(sim, err, args)
+        if not stop:
+            raise
         # the mesh and fields are those of the last completed step: keep them
-        sim.checkpoint()
-        sim.figures()
+        _guarded(sim, args, lambda: (sim.checkpoint(), sim.figures()))
         reason = (str(err).splitlines() or [type(err).__name__])[0]
         from .sinking_plate import StepStalled
         hint = ("--restart with a smaller --min-dt or --cfl, or a new run with more --nodes"
@@ -162,7 +167,7 @@ def _run_plate(sim, cfg, args) -> int:
               f"{reason}. Outputs and a checkpoint up to there are in {args.output}; try "
               f"{hint}", file=sys.stderr)
         return STOPPED
-    for p in sim.figures():
+    for p in _guarded(sim, args, sim.figures):
         print("wrote", p)
     print("wrote", sim.out / "plate.pvd", "and", sim.out / "diagnostics.csv")
     retried = _retried_steps(sim.out / "diagnostics.csv") if sim.root else 0
@@ -170,6 +175,31 @@ def _run_plate(sim, cfg, args) -> int:
         print(f"{retried} step(s) were retried with a shorter time step (column 'retries' "
               f"of diagnostics.csv)")
     return 0
+
+
+def _ranks(sim) -> int:
+    """The number of MPI ranks computing the run (1 unless over MPI)."""
+    return getattr(sim, "ranks", 1)
+
+
+def _guarded(sim, args, write):
+    """``write()`` (rank 0's outputs); over MPI a failure of it ends every rank."""
+    try:
+        return write()
+    except Exception as err:
+        if _ranks(sim) > 1:
+            _abort_rank(sim, err, args)
+        raise
+
+
+def _abort_rank(sim, err, args) -> None:
+    """End every rank (over MPI) after a failure of this rank alone, in one line naming it;
+    the last checkpoint stays as it was. Does not return."""
+    reason = (str(err).splitlines() or [type(err).__name__])[0]
+    sim.failures.abort(f"skfem-nem: sinking-plate: rank {sim.rank} of {sim.ranks} failed at "
+                       f"t = {sim.lm.time:g} (step {sim.lm.step}): {type(err).__name__}: "
+                       f"{reason}; every rank stopped, and the last checkpoint in "
+                       f"{args.output} is kept (--restart continues from it)")
 
 
 def _retried_steps(path) -> int:

@@ -59,6 +59,7 @@ from ..models.rheology import (Material, PicardNotConverged, from_ip_field, seco
                                to_ip_field, vep_step)
 from ..models.stokes import outline_flux, stokes_spaces
 from ..models.stokes_solvers import CACHED_SOLVERS, StokesCache
+from ..parallel.failures import FailureChannel
 from ..parallel.petsc import ranks_differing, world
 
 # (PlateConfig, load_config and stored_config are re-exported from plate_config)
@@ -139,6 +140,8 @@ class SinkingPlate:
         self.cfg = cfg
         # over MPI (solver "petsc") every rank computes the whole run, rank 0 writes
         self.rank, self.ranks = world() if cfg.solver == "petsc" else (0, 1)
+        # a failure of one rank ends every rank (parallel.failures); built by all ranks here
+        self.failures = FailureChannel() if self.ranks > 1 else None
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         # a film that closes within any step (_stable_dt), dealt with before the next

@@ -1,0 +1,163 @@
+"""Solvers for the quadratic natural-neighbour Laplacian: CG iterations as the mesh grows.
+
+A study for a solver whose iterations do not grow with the quadratic natural-neighbour
+matrices (``ElementNaturalNeighbour2``): their rows hold about 110 entries (P2: about 14), and
+pyamg's smoothed aggregation on the whole matrix, fine for P2, needs more and more iterations.
+The linear natural-neighbour space is nested in the quadratic one (nodal values, and edge
+values at the averages of their nodes, reproduce it exactly), so a two-level method takes it as
+the coarse level:
+
+* ``two-level``: Chebyshev smoothing (degree ``--degree``, Jacobi-scaled, pyamg's bounds) on the
+  quadratic matrix, the Galerkin product ``P^T A P`` on the nodes as coarse matrix, solved by
+  one V-cycle of pyamg's smoothed aggregation (or exactly, ``--exact-coarse``);
+* ``SA``: one V-cycle of pyamg's smoothed aggregation on the whole quadratic matrix;
+* ``P2 SA``: the same for scikit-fem's P2 on the same triangles, the baseline.
+
+Each preconditions CG on ``-Laplace u = 2 pi^2 sin(pi x) sin(pi y)`` on the unit square with
+``u = 0`` on the boundary (random interior nodes, ``box_nodes``) to a relative residual of
+1e-8. Printed: unknowns, entries per row, CG iterations and the set-up and solve seconds of
+each (warm: a small problem runs first, so numba's kernels are loaded before).
+
+Run ``python benchmarks/quadratic_solvers.py [--nodes 2000 8000 32000] [--degree 3]``.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+# CG's relative residual
+TOL = 1e-8
+# pyamg's coarsest level and the Chebyshev bounds (as its own "chebyshev" smoother)
+MAX_COARSE = 500
+CHEB_LOWER, CHEB_UPPER = 1.0 / 30.0, 1.1
+
+
+def problem(n: int, quadratic: bool):
+    """The condensed Laplacian and load of the quadratic natural-neighbour basis
+    (``quadratic``) or P2 on the Delaunay triangles of n random nodes, with the
+    prolongation from the interior nodes (None for P2)."""
+    from skfem import Basis, BilinearForm, ElementTriP2, LinearForm
+    from skfem.helpers import dot, grad
+
+    from skfem_nem import ElementNaturalNeighbour2, NaturalNeighbourBasis, delaunay_mesh
+    from skfem_nem.geometry.nodesets import box_nodes
+
+    @BilinearForm
+    def laplace(u, v, w):
+        return dot(grad(u), grad(v))
+
+    @LinearForm
+    def load(v, w):
+        return 2 * np.pi ** 2 * np.sin(np.pi * w.x[0]) * np.sin(np.pi * w.x[1]) * v
+
+    mesh = delaunay_mesh(box_nodes(n, seed=0))
+    basis = (NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2()) if quadratic
+             else Basis(mesh, ElementTriP2()))
+    A, b = laplace.assemble(basis), load.assemble(basis)
+    interior = basis.complement_dofs(basis.get_dofs().all())
+    P = None
+    if quadratic:
+        boundary = np.unique(mesh.facets[:, mesh.boundary_facets()])
+        nodes = np.setdiff1d(np.arange(mesh.p.shape[1]), boundary)
+        P = prolongation(basis, mesh)[interior][:, nodes].tocsr()
+    return A[interior][:, interior].tocsr(), b[interior], P
+
+
+def prolongation(basis, mesh) -> sp.csr_matrix:
+    """Nodal values of a linear natural-neighbour function -> the quadratic dofs that
+    reproduce it: nodal dofs the values, edge dofs the averages of their two nodes."""
+    n, ne = mesh.p.shape[1], mesh.facets.shape[1]
+    rows = np.r_[basis.nodal_dofs[0], basis.facet_dofs[0], basis.facet_dofs[0]]
+    cols = np.r_[np.arange(n), mesh.facets[0], mesh.facets[1]]
+    vals = np.r_[np.ones(n), np.full(2 * ne, 0.5)]
+    return sp.csr_matrix((vals, (rows, cols)), shape=(basis.N, n))
+
+
+class TwoLevel:
+    """Chebyshev smoothing on A, the Galerkin coarse matrix on the nodes (one SA V-cycle,
+    or an exact solve), Chebyshev again: a symmetric preconditioner for CG."""
+
+    def __init__(self, A, P, degree: int, exact: bool):
+        import pyamg
+        from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
+        from pyamg.util.linalg import approximate_spectral_radius
+        self.A, self.P, self.R = A, P, P.T.tocsr()
+        self.dinv = 1.0 / A.diagonal()
+        rho = approximate_spectral_radius(sp.diags(self.dinv) @ A)
+        self.coef = -chebyshev_polynomial_coefficients(CHEB_LOWER * rho, CHEB_UPPER * rho,
+                                                       degree)[:-1]
+        Ac = (self.R @ A @ P).tocsr()
+        if exact:
+            self.coarse = spla.splu(Ac.tocsc()).solve
+        else:
+            ml = pyamg.smoothed_aggregation_solver(Ac, symmetry="symmetric",
+                                                   max_coarse=MAX_COARSE)
+            self.coarse = lambda r: ml.solve(r, maxiter=1, cycle="V", tol=1e-30)
+
+    def smooth(self, x, b):
+        r = self.dinv * (b - self.A @ x)
+        h = self.coef[0] * r
+        for c in self.coef[1:]:
+            h = c * r + self.dinv * (self.A @ h)
+        return x + h
+
+    def __call__(self, b):
+        x = self.smooth(np.zeros_like(b), b)
+        x = x + self.P @ self.coarse(self.R @ (b - self.A @ x))
+        return self.smooth(x, b)
+
+
+def sa(A):
+    """One V-cycle of pyamg's smoothed aggregation on A."""
+    import pyamg
+    ml = pyamg.smoothed_aggregation_solver(A, symmetry="symmetric", max_coarse=MAX_COARSE)
+    return lambda r: ml.solve(r, maxiter=1, cycle="V", tol=1e-30)
+
+
+def pcg(A, b, make) -> dict:
+    """CG preconditioned by ``make(A)``: iterations, set-up and solve seconds."""
+    t0 = time.perf_counter()
+    M = make(A)
+    t1 = time.perf_counter()
+    its = [0]
+    _, info = spla.cg(A, b, M=spla.LinearOperator(A.shape, matvec=M), rtol=TOL, maxiter=5000,
+                      callback=lambda *_: its.__setitem__(0, its[0] + 1))
+    t2 = time.perf_counter()
+    return {"its": its[0] if info == 0 else f">{its[0]}", "setup": t1 - t0, "solve": t2 - t1}
+
+
+def row(n: int, degree: int, exact: bool, sa_below: int) -> list:
+    A, b, P = problem(n, True)
+    out = [("two-level", A, pcg(A, b, lambda M: TwoLevel(M, P, degree, exact)))]
+    if A.shape[0] < sa_below:
+        out.append(("SA", A, pcg(A, b, sa)))
+    A2, b2, _ = problem(n, False)
+    out.append(("P2 SA", A2, pcg(A2, b2, sa)))
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--nodes", type=int, nargs="+", default=[2000, 8000, 32000])
+    ap.add_argument("--degree", type=int, default=3)
+    ap.add_argument("--exact-coarse", action="store_true")
+    ap.add_argument("--sa-below", type=int, default=40000,
+                    help="run SA on the whole quadratic matrix below this many unknowns")
+    a = ap.parse_args(argv)
+    row(300, a.degree, a.exact_coarse, a.sa_below)    # warm-up: kernels loaded
+    coarse = "exact" if a.exact_coarse else "one SA V-cycle"
+    print("| nodes | method | unknowns | entries a row | CG iterations | set-up s | solve s |"
+          "\n|---|---|---|---|---|---|---|")
+    for n in a.nodes:
+        for name, M, r in row(n, a.degree, a.exact_coarse, a.sa_below):
+            print(f"| {n:,} | {name} | {M.shape[0]:,} | {M.nnz / M.shape[0]:.0f} | {r['its']} "
+                  f"| {r['setup']:.2f} | {r['solve']:.2f} |", flush=True)
+    print(f"\nTwo-level: Chebyshev degree {a.degree}, coarse level {coarse}.")
+
+
+if __name__ == "__main__":
+    main()

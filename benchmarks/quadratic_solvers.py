@@ -3,13 +3,14 @@
 A study for a solver whose iterations do not grow with the quadratic natural-neighbour
 matrices (``ElementNaturalNeighbour2``): their rows hold about 110 entries (P2: about 14), and
 pyamg's smoothed aggregation on the whole matrix, fine for P2, needs more and more iterations.
-The linear natural-neighbour space is nested in the quadratic one (nodal values, and edge
-values at the averages of their nodes, reproduce it exactly), so a two-level method takes it as
-the coarse level:
+A two-level method takes the nodes as its coarse level: nodal values with each edge's value
+the average of its nodes' (``skfem_nem.basis.two_level``), which interpolate the values and
+reproduce linear fields:
 
-* ``two-level``: Chebyshev smoothing (degree ``--degree``, Jacobi-scaled, pyamg's bounds) on the
-  quadratic matrix, the Galerkin product ``P^T A P`` on the nodes as coarse matrix, solved by
-  one V-cycle of pyamg's smoothed aggregation (or exactly, ``--exact-coarse``);
+* ``two-level``: ``TwoLevelPreconditioner``, Chebyshev smoothing (degree ``--degree``,
+  Jacobi-scaled) on the quadratic matrix, the Galerkin product ``P^T A P`` on the nodes as
+  coarse matrix, solved by one V-cycle of pyamg's smoothed aggregation (or exactly,
+  ``--exact-coarse``);
 * ``SA``: one V-cycle of pyamg's smoothed aggregation on the whole quadratic matrix;
 * ``P2 SA``: the same for scikit-fem's P2 on the same triangles, the baseline.
 
@@ -18,7 +19,7 @@ Each preconditions CG on ``-Laplace u = 2 pi^2 sin(pi x) sin(pi y)`` on the unit
 1e-8. Printed: unknowns, entries per row, CG iterations and the set-up and solve seconds of
 each (warm: a small problem runs first, so numba's kernels are loaded before).
 
-Run ``python benchmarks/quadratic_solvers.py [--nodes 2000 8000 32000] [--degree 3]``.
+Run ``python benchmarks/quadratic_solvers.py [--nodes 2000 8000 32000] [--degree 5]``.
 """
 from __future__ import annotations
 
@@ -26,14 +27,12 @@ import argparse
 import time
 
 import numpy as np
-import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 # CG's relative residual
 TOL = 1e-8
-# pyamg's coarsest level and the Chebyshev bounds (as its own "chebyshev" smoother)
+# pyamg's coarsest level (as the two-level method's)
 MAX_COARSE = 500
-CHEB_LOWER, CHEB_UPPER = 1.0 / 30.0, 1.1
 
 
 def problem(n: int, quadratic: bool):
@@ -63,52 +62,9 @@ def problem(n: int, quadratic: bool):
     if quadratic:
         boundary = np.unique(mesh.facets[:, mesh.boundary_facets()])
         nodes = np.setdiff1d(np.arange(mesh.p.shape[1]), boundary)
-        P = prolongation(basis, mesh)[interior][:, nodes].tocsr()
+        from skfem_nem.basis.two_level import nested_prolongation
+        P = nested_prolongation(basis)[interior][:, nodes].tocsr()
     return A[interior][:, interior].tocsr(), b[interior], P
-
-
-def prolongation(basis, mesh) -> sp.csr_matrix:
-    """Nodal values of a linear natural-neighbour function -> the quadratic dofs that
-    reproduce it: nodal dofs the values, edge dofs the averages of their two nodes."""
-    n, ne = mesh.p.shape[1], mesh.facets.shape[1]
-    rows = np.r_[basis.nodal_dofs[0], basis.facet_dofs[0], basis.facet_dofs[0]]
-    cols = np.r_[np.arange(n), mesh.facets[0], mesh.facets[1]]
-    vals = np.r_[np.ones(n), np.full(2 * ne, 0.5)]
-    return sp.csr_matrix((vals, (rows, cols)), shape=(basis.N, n))
-
-
-class TwoLevel:
-    """Chebyshev smoothing on A, the Galerkin coarse matrix on the nodes (one SA V-cycle,
-    or an exact solve), Chebyshev again: a symmetric preconditioner for CG."""
-
-    def __init__(self, A, P, degree: int, exact: bool):
-        import pyamg
-        from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
-        from pyamg.util.linalg import approximate_spectral_radius
-        self.A, self.P, self.R = A, P, P.T.tocsr()
-        self.dinv = 1.0 / A.diagonal()
-        rho = approximate_spectral_radius(sp.diags(self.dinv) @ A)
-        self.coef = -chebyshev_polynomial_coefficients(CHEB_LOWER * rho, CHEB_UPPER * rho,
-                                                       degree)[:-1]
-        Ac = (self.R @ A @ P).tocsr()
-        if exact:
-            self.coarse = spla.splu(Ac.tocsc()).solve
-        else:
-            ml = pyamg.smoothed_aggregation_solver(Ac, symmetry="symmetric",
-                                                   max_coarse=MAX_COARSE)
-            self.coarse = lambda r: ml.solve(r, maxiter=1, cycle="V", tol=1e-30)
-
-    def smooth(self, x, b):
-        r = self.dinv * (b - self.A @ x)
-        h = self.coef[0] * r
-        for c in self.coef[1:]:
-            h = c * r + self.dinv * (self.A @ h)
-        return x + h
-
-    def __call__(self, b):
-        x = self.smooth(np.zeros_like(b), b)
-        x = x + self.P @ self.coarse(self.R @ (b - self.A @ x))
-        return self.smooth(x, b)
 
 
 def sa(A):
@@ -131,8 +87,10 @@ def pcg(A, b, make) -> dict:
 
 
 def row(n: int, degree: int, exact: bool, sa_below: int) -> list:
+    from skfem_nem.basis.two_level import TwoLevelPreconditioner
     A, b, P = problem(n, True)
-    out = [("two-level", A, pcg(A, b, lambda M: TwoLevel(M, P, degree, exact)))]
+    coarse = "direct" if exact else "sa"
+    out = [("two-level", A, pcg(A, b, lambda M: TwoLevelPreconditioner(M, P, degree, coarse)))]
     if A.shape[0] < sa_below:
         out.append(("SA", A, pcg(A, b, sa)))
     A2, b2, _ = problem(n, False)
@@ -143,7 +101,7 @@ def row(n: int, degree: int, exact: bool, sa_below: int) -> list:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--nodes", type=int, nargs="+", default=[2000, 8000, 32000])
-    ap.add_argument("--degree", type=int, default=3)
+    ap.add_argument("--degree", type=int, default=5)
     ap.add_argument("--exact-coarse", action="store_true")
     ap.add_argument("--sa-below", type=int, default=40000,
                     help="run SA on the whole quadratic matrix below this many unknowns")

@@ -16,7 +16,7 @@ This module only re-exports the public names.
 """
 from .basis import (ElementNaturalNeighbour, ElementNaturalNeighbour2, ElementTetNaturalNeighbour,
                     NaturalNeighbourBasis, NaturalNeighbourFacetBasis,
-                    restore_scikit_fem_assembly)
+                    natural_neighbour_solver, restore_scikit_fem_assembly)
 from .coordinates import (NaturalNeighbourInterpolator, estimate_gradients, laplace_coordinates,
                           natural_neighbour_coordinates, natural_neighbour_to_grid,
                           sibson_coordinates)
@@ -32,6 +32,7 @@ __all__ = [
     "ElementTetNaturalNeighbour",
     "NaturalNeighbourBasis",
     "NaturalNeighbourFacetBasis",
+    "natural_neighbour_solver",
     "delaunay_mesh",
     "LagrangianMesh",
     "LagrangianMesh3D",

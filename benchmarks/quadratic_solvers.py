@@ -8,7 +8,8 @@ the average of its nodes' (``skfem_nem.basis.two_level``), which interpolate the
 reproduce linear fields:
 
 * ``two-level``: ``TwoLevelPreconditioner``, Chebyshev smoothing (degree ``--degree``,
-  Jacobi-scaled) on the quadratic matrix, the Galerkin product ``P^T A P`` on the nodes as
+  preconditioned by the node stars, ``natural_neighbour_solver``'s, or by Jacobi) on the
+  quadratic matrix, the Galerkin product ``P^T A P`` on the nodes as
   coarse matrix, solved by one V-cycle of pyamg's smoothed aggregation (or exactly,
   ``--exact-coarse``);
 * ``SA``: one V-cycle of pyamg's smoothed aggregation on the whole quadratic matrix;
@@ -19,7 +20,7 @@ Each preconditions CG on ``-Laplace u = 2 pi^2 sin(pi x) sin(pi y)`` on the unit
 1e-8. Printed: unknowns, entries per row, CG iterations and the set-up and solve seconds of
 each (warm: a small problem runs first, so numba's kernels are loaded before).
 
-Run ``python benchmarks/quadratic_solvers.py [--nodes 2000 8000 32000] [--degree 5]``.
+Run ``python benchmarks/quadratic_solvers.py [--nodes 2000 8000 32000] [--degree 3]``.
 """
 from __future__ import annotations
 
@@ -58,13 +59,14 @@ def problem(n: int, quadratic: bool):
              else Basis(mesh, ElementTriP2()))
     A, b = laplace.assemble(basis), load.assemble(basis)
     interior = basis.complement_dofs(basis.get_dofs().all())
-    P = None
+    P = stars = None
     if quadratic:
+        from skfem_nem.basis.two_level import nested_prolongation, star_dofs
         boundary = np.unique(mesh.facets[:, mesh.boundary_facets()])
         nodes = np.setdiff1d(np.arange(mesh.p.shape[1]), boundary)
-        from skfem_nem.basis.two_level import nested_prolongation
         P = nested_prolongation(basis)[interior][:, nodes].tocsr()
-    return A[interior][:, interior].tocsr(), b[interior], P
+        stars = star_dofs(basis, interior)
+    return A[interior][:, interior].tocsr(), b[interior], P, stars
 
 
 def sa(A):
@@ -87,13 +89,19 @@ def pcg(A, b, make) -> dict:
 
 
 def row(n: int, degree: int, exact: bool, sa_below: int) -> list:
-    from skfem_nem.basis.two_level import TwoLevelPreconditioner
-    A, b, P = problem(n, True)
+    from skfem_nem.basis.two_level import TwoLevelPreconditioner, star_smoother
+    A, b, P, stars = problem(n, True)
     coarse = "direct" if exact else "sa"
-    out = [("two-level", A, pcg(A, b, lambda M: TwoLevelPreconditioner(M, P, degree, coarse)))]
+
+    def two_level(M, smoother):
+        return TwoLevelPreconditioner(M, P, degree, coarse,
+                                      star_smoother(M, *stars) if smoother else None)
+
+    out = [("two-level, stars", A, pcg(A, b, lambda M: two_level(M, True))),
+           ("two-level, Jacobi", A, pcg(A, b, lambda M: two_level(M, False)))]
     if A.shape[0] < sa_below:
         out.append(("SA", A, pcg(A, b, sa)))
-    A2, b2, _ = problem(n, False)
+    A2, b2, _, _ = problem(n, False)
     out.append(("P2 SA", A2, pcg(A2, b2, sa)))
     return out
 
@@ -101,7 +109,7 @@ def row(n: int, degree: int, exact: bool, sa_below: int) -> list:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--nodes", type=int, nargs="+", default=[2000, 8000, 32000])
-    ap.add_argument("--degree", type=int, default=5)
+    ap.add_argument("--degree", type=int, default=3)
     ap.add_argument("--exact-coarse", action="store_true")
     ap.add_argument("--sa-below", type=int, default=40000,
                     help="run SA on the whole quadratic matrix below this many unknowns")

@@ -10,9 +10,12 @@ of their two nodes. It interpolates the nodal values and reproduces linear field
 a coarse space must; it is not the linear natural-neighbour function of the values (pairs of
 natural neighbours without an edge take their polar values through a triangle, which only
 for a linear field gives the average). The Galerkin product ``P^T A P`` is the coarse
-matrix, and :class:`TwoLevelPreconditioner` combines Chebyshev smoothing on
-the quadratic matrix with one smoothed-aggregation V-cycle on the coarse one. As CG's
-preconditioner it takes about P2's iterations with pyamg (docs/quadratic.md).
+matrix. The smoother must take what Jacobi leaves: a node's edge dofs can oscillate at
+little cost in energy, so each node's star (its dof and its edges' dofs) is solved as one
+block (:func:`star_smoother`, overlapping additive Schwarz) inside Chebyshev.
+:class:`TwoLevelPreconditioner` combines the two, with one smoothed-aggregation V-cycle on
+the coarse matrix. As CG's preconditioner it takes fewer iterations than P2 with pyamg
+(docs/quadratic.md).
 
 :func:`natural_neighbour_solver` makes it a solver for scikit-fem's ``solve``::
 
@@ -25,18 +28,29 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from numba import njit
 
-__all__ = ["nested_prolongation", "TwoLevelPreconditioner", "natural_neighbour_solver",
-           "CHEBYSHEV_DEGREE", "SOLVER_TOL"]
+__all__ = ["nested_prolongation", "star_dofs", "star_smoother", "TwoLevelPreconditioner",
+           "natural_neighbour_solver", "CHEBYSHEV_DEGREE", "SOLVER_TOL"]
 
-# degree of the Chebyshev smoother on the quadratic matrix: 5 took 34 / 44 / 67 CG iterations
-# at 8,000 / 32,000 / 128,000 unknowns against 46 / 61 / 83 with 3, in about the same time
-CHEBYSHEV_DEGREE = 5
+# degree of the Chebyshev smoother on the quadratic matrix, preconditioned by the node stars
+# (star_smoother). With Jacobi in place of the stars, degree 5 took 34 / 44 / 67 CG
+# iterations at 8,000 / 32,000 / 128,000 unknowns (3: 46 / 61 / 83): the cheap oscillating
+# patterns of a node's edge dofs are what Jacobi leaves and the stars take
+CHEBYSHEV_DEGREE = 3
 # the smoother's interval, relative to the spectral radius of the Jacobi-scaled matrix
 # (pyamg's own Chebyshev bounds)
 CHEBYSHEV_BOUNDS = (1.0 / 30.0, 1.1)
-# coarsest level of the smoothed aggregation on the coarse matrix (solved directly there)
+# coarsest level of the smoothed aggregation on the coarse matrix (solved directly there), its
+# strength of connection and smoother: the coarse matrix has some 42 entries a row, and
+# keeping them all coarsened 31,812 nodes to 1,679 in one level and took 36 CG iterations at
+# 128,000 unknowns; theta 0.1 coarsens to 6,856 and took 26 (0.25: 112); Chebyshev as for the
+# viscous blocks (models.stokes_amg)
 MAX_COARSE = 500
+COARSE_STRENGTH = ("symmetric", {"theta": 0.1})
+COARSE_SMOOTHER = ("chebyshev", {"degree": 2})
+# power iterations of the spectral-radius estimate of the star-preconditioned matrix
+POWER_STEPS = 30
 # CG's relative residual, and its iteration limit, by default
 SOLVER_TOL = 1e-8
 SOLVER_MAXITER = 5000
@@ -65,16 +79,89 @@ def nested_prolongation(basis) -> sp.csr_matrix:
                          shape=(basis.N, ncomp * n))
 
 
+def star_dofs(basis, free: np.ndarray) -> tuple:
+    """``(ptr, idx)``: the star of node i, ``idx[ptr[i]:ptr[i + 1]]``, holds the free dofs
+    (positions in ``free``) of node i and of the edges at i, every component; stars with no
+    free dof are left out."""
+    nodal, facet = np.atleast_2d(basis.nodal_dofs), np.atleast_2d(basis.facet_dofs)
+    ends = np.asarray(basis.mesh.facets)
+    n = nodal.shape[1]
+    where = np.full(basis.N, -1, np.int64)
+    where[free] = np.arange(free.size)
+    owner = np.concatenate([np.tile(np.arange(n), nodal.shape[0]),
+                            np.tile(ends[0], facet.shape[0]), np.tile(ends[1], facet.shape[0])])
+    dofs = where[np.concatenate([nodal.ravel(), facet.ravel(), facet.ravel()])]
+    keep = dofs >= 0
+    owner, dofs = owner[keep], dofs[keep]
+    order = np.argsort(owner, kind="stable")
+    counts = np.bincount(owner, minlength=n)
+    counts = counts[counts > 0]
+    ptr = np.zeros(counts.size + 1, np.int64)
+    np.cumsum(counts, out=ptr[1:])
+    return ptr, dofs[order]
+
+
+@njit(cache=True)
+def _star_inverses(ptr, idx, indptr, indices, data, n, rows, cols, vals):
+    """The inverse of A's block on each star, written as COO entries (star after star)."""
+    at = np.full(n, -1, np.int64)
+    o = 0
+    for s in range(ptr.shape[0] - 1):
+        m = ptr[s + 1] - ptr[s]
+        for a in range(m):
+            at[idx[ptr[s] + a]] = a
+        block = np.zeros((m, m))
+        for a in range(m):
+            r = idx[ptr[s] + a]
+            for k in range(indptr[r], indptr[r + 1]):
+                b = at[indices[k]]
+                if b >= 0:
+                    block[a, b] = data[k]
+        inv = np.linalg.inv(block)
+        for a in range(m):
+            for b in range(m):
+                rows[o] = idx[ptr[s] + a]
+                cols[o] = idx[ptr[s] + b]
+                vals[o] = 0.5 * (inv[a, b] + inv[b, a])
+                o += 1
+        for a in range(m):
+            at[idx[ptr[s] + a]] = -1
+
+
+def star_smoother(A: sp.spmatrix, ptr: np.ndarray, idx: np.ndarray) -> sp.csr_matrix:
+    """``B = sum_s R_s^T (A_ss)^-1 R_s`` over the stars ``(ptr, idx)`` (:func:`star_dofs`):
+    the additive Schwarz preconditioner of the overlapping node stars, symmetric."""
+    A = sp.csr_matrix(A)
+    nnz = int(np.sum(np.diff(ptr) ** 2))
+    rows, cols = np.empty(nnz, np.int64), np.empty(nnz, np.int64)
+    vals = np.empty(nnz)
+    _star_inverses(ptr, idx, A.indptr.astype(np.int64), A.indices.astype(np.int64),
+                   A.data.astype(np.float64), A.shape[0], rows, cols, vals)
+    return sp.csr_matrix((vals, (rows, cols)), shape=A.shape)
+
+
+def _spectral_radius(A, B) -> float:
+    """Largest eigenvalue of ``B A`` (both symmetric positive definite) by power iteration
+    from a fixed start."""
+    x = np.random.default_rng(0).normal(size=A.shape[0])
+    lam = 0.0
+    for _ in range(POWER_STEPS):
+        y = B @ (A @ x)
+        lam = float(np.linalg.norm(y) / np.linalg.norm(x))
+        x = y / np.linalg.norm(y)
+    return lam
+
+
 class TwoLevelPreconditioner:
-    """Chebyshev smoothing on ``A`` (Jacobi-scaled, ``degree``), the coarse correction with
-    ``P^T A P`` (``coarse``: ``"sa"``, one V-cycle of pyamg's smoothed aggregation, or
-    ``"direct"``, a sparse LU), smoothing again: symmetric, for CG. Call it on a residual."""
+    """Chebyshev smoothing on ``A`` (``degree``), preconditioned by ``smoother`` (a sparse
+    ``B``, e.g. :func:`star_smoother`; None: Jacobi), the coarse correction with ``P^T A P``
+    (``coarse``: ``"sa"``, one V-cycle of pyamg's smoothed aggregation, or ``"direct"``, a
+    sparse LU), smoothing again: symmetric, for CG. Call it on a residual."""
 
     def __init__(self, A: sp.spmatrix, P: sp.spmatrix, degree: int = CHEBYSHEV_DEGREE,
-                 coarse: str = "sa"):
+                 coarse: str = "sa", smoother: Optional[sp.spmatrix] = None):
         import pyamg
         from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
-        from pyamg.util.linalg import approximate_spectral_radius
         if coarse not in ("sa", "direct"):
             raise ValueError(f"coarse must be 'sa' or 'direct', got {coarse!r}")
         self.A, self.P = sp.csr_matrix(A), sp.csr_matrix(P)
@@ -83,24 +170,25 @@ class TwoLevelPreconditioner:
         if not (d > 0).all():
             raise ValueError(f"the matrix has {int((d <= 0).sum())} diagonal entries <= 0: "
                              f"the two-level solver is for symmetric positive definite ones")
-        self.dinv = 1.0 / d
-        rho = approximate_spectral_radius(sp.diags(self.dinv) @ self.A)
+        self.B = sp.diags(1.0 / d).tocsr() if smoother is None else sp.csr_matrix(smoother)
+        rho = _spectral_radius(self.A, self.B)
         lo, hi = CHEBYSHEV_BOUNDS
         self.coef = -chebyshev_polynomial_coefficients(lo * rho, hi * rho, degree)[:-1]
         Ac = (self.R @ self.A @ self.P).tocsr()
         if coarse == "direct":
             self.coarse = spla.splu(Ac.tocsc()).solve
         else:
-            ml = pyamg.smoothed_aggregation_solver(Ac, symmetry="symmetric",
-                                                   max_coarse=MAX_COARSE)
+            ml = pyamg.smoothed_aggregation_solver(
+                Ac, symmetry="symmetric", max_coarse=MAX_COARSE, strength=COARSE_STRENGTH,
+                presmoother=COARSE_SMOOTHER, postsmoother=COARSE_SMOOTHER)
             self.coarse = lambda r: ml.solve(r, maxiter=1, cycle="V", tol=1e-30)
 
     def smooth(self, x: np.ndarray, b: np.ndarray) -> np.ndarray:
         """One Chebyshev step for ``A x = b`` from ``x``."""
-        r = self.dinv * (b - self.A @ x)
+        r = self.B @ (b - self.A @ x)
         h = self.coef[0] * r
         for c in self.coef[1:]:
-            h = c * r + self.dinv * (self.A @ h)
+            h = c * r + self.B @ (self.A @ h)
         return x + h
 
     def __call__(self, b: np.ndarray) -> np.ndarray:
@@ -124,6 +212,7 @@ def natural_neighbour_solver(basis, D: Optional[np.ndarray] = None, tol: float =
     free = np.setdiff1d(np.arange(basis.N), D)
     nodal = np.atleast_2d(basis.nodal_dofs).ravel()          # column c n + i's nodal dof
     PI = P[free][:, np.isin(nodal, free)].tocsr()
+    stars = star_dofs(basis, free)
 
     def solver(A, b, **kwargs):
         if kwargs:
@@ -131,7 +220,7 @@ def natural_neighbour_solver(basis, D: Optional[np.ndarray] = None, tol: float =
         if A.shape != (free.size, free.size):
             raise ValueError(f"the matrix is {A.shape[0]} x {A.shape[1]}, the basis has "
                              f"{free.size} free dofs: condense it with the same D")
-        M = TwoLevelPreconditioner(A, PI, degree)
+        M = TwoLevelPreconditioner(A, PI, degree, smoother=star_smoother(A, *stars))
         its = [0]
         x, info = spla.cg(A, b, M=spla.LinearOperator(A.shape, matvec=M, dtype=float),
                           rtol=tol, maxiter=maxiter,

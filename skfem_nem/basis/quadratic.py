@@ -198,19 +198,12 @@ def _through_triangle(mesh, i, j, table):
     i whose angle contains the direction to j (else the one with the smallest
     weights): (pair k, function, coefficient) triplets."""
     ptr, tris = _node_triangles(mesh)
-    count = ptr[i + 1] - ptr[i]
-    pid = np.repeat(np.arange(i.size), count)
-    T = tris[ptr[i][pid] + np.arange(pid.size) - np.repeat(np.cumsum(count) - count, count)]
-    tv = mesh.t[:, T]
-    at = np.argmax(tv == i[pid], axis=0)
-    cand = np.arange(T.size)
-    a, b = tv[(at + 1) % 3, cand], tv[(at + 2) % 3, cand]
-    beta, gamma = _weights(mesh.p, i[pid], a, b, j[pid])
-    size = np.maximum(np.abs(beta), np.abs(gamma))
-    inside = (beta >= -SECTOR_TOL) & (gamma >= -SECTOR_TOL)
-    order = np.lexsort((size, ~inside, pid))
-    best = order[np.r_[True, pid[order][1:] != pid[order][:-1]]]
-    be, ga, a, b = beta[best], gamma[best], a[best], b[best]
+    i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
+    a, b = np.empty(i.size, np.int64), np.empty(i.size, np.int64)
+    be, ga = np.empty(i.size), np.empty(i.size)
+    _best_triangles(np.ascontiguousarray(mesh.p, dtype=np.float64),
+                    np.ascontiguousarray(mesh.t, dtype=np.int64), ptr, tris.astype(np.int64),
+                    i, j, a, b, be, ga)
     nv = mesh.p.shape[1]
     e_a = edge_index(mesh, np.minimum(i, a), np.maximum(i, a), table)
     e_b = edge_index(mesh, np.minimum(i, b), np.maximum(i, b), table)
@@ -221,8 +214,39 @@ def _through_triangle(mesh, i, j, table):
             np.concatenate([alpha - 0.5 * (be + ga), -0.5 * be, -0.5 * ga, 2 * be, 2 * ga]))
 
 
+@njit(cache=True)
+def _best_triangles(p, t, ptr, tris, i, j, a_out, b_out, beta_out, gamma_out):
+    """For each pair k, the triangle (i[k], a, b) at i[k] in which x_j has barycentric
+    weights (beta, gamma) of a and b: the first (in the order of ``tris``) whose angle
+    at i holds the direction to j (both weights >= -SECTOR_TOL), else the one with the
+    smallest larger weight; among those inside, the smallest too (ties: the first). A
+    loop over each node's few triangles (it was a sort of all candidates, 0.55 s of a
+    0.57 s pair matrix at 8,000 nodes)."""
+    for k in range(i.shape[0]):
+        n = i[k]
+        best_in, best_size = False, np.inf
+        for c in range(ptr[n], ptr[n + 1]):
+            tri = tris[c]
+            at = 0
+            while t[at, tri] != n:
+                at += 1
+            a, b = t[(at + 1) % 3, tri], t[(at + 2) % 3, tri]
+            beta, gamma = _weights(p, n, a, b, j[k])
+            size = max(abs(beta), abs(gamma))
+            if size != size:
+                size = np.inf                   # a degenerate triangle sorts last
+            inside = beta >= -SECTOR_TOL and gamma >= -SECTOR_TOL
+            if c == ptr[n] or (inside and not best_in) or (inside == best_in
+                                                          and size < best_size):
+                best_in, best_size = inside, size
+                a_out[k], b_out[k], beta_out[k], gamma_out[k] = a, b, beta, gamma
+
+
+@njit(cache=True)
 def _weights(p, i, a, b, j):
     """Barycentric weights (of a and b) of x_j in the triangle (x_i, x_a, x_b)."""
-    ea, eb, r = p[:, a] - p[:, i], p[:, b] - p[:, i], p[:, j] - p[:, i]
-    det = ea[0] * eb[1] - ea[1] * eb[0]
-    return (r[0] * eb[1] - r[1] * eb[0]) / det, (ea[0] * r[1] - ea[1] * r[0]) / det
+    ea0, ea1 = p[0, a] - p[0, i], p[1, a] - p[1, i]
+    eb0, eb1 = p[0, b] - p[0, i], p[1, b] - p[1, i]
+    r0, r1 = p[0, j] - p[0, i], p[1, j] - p[1, i]
+    det = ea0 * eb1 - ea1 * eb0
+    return (r0 * eb1 - r1 * eb0) / det, (ea0 * r1 - ea1 * r0) / det

@@ -1,6 +1,6 @@
 """A failure of one rank ends every rank (``parallel.failures``): rank 0's output failing,
 rank 1's computation failing, and a step stalled on every rank, each in a run on two ranks
-of its own (``plate_failures.py``), started from the one-rank session of the MPI tests."""
+of its own (``plate_failures.py``), started from the one-rank run of the MPI tests."""
 import os
 import subprocess
 import sys
@@ -30,7 +30,7 @@ def run_two_ranks(mode: str, out: Path) -> subprocess.CompletedProcess:
 @pytest.fixture
 def alone(comm):
     if comm.getSize() > 1:
-        pytest.skip("starts two ranks of its own: run from the one-rank session")
+        pytest.skip("starts two ranks of its own: run from the one-rank run of tests/mpi")
 
 
 def failure_lines(stderr: str) -> list:

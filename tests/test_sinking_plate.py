@@ -556,6 +556,39 @@ def test_step_retried_when_the_plastic_iterations_stall(tmp_path, monkeypatch):
         sim.step(1.0)
 
 
+def test_step_retried_when_a_stokes_solve_does_not_converge(tmp_path, monkeypatch):
+    """A Stokes solve stopped at its iteration limit (SolverNotConverged, raised by the
+    solvers themselves) makes the step retry with half dt, the stress of the step's start
+    restored: a shorter step lowers the visco-elastic contrast."""
+    import skfem_nem.apps.sinking_plate as sp
+    import skfem_nem.models.rheology as rh
+    from skfem_nem.models.stokes_solvers import SolverNotConverged
+    sim = SinkingPlate(PlateConfig(**SMALL), tmp_path)
+    before = {k: v.copy() for k, v in sim.lm.ip_fields.items()}
+    real, calls = rh.solve_stokes_bc, []
+
+    def stalling(*args, **kw):
+        calls.append(1)
+        if len(calls) == 1:
+            raise SolverNotConverged("pressure CG did not converge: 2000 iterations, "
+                                     "relative residual 1.678e-06 > tol 1.0e-06")
+        return real(*args, **kw)
+
+    real_step = sp.vep_step
+    dts = []
+
+    def recording(*args, **kw):
+        dts.append(args[3])
+        for k, v in before.items():                   # the start's stress on every try
+            np.testing.assert_array_equal(sim.lm.ip_fields[k], v)
+        return real_step(*args, **kw)
+
+    monkeypatch.setattr(rh, "solve_stokes_bc", stalling)
+    monkeypatch.setattr(sp, "vep_step", recording)
+    row = sim.step(2.0)
+    assert dts == [2.0, 1.0] and row["retries"] == 1 and sim.lm.time == pytest.approx(1.0)
+
+
 def test_an_unconverged_move_is_retried_down_to_min_dt_then_the_run_stops(tmp_path, capsys,
                                                                            monkeypatch):
     """A predictor-corrector that does not converge is never accepted: the step is retried

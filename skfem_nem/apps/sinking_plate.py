@@ -58,7 +58,7 @@ from .output import (CSVLog, PVDWriter, atomic_write_text, next_output_time,
 from ..models.rheology import (Material, PicardNotConverged, from_ip_field, second_invariant,
                                to_ip_field, vep_step)
 from ..models.stokes import outline_flux, stokes_spaces
-from ..models.stokes_solvers import CACHED_SOLVERS, StokesCache
+from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
 from ..parallel.failures import FailureChannel
 from ..parallel.petsc import ranks_differing, world
 
@@ -283,12 +283,13 @@ class SinkingPlate:
                     # instead of failing at the full step again
                     self.dt_next = min(self.dt_next, 2.0 * dt)
                 return row
-            except (StepTooLong, PicardNotConverged) as err:
+            except (StepTooLong, PicardNotConverged, SolverNotConverged) as err:
                 # the evolving mesh leaves itself unchanged on errors; restore the
                 # integration-point fields that the solve had updated. The plastic
                 # iterations can stall where the yielded region jumps between iterates,
-                # the predictor-corrector where the velocity varies fast: a shorter step
-                # changes less
+                # the predictor-corrector where the velocity varies fast, a Stokes solve
+                # at a large visco-elastic contrast: a shorter step changes less (and
+                # lowers the contrast)
                 self.lm.replace_ip_fields(saved)
                 last = dt / 2 < self.cfg.min_dt
                 if getattr(err, "crossing", None) is not None and (attempt >= retries or last):

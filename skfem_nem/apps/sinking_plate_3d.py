@@ -38,7 +38,7 @@ from ..evolution.stepping import StepTooLong
 from ..geometry.nodesets3d import box_nodes_3d
 from ..models.rheology import PicardNotConverged, second_invariant, vep_step
 from ..models.stokes import stokes_spaces
-from ..models.stokes_solvers import CACHED_SOLVERS, StokesCache
+from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
 from .output import (CSVLog, PVDWriter, atomic_write_text, next_output_time,
                      progress_bar, write_vtu)
 from .plate3d_config import Plate3DConfig, plate_box
@@ -158,7 +158,7 @@ class SinkingPlate3D:
                 return row
             except _TooLong as short:
                 dt = short.stable
-            except (StepTooLong, PicardNotConverged) as err:
+            except (StepTooLong, PicardNotConverged, SolverNotConverged) as err:
                 # the mesh leaves itself as it was on errors, with the stress the step
                 # had set: the stress of the step's start comes back
                 self.lm.ip_fields = dict(saved)

@@ -40,20 +40,13 @@ def problem(n: int, quadratic: bool):
     """The condensed Laplacian and load of the quadratic natural-neighbour basis
     (``quadratic``) or P2 on the Delaunay triangles of n random nodes, with the
     prolongation from the interior nodes (None for P2)."""
-    from skfem import Basis, BilinearForm, ElementTriP2, LinearForm
-    from skfem.helpers import dot, grad
+    from quadratic_cost import forms
+    from skfem import Basis, ElementTriP2
 
     from skfem_nem import ElementNaturalNeighbour2, NaturalNeighbourBasis, delaunay_mesh
     from skfem_nem.geometry.nodesets import box_nodes
 
-    @BilinearForm
-    def laplace(u, v, w):
-        return dot(grad(u), grad(v))
-
-    @LinearForm
-    def load(v, w):
-        return 2 * np.pi ** 2 * np.sin(np.pi * w.x[0]) * np.sin(np.pi * w.x[1]) * v
-
+    laplace, load, _ = forms()                 # the problem of quadratic_cost.py
     mesh = delaunay_mesh(box_nodes(n, seed=0))
     basis = (NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2()) if quadratic
              else Basis(mesh, ElementTriP2()))

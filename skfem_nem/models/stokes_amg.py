@@ -16,7 +16,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit, prange
 
-from .krylov import dot
+from ..basis.two_level import v_cycle
+from .krylov import cg_steps
 
 __all__ = ["AMG_COARSE_SOLVER", "AMG_MAX_COARSE", "AMG_SEED", "AMG_SMOOTHER", "AMG_STRENGTH",
            "ViscousAMG", "amg_cg", "rigid_modes", "scaled_block", "unit_scale",
@@ -64,9 +65,14 @@ def seeded_global_random(seed: int = AMG_SEED):
         np.random.set_state(state)
 
 
-def viscous_amg(problem) -> "ViscousAMG":
-    """Smoothed-aggregation AMG hierarchy of the viscous block (pyamg), with
-    the rigid-body modes as near null space."""
+def viscous_amg(problem):
+    """The multigrid of the viscous block: smoothed-aggregation AMG (pyamg, the
+    rigid-body modes as near null space, :class:`ViscousAMG`), or for the quadratic
+    natural-neighbour velocity the two-level method
+    (:class:`~skfem_nem.models.stokes_two_level.ViscousTwoLevel`)."""
+    if getattr(problem.ubasis, "order", 1) == 2:
+        from .stokes_two_level import ViscousTwoLevel
+        return ViscousTwoLevel(problem.A, problem.ubasis, problem.free)
     three_d = problem.ubasis.mesh.dim() == 3
     return ViscousAMG(problem.A, rigid_modes(problem.ubasis, problem.free),
                       **({"smooth": AMG_SMOOTH_3D} if three_d else {}))
@@ -175,45 +181,8 @@ def amg_cg(ml, A: sp.spmatrix, b: np.ndarray, steps: int) -> np.ndarray:
     """``steps`` conjugate-gradient steps from zero for ``A x = b``, each
     preconditioned by one V-cycle of ``ml``: a better approximation of
     ``A^-1 b`` than as many stationary V-cycles for one product with ``A``
-    more per step."""
-    x = np.zeros_like(b)
-    r = b.copy()
-    z = v_cycle(ml, r)
-    d = z.copy()
-    rz = dot(r, z)
-    for k in range(steps):
-        Ad = A @ d
-        dAd = dot(d, Ad)
-        if not dAd > 0:
-            break
-        alpha = rz / dAd
-        x += alpha * d
-        if k == steps - 1:
-            break
-        r -= alpha * Ad
-        z = v_cycle(ml, r)
-        rz, rz_old = dot(r, z), rz
-        d = z + (rz / rz_old) * d
-    return x
-
-
-def v_cycle(ml, b: np.ndarray) -> np.ndarray:
-    """One AMG V-cycle from zero for ``A x = b`` (pyamg's own preconditioner
-    also computes two norms and a residual per cycle, which are not needed
-    inside a Krylov method)."""
-    levels = ml.levels
-
-    def cycle(k, rhs):
-        lv = levels[k]
-        if k == len(levels) - 1:
-            return ml.coarse_solver(lv.A, rhs)
-        x = np.zeros_like(rhs)
-        lv.presmoother(lv.A, x, rhs)
-        x += lv.P @ cycle(k + 1, lv.R @ (rhs - lv.A @ x))
-        lv.postsmoother(lv.A, x, rhs)
-        return x
-
-    return cycle(0, b)
+    more per step (:func:`~skfem_nem.models.krylov.cg_steps`)."""
+    return cg_steps(A, lambda r: v_cycle(ml, r), b, steps)
 
 
 def velocity_components(ubasis) -> np.ndarray:

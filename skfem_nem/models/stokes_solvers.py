@@ -62,6 +62,7 @@ from .krylov import FGMRES_RESTART, fgmres, norm
 from .stokes_amg import rigid_modes, velocity_components, viscous_amg
 from .stokes_cache import REBUILD_GROWTH, REBUILD_SLACK, StokesCache
 from .stokes_factors import ComponentFactors, ViscousFactor
+from .stokes_two_level import ViscousTwoLevel
 
 __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SolverNotConverged", "SOLVERS",
            "CACHED_SOLVERS",
@@ -93,6 +94,11 @@ MINRES_MAX_RTOL = 0.5
 # outer iterations for 1, 2 and 3 steps at 10,338 nodes (3.7, 3.9 and 4.7 s), 266 and
 # 158 for 1 and 2 at 101,054 nodes, 144 for 3 (54 s against 43 s for 2)
 VISCOUS_CG_STEPS = 2
+# the same for the two-level method of the quadratic natural-neighbour velocity
+# (models.stokes_two_level), whose application costs some seven products with a block of
+# 211 entries a row: SolCx at a contrast of 1e6, 33,242 unknowns: 77 FGMRES iterations and
+# 20 s with one step, 57 and 27 s with two
+TWO_LEVEL_CG_STEPS = 1
 # "schur" keeps the viscous factorisation in its StokesCache for the next solves of the
 # same pattern (False: factorise every solve, as before; benchmarks/scaling.py measures
 # both). Kept, the later Picard iterations of a step take 16-32 FGMRES iterations with the
@@ -499,15 +505,16 @@ def solve_minres(problem: SaddlePointProblem, tol: float, maxiter: int,
     return SaddlePointSolution(x[:n1], p, its, res)
 
 
-def saddle_matvec(problem: SaddlePointProblem) -> Callable:
+def saddle_matvec(problem: SaddlePointProblem, viscous: Optional[Callable] = None) -> Callable:
     """The product with the whole saddle-point matrix (mean-pressure term
-    included)."""
+    included); ``viscous``: the product with the viscous block, if not ``A @``."""
     A, B, S, m, c = problem.A, problem.B, problem.S, problem.m, problem.mean_weight
     n1 = problem.n_velocity
+    viscous = A.__matmul__ if viscous is None else viscous
 
     def matvec(x):
         xu, xp = x[:n1], x[n1:]
-        return np.concatenate([A @ xu + B.T @ xp,
+        return np.concatenate([viscous(xu) + B.T @ xp,
                                B @ xu - S @ xp - c * m * (m @ xp)])
 
     return matvec
@@ -559,23 +566,25 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
     """Flexible GMRES on the whole system, preconditioned by the block upper
     triangle ``[[A, B^T], [0, -S_hat]]^-1``.
 
-    ``A^-1`` is ``VISCOUS_CG_STEPS`` conjugate-gradient steps preconditioned
-    by AMG V-cycles (rigid-body modes as near null space); ``S_hat`` is the
-    lumped 1/eta-weighted pressure mass ``dp`` (on constraint multipliers the
-    Jacobi estimate of ``C A^-1 C^T``). With an exact ``A^-1`` the triangular
-    form leaves the spectrum of the Schur complement against ``S_hat``, whose
-    iterations ``"schur"`` shows to be flat in the mesh size; the consistent
-    weighted mass in place of the lumped one did not lower them at contrasts
-    of 1e4 and more. The CG steps are not a fixed linear map, hence the
-    flexible variant. Stops on the true relative residual of the whole
-    system. ``cache`` (a :class:`StokesCache`) supplies and keeps the
-    hierarchy and the start vector. Records ``info["amg_levels"]``,
+    ``A^-1`` is ``VISCOUS_CG_STEPS`` conjugate-gradient steps preconditioned by AMG V-cycles
+    (rigid-body modes as near null space; for the quadratic natural-neighbour velocity
+    ``TWO_LEVEL_CG_STEPS`` steps of the two-level method); ``S_hat`` is the lumped 1/eta-
+    weighted pressure mass ``dp`` (on constraint multipliers the Jacobi estimate of ``C A^-1
+    C^T``). With an exact ``A^-1`` the triangular form leaves the spectrum of the Schur
+    complement against ``S_hat``, whose iterations ``"schur"`` shows to be flat in the mesh
+    size; the consistent weighted mass in place of the lumped one did not lower them at
+    contrasts of 1e4 and more. The CG steps are not a fixed linear map, hence the flexible
+    variant. Stops on the true relative residual of the whole system. ``cache`` (a
+    :class:`StokesCache`) supplies and keeps the hierarchy and the start vector. Records
+    ``info["amg_levels"]``,
     ``info["amg_rebuilt"]`` and ``info["warm_start"]``.
     """
     cache = StokesCache() if cache is None else cache
     ml, rebuilt = cache.amg(problem)
-    matvec = saddle_matvec(problem)
-    precondition = _triangular_preconditioner(problem, lambda r: ml.cg(r, VISCOUS_CG_STEPS))
+    two_level = isinstance(ml, ViscousTwoLevel)
+    matvec = saddle_matvec(problem, ml.matvec if two_level else None)
+    steps = TWO_LEVEL_CG_STEPS if two_level else VISCOUS_CG_STEPS
+    precondition = _triangular_preconditioner(problem, lambda r: ml.cg(r, steps))
 
     rhs = problem.rhs
     x0 = _warm_start(cache, matvec, rhs)

@@ -67,3 +67,28 @@ def test_the_quadratic_velocity_takes_the_two_level_method(solcx, monkeypatch):
     ml.refresh(2.0 * A)
     assert np.allclose(2.0 * ml.cycle(b), ViscousTwoLevel(A, problem.ubasis,
                                                           problem.free).cycle(b))
+
+
+def test_fgmres_stops_where_rounding_stalls_it(solcx):
+    """Asked for a tolerance below the rounding of the residual, FGMRES with the two-level
+    method stops after a restart cycle that did not halve the residual and says so, instead
+    of running on to maxiter."""
+    from skfem_nem.models.krylov import FGMRES_RESTART
+    from skfem_nem.models.stokes_solvers import SolverNotConverged
+    spaces, ex, _ = solcx
+    with pytest.raises(SolverNotConverged, match="stalled") as err:
+        solve_stokes(spaces, ex.viscosity, ex.force, solver="fgmres", tol=1e-17,
+                     maxiter=20 * FGMRES_RESTART)
+    its = int(str(err.value).split(": ")[1].split()[0])
+    assert its < 5 * FGMRES_RESTART
+
+
+def test_auto_takes_fgmres_for_the_quadratic_velocity_from_its_size(solcx, monkeypatch):
+    import skfem_nem.models.stokes_solvers as solvers
+    spaces, ex, ref = solcx
+    small = solve_stokes(spaces, ex.viscosity, ex.force)
+    assert small.info["solver"] == "schur"
+    monkeypatch.setattr(solvers, "AUTO_FGMRES_UNKNOWNS_NEM2", 1)
+    big = solve_stokes(spaces, ex.viscosity, ex.force, tol=1e-11)
+    assert big.info["solver"] == "fgmres" and big.info["amg_levels"] >= 2
+    assert np.linalg.norm(big.u - ref.u) < 1e-7 * np.linalg.norm(ref.u)

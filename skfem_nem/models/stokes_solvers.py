@@ -99,6 +99,11 @@ VISCOUS_CG_STEPS = 2
 # 211 entries a row: SolCx at a contrast of 1e6, 33,242 unknowns: 77 FGMRES iterations and
 # 20 s with one step, 57 and 27 s with two
 TWO_LEVEL_CG_STEPS = 1
+# with the two-level method, a restart cycle of FGMRES that leaves the true residual above
+# this fraction of the last one's has met the rounding of the residual itself: SolCx at a
+# contrast of 1e6 and 145,820 unknowns went on for 685 iterations at a relative residual of
+# 7.7e-10 against a tol of 1e-10 (at 33,242 unknowns it reached 1e-10 in 75)
+TWO_LEVEL_STALL = 0.5
 # "schur" keeps the viscous factorisation in its StokesCache for the next solves of the
 # same pattern (False: factorise every solve, as before; benchmarks/scaling.py measures
 # both). Kept, the later Picard iterations of a step take 16-32 FGMRES iterations with the
@@ -159,6 +164,13 @@ AUTO_FGMRES_UNKNOWNS = 100_000
 # "fgmres" in 5.3 s (31 iterations), so above this size "auto" takes "fgmres" in 3D at
 # any contrast, with or without a cache
 AUTO_FGMRES_UNKNOWNS_3D = 6_000
+# The quadratic natural-neighbour viscous block (211 entries a row) factorises slowly, and
+# "fgmres" with the two-level method (models.stokes_two_level) needs no factors: SolCx at a
+# contrast of 1e6 (interface as segments), one solve to 1e-8, seconds and peak MB of
+# "schur" / "fgmres", other jobs on the two cores: 8,594 unknowns 2.9 / 3.1 s and 162 /
+# 108 MB, 33,242: 33.0 / 14.4 s and 1,062 / 473 MB (benchmarks/quadratic_stokes.py). So
+# "auto" takes "fgmres" for it from this many velocity unknowns on
+AUTO_FGMRES_UNKNOWNS_NEM2 = 20_000
 
 
 @dataclass
@@ -588,11 +600,13 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
 
     rhs = problem.rhs
     x0 = _warm_start(cache, matvec, rhs)
-    x, its, res = fgmres(matvec, precondition, rhs, x0, tol, maxiter)
+    x, its, res = fgmres(matvec, precondition, rhs, x0, tol, maxiter,
+                         stall=TWO_LEVEL_STALL if two_level else None)
     info.update(amg_levels=ml.n_levels, amg_rebuilt=rebuilt, warm_start=x0 is not None)
     if not res <= tol:
         cache.last_iterations = its  # a failed solve asks for a new hierarchy next time
-        raise SolverNotConverged(f"FGMRES did not converge: {its} iterations (maxiter), relative "
+        why = "maxiter" if its >= maxiter else "stalled: the rounding of the residual"
+        raise SolverNotConverged(f"FGMRES did not converge: {its} iterations ({why}), relative "
                            f"residual {res:.3e} > tol {tol:.1e} (raise maxiter, loosen tol, "
                            f"or use solver='schur', which factorises the viscous block)")
     cache.record(x, its, rebuilt)
@@ -650,9 +664,12 @@ def auto_solver(problem: SaddlePointProblem, cached: bool) -> str:
     of solves with a :class:`StokesCache` (Picard iterations, time steps) the cheaper,
     (in 3D, natural-neighbour velocities take ``"fgmres"`` from
     :data:`AUTO_FGMRES_UNKNOWNS_3D` unknowns on, whatever the contrast and cache),
-    and it is the robust one for the quadratic velocities, Taylor-Hood's P2 (there
-    ``"fgmres"`` did not converge at a contrast of 1e6) and the quadratic natural-neighbour
-    one (SolCx at 1e6, 33,242 unknowns: 202 iterations and 32 s against 44 and 18 s)."""
+    and it is the robust one for Taylor-Hood's P2 (there ``"fgmres"`` did not converge at a
+    contrast of 1e6). The quadratic natural-neighbour velocity takes ``"fgmres"`` (with the
+    two-level method on its viscous block) from :data:`AUTO_FGMRES_UNKNOWNS_NEM2` unknowns
+    on, whatever the contrast and cache."""
+    if isinstance(problem.ubasis, NaturalNeighbourBasis) and problem.ubasis.order == 2:
+        return "fgmres" if problem.n_velocity >= AUTO_FGMRES_UNKNOWNS_NEM2 else "schur"
     nem = isinstance(problem.ubasis, NaturalNeighbourBasis) and problem.ubasis.order == 1
     if nem and problem.ubasis.mesh.dim() == 3:
         return "fgmres" if problem.n_velocity >= AUTO_FGMRES_UNKNOWNS_3D else "schur"

@@ -98,7 +98,8 @@ def table(rows) -> str:
     for r in rows:
         ref = th.get(r["nodes"])
         ratio = ("", "") if ref is None or r is ref else (
-            f"{r['total'] / ref['total']:.1f}", f"{r['peak_mb'] / ref['peak_mb']:.1f}")
+            f"{r['total'] / ref['total']:.1f}",
+            f"{r['peak_mb'] / ref['peak_mb']:.1f}" if ref["peak_mb"] > 0 else "-")
         out.append(f"| {r['nodes']:,} | {r['case']} | {r['unknowns']:,} | {r['iterations']} | "
                    f"{r['basis']:.2f} | {r['assembly']:.2f} | {r['solver']:.2f} | "
                    f"{r['total']:.2f} | {r['peak_mb']:.0f} | {r['u_l2']:.3e} | "

@@ -652,3 +652,17 @@ def test_plate_3d_prints_steps_and_depths(capsys):
     assert all(float(v) > 0 for v in depth[-1].split("|")[2:4])
     assert 0 <= out["worst"] < 1
     assert "largest relative difference" in capsys.readouterr().out
+
+
+def test_quadratic_stokes_measures_both_velocities_on_one_problem():
+    """benchmarks/quadratic_stokes.py: the same SolCx, C-NEM2 with the two-level FGMRES and
+    Taylor-Hood, their errors alike and the ratios in the table computed from the rows."""
+    qs = load_benchmark("quadratic_stokes")
+    rows = [qs.measure(300, case) for case in ("C-NEM2, fgmres", "Taylor-Hood")]
+    nem2, th = rows
+    assert nem2["unknowns"] == th["unknowns"] and nem2["iterations"] > 1
+    assert nem2["u_l2"] < 1.5 * th["u_l2"] and abs(nem2["p_l2"] / th["p_l2"] - 1) < 0.1
+    line = next(x for x in qs.table(rows).splitlines() if "C-NEM2, fgmres" in x)
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert float(cells[-2]) == pytest.approx(nem2["total"] / th["total"], abs=0.06)
+    assert float(cells[-1]) == pytest.approx(nem2["peak_mb"] / th["peak_mb"], abs=0.06)

@@ -55,8 +55,11 @@ COARSE_PROLONGATOR = ("jacobi", {"omega": 4.0 / 3.0})
 # solve on the coarsest level: sparse LU (pyamg's default, a pseudo-inverse by dense SVD,
 # took 6 s of a SolCx solve at 33,242 velocity unknowns)
 COARSEST_SOLVER = "splu"
-# power iterations of the spectral-radius estimate of the star-preconditioned matrix
-POWER_STEPS = 30
+# Lanczos steps of the spectral-radius estimate of the star-preconditioned matrix (one product
+# with the matrix and one with the stars each): at 31,969 unknowns 15 steps gave 5.31 (20: 5.39,
+# converged), where 30 power iterations, twice the products, gave 5.24; the set-up at 127,961
+# unknowns spent 2.2 s of its 8.3 s in those power iterations
+LANCZOS_STEPS = 15
 # CG's relative residual, and its iteration limit, by default
 SOLVER_TOL = 1e-8
 SOLVER_MAXITER = 5000
@@ -147,15 +150,25 @@ def star_smoother(A: sp.spmatrix, ptr: np.ndarray, idx: np.ndarray) -> sp.csr_ma
 
 
 def _spectral_radius(A, B) -> float:
-    """Largest eigenvalue of ``B A`` (both symmetric positive definite) by power iteration
-    from a fixed start."""
-    x = np.random.default_rng(0).normal(size=A.shape[0])
-    lam = 0.0
-    for _ in range(POWER_STEPS):
-        y = B @ (A @ x)
-        lam = float(np.linalg.norm(y) / np.linalg.norm(x))
-        x = y / np.linalg.norm(y)
-    return lam
+    """Largest eigenvalue of ``B A`` (both symmetric positive definite), the largest
+    eigenvalue of the Lanczos matrix of :data:`LANCZOS_STEPS` conjugate-gradient steps
+    preconditioned by ``B`` from a fixed random right side (an estimate from below)."""
+    from scipy.linalg import eigvalsh_tridiagonal
+    r = np.random.default_rng(0).normal(size=A.shape[0])
+    z = B @ r
+    p, rz = z.copy(), float(r @ z)
+    alpha, beta = np.empty(LANCZOS_STEPS), np.empty(LANCZOS_STEPS)
+    for k in range(LANCZOS_STEPS):
+        Ap = A @ p
+        alpha[k] = rz / float(p @ Ap)
+        r = r - alpha[k] * Ap
+        z = B @ r
+        rz_new = float(r @ z)
+        beta[k], rz = rz_new / rz, rz_new
+        p = z + beta[k] * p
+    diagonal = 1.0 / alpha
+    diagonal[1:] += beta[:-1] / alpha[:-1]
+    return float(eigvalsh_tridiagonal(diagonal, np.sqrt(beta[:-1]) / alpha[:-1]).max())
 
 
 class TwoLevelPreconditioner:
@@ -163,11 +176,12 @@ class TwoLevelPreconditioner:
     ``B``, e.g. :func:`star_smoother`; None: Jacobi), the coarse correction with ``P^T A P``
     (``coarse``: ``"sa"``, one V-cycle of pyamg's smoothed aggregation with ``modes`` as its
     near null space, or ``"direct"``, a sparse LU), smoothing again: symmetric, for CG. Call
-    it on a residual."""
+    it on a residual. ``renumber``: the products in a bandwidth-reducing order
+    (:meth:`_bandwidth_order`; ``order``, None without)."""
 
     def __init__(self, A: sp.spmatrix, P: sp.spmatrix, degree: int = CHEBYSHEV_DEGREE,
                  coarse: str = "sa", smoother: Optional[sp.spmatrix] = None,
-                 modes: Optional[np.ndarray] = None):
+                 modes: Optional[np.ndarray] = None, renumber: bool = True):
         from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
         if coarse not in ("sa", "direct"):
             raise ValueError(f"coarse must be 'sa' or 'direct', got {coarse!r}")
@@ -187,14 +201,18 @@ class TwoLevelPreconditioner:
             self.coarse = spla.splu(Ac.tocsc()).solve
         else:
             self.coarse = self._coarse_cycle(Ac, modes)
-        self._bandwidth_order()
+        self.order = None
+        if renumber:
+            self._bandwidth_order()
 
     def _bandwidth_order(self) -> None:
         """Renumber the fine dofs by reverse Cuthill-McKee (``order``; the products with
         ``A``, ``B`` and ``P`` then work in that order): the basis numbers the edge dofs
         after all nodal ones, so a row's entries lie far apart in memory. SolCx at 33,242
         velocity unknowns (211 entries a row): a product with the viscous block took 9.5 ms
-        numbered by the basis, 4.9 ms renumbered."""
+        numbered by the basis, 4.9 ms renumbered; a scalar Laplacian at 31,969 unknowns
+        4.3 ms and 4.7 ms (its set-up spent 1.8 s of 8.3 s renumbering at 127,961), so
+        :class:`TwoLevelSpace` renumbers vector bases only."""
         from scipy.sparse.csgraph import reverse_cuthill_mckee
         order = reverse_cuthill_mckee(self.A, symmetric_mode=True)
         self.order = order.astype(np.int64)
@@ -240,6 +258,8 @@ class TwoLevelPreconditioner:
 
     def in_basis_order(self, f, b: np.ndarray) -> np.ndarray:
         """``f`` (a map of vectors in the renumbered order) on ``b`` in the basis's order."""
+        if self.order is None:
+            return f(b)
         out = np.empty_like(b)
         out[self.order] = f(b[self.order])
         return out
@@ -295,7 +315,8 @@ class TwoLevelSpace:
             raise ValueError(f"the matrix is {A.shape[0]} x {A.shape[1]}, the basis has "
                              f"{self.size} free dofs: condense it with the same D")
         return TwoLevelPreconditioner(A, self.prolongation, self.degree,
-                                      smoother=star_smoother(A, *self.stars), modes=self.modes)
+                                      smoother=star_smoother(A, *self.stars), modes=self.modes,
+                                      renumber=self.modes is not None)
 
 
 def _nodal_rigid_modes(basis) -> np.ndarray:

@@ -20,15 +20,22 @@ Each preconditions CG on ``-Laplace u = 2 pi^2 sin(pi x) sin(pi y)`` on the unit
 1e-8. Printed: unknowns, entries per row, CG iterations and the set-up and solve seconds of
 each (warm: a small problem runs first, so numba's kernels are loaded before).
 
-Run ``python benchmarks/quadratic_solvers.py [--nodes 2000 8000 32000] [--degree 3]``.
+``--linear``: the linear natural-neighbour basis (``ElementNaturalNeighbour``) against P1 on the
+same problem, both with one V-cycle of smoothed aggregation.
+
+Run ``python benchmarks/quadratic_solvers.py [--nodes 2000 8000 32000] [--degree 3] [--linear]``.
 """
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse.linalg as spla
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))    # quadratic_cost: the problem
 
 # CG's relative residual
 TOL = 1e-8
@@ -60,6 +67,33 @@ def problem(n: int, quadratic: bool):
         P = nested_prolongation(basis)[interior][:, nodes].tocsr()
         stars = star_dofs(basis, interior)
     return A[interior][:, interior].tocsr(), b[interior], P, stars
+
+
+def linear_problem(n: int, nem: bool):
+    """The condensed Laplacian and load of the linear natural-neighbour basis (``nem``) or
+    P1 on the Delaunay triangles of n random nodes."""
+    from quadratic_cost import forms
+    from skfem import Basis, ElementTriP1
+
+    from skfem_nem import ElementNaturalNeighbour, NaturalNeighbourBasis, delaunay_mesh
+    from skfem_nem.geometry.nodesets import box_nodes
+
+    laplace, load, _ = forms()
+    mesh = delaunay_mesh(box_nodes(n, seed=0))
+    basis = (NaturalNeighbourBasis(mesh, ElementNaturalNeighbour()) if nem
+             else Basis(mesh, ElementTriP1()))
+    A, b = laplace.assemble(basis), load.assemble(basis)
+    interior = basis.complement_dofs(basis.get_dofs().all())
+    return A[interior][:, interior].tocsr(), b[interior]
+
+
+def linear_row(n: int) -> list:
+    """The linear natural-neighbour matrix and P1's, each with one SA V-cycle."""
+    out = []
+    for name, nem in (("NEM (linear) SA", True), ("P1 SA", False)):
+        A, b = linear_problem(n, nem)
+        out.append((name, A, pcg(A, b, sa)))
+    return out
 
 
 def sa(A):
@@ -106,16 +140,21 @@ def main(argv=None):
     ap.add_argument("--exact-coarse", action="store_true")
     ap.add_argument("--sa-below", type=int, default=40000,
                     help="run SA on the whole quadratic matrix below this many unknowns")
+    ap.add_argument("--linear", action="store_true",
+                    help="the linear natural-neighbour basis against P1 instead (SA on both)")
     a = ap.parse_args(argv)
-    row(300, a.degree, a.exact_coarse, a.sa_below)    # warm-up: kernels loaded
+    rows = (lambda n: linear_row(n)) if a.linear else (
+        lambda n: row(n, a.degree, a.exact_coarse, a.sa_below))
+    rows(300)    # warm-up: kernels loaded
     coarse = "exact" if a.exact_coarse else "one SA V-cycle"
     print("| nodes | method | unknowns | entries a row | CG iterations | set-up s | solve s |"
           "\n|---|---|---|---|---|---|---|")
     for n in a.nodes:
-        for name, M, r in row(n, a.degree, a.exact_coarse, a.sa_below):
+        for name, M, r in rows(n):
             print(f"| {n:,} | {name} | {M.shape[0]:,} | {M.nnz / M.shape[0]:.0f} | {r['its']} "
                   f"| {r['setup']:.2f} | {r['solve']:.2f} |", flush=True)
-    print(f"\nTwo-level: Chebyshev degree {a.degree}, coarse level {coarse}.")
+    if not a.linear:
+        print(f"\nTwo-level: Chebyshev degree {a.degree}, coarse level {coarse}.")
 
 
 if __name__ == "__main__":

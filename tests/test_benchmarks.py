@@ -666,3 +666,22 @@ def test_quadratic_stokes_measures_both_velocities_on_one_problem():
     cells = [c.strip() for c in line.strip("|").split("|")]
     assert float(cells[-2]) == pytest.approx(nem2["total"] / th["total"], abs=0.06)
     assert float(cells[-1]) == pytest.approx(nem2["peak_mb"] / th["peak_mb"], abs=0.06)
+
+
+def test_quadratic_solvers_prints_the_iterations_of_each_method(capsys):
+    """benchmarks/quadratic_solvers.py: per size, the two-level method (stars, Jacobi) on the
+    quadratic matrix beside P2's SA, and with --linear the linear natural-neighbour matrix
+    beside P1's; the stars take fewer iterations than Jacobi, and every method converges."""
+    qs = load_benchmark("quadratic_solvers")
+    qs.main(["--nodes", "600"])
+    qs.main(["--nodes", "600", "--linear"])
+    rows = {}
+    for line in capsys.readouterr().out.splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if len(cells) == 7 and cells[0] == "600":
+            rows[cells[1]] = (int(cells[2].replace(",", "")), int(cells[4]))
+    assert set(rows) == {"two-level, stars", "two-level, Jacobi", "SA", "P2 SA",
+                         "NEM (linear) SA", "P1 SA"}
+    assert rows["two-level, stars"][1] < rows["two-level, Jacobi"][1]
+    assert rows["two-level, stars"][0] == rows["P2 SA"][0]
+    assert rows["NEM (linear) SA"][0] == rows["P1 SA"][0]

@@ -30,6 +30,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from .rigid_modes import rigid_modes
+
 __all__ = ["nested_prolongation", "star_dofs", "star_smoother", "TwoLevelPreconditioner",
            "TwoLevelSpace", "natural_neighbour_solver", "v_cycle", "CHEBYSHEV_DEGREE",
            "SOLVER_TOL"]
@@ -301,8 +303,9 @@ class TwoLevelSpace:
         kept = np.isin(nodal, self.free)
         self.prolongation = P[self.free][:, kept].tocsr()
         self.stars = star_dofs(basis, self.free)
-        self.modes = _nodal_rigid_modes(basis)[kept] if nodal.size > basis.mesh.p.shape[1] \
-            else None
+        # column j of the prolongation is the nodal dof nodal[kept][j]: its rigid modes
+        self.modes = (rigid_modes(basis, nodal[kept]) if nodal.size > basis.mesh.p.shape[1]
+                      else None)
 
     @property
     def size(self) -> int:
@@ -317,22 +320,6 @@ class TwoLevelSpace:
         return TwoLevelPreconditioner(A, self.prolongation, self.degree,
                                       smoother=star_smoother(A, *self.stars), modes=self.modes,
                                       renumber=self.modes is not None)
-
-
-def _nodal_rigid_modes(basis) -> np.ndarray:
-    """(components x nodes, modes) rigid-body modes of the nodal values of a vector basis
-    (column ``c n + i``: node i, component c): the translations, then the rotations in the
-    (0, 1) plane (and (1, 2), (2, 0) in 3D)."""
-    x = np.asarray(basis.mesh.p)
-    d, n = x.shape
-    pairs = [(0, 1)] if d == 2 else [(0, 1), (1, 2), (2, 0)]
-    modes = np.zeros((d * n, d + len(pairs)))
-    for c in range(d):
-        modes[c * n:(c + 1) * n, c] = 1.0
-    for k, (a, b) in enumerate(pairs):
-        modes[a * n:(a + 1) * n, d + k] = -x[b]
-        modes[b * n:(b + 1) * n, d + k] = x[a]
-    return modes
 
 
 def natural_neighbour_solver(basis, D: Optional[np.ndarray] = None, tol: float = SOLVER_TOL,

@@ -1,5 +1,6 @@
 """Krylov methods and vector products shared by the Stokes solvers and their
-multigrid: restarted flexible GMRES and BLAS-free dot products.
+multigrid: restarted flexible GMRES, restarted MINRES, a few preconditioned CG steps and
+BLAS-free dot products.
 
 Kept apart from :mod:`skfem_nem.models.stokes_solvers` because they are linear
 algebra on vectors and callables alone, with no knowledge of the Stokes blocks;
@@ -11,8 +12,10 @@ from typing import Callable, Optional
 
 import numpy as np
 import scipy.linalg as sla
+import scipy.sparse.linalg as spla
 
-__all__ = ["FGMRES_RESTART", "cg_steps", "dot", "fgmres", "norm"]
+__all__ = ["FGMRES_RESTART", "MINRES_MAX_RTOL", "MINRES_TOL_FACTOR", "cg_steps", "dot", "fgmres",
+           "norm", "restarted_minres"]
 
 # FGMRES restart length: it keeps two vectors of the system's size per iteration
 # up to this many, so memory stays linear in the unknowns (730 MB at 300,000
@@ -20,6 +23,11 @@ __all__ = ["FGMRES_RESTART", "cg_steps", "dot", "fgmres", "norm"]
 # a contrast of 1e6 a restart every 50 iterations stalled (no convergence in 760),
 # every 150 converged in 285
 FGMRES_RESTART = 150
+# MINRES stops when its preconditioned residual norm is below this factor
+# times tol (its own estimate drifts from the true residual; stokes_solvers.solve_minres)
+MINRES_TOL_FACTOR = 10
+# MINRES restart asks for at most this relative reduction of the residual
+MINRES_MAX_RTOL = 0.5
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> float:
@@ -120,3 +128,32 @@ def fgmres(matvec: Callable, precondition: Callable, b: np.ndarray, x0: Optional
         y = sla.solve_triangular(H[:k, :k], g[:k], check_finite=False)
         x += np.einsum("i,ij->j", y, Z[:k])
         r = b - matvec(x)
+
+
+def restarted_minres(matvec: Callable, K, M, rhs: np.ndarray, tol: float, maxiter: int):
+    """MINRES restarted on the true residual.
+
+    MINRES's own residual estimate drifts from the true one on these badly
+    conditioned systems: restart it on the true residual until the
+    preconditioned residual norm (the norm MINRES minimises) meets
+    ``MINRES_TOL_FACTOR * tol`` or ``maxiter`` iterations are spent. Returns
+    the solution, that relative norm, the number of restarts and of
+    iterations.
+    """
+    count = [0]
+    bnorm = float(np.sqrt(abs(rhs @ M.matvec(rhs)))) or 1.0
+    x = np.zeros_like(rhs)
+    r = rhs.copy()
+    res_m = 1.0
+    restarts = 0
+    while count[0] < maxiter:
+        res_m = float(np.sqrt(abs(r @ M.matvec(r)))) / bnorm
+        if res_m <= MINRES_TOL_FACTOR * tol:
+            break
+        dx, _ = spla.minres(K, r, M=M, rtol=min(MINRES_MAX_RTOL, MINRES_MAX_RTOL * tol / res_m),
+                            maxiter=maxiter - count[0],
+                            callback=lambda *_: count.__setitem__(0, count[0] + 1))
+        x = x + dx
+        r = rhs - matvec(x)
+        restarts += 1
+    return x, res_m, restarts, count[0]

@@ -58,7 +58,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..basis import NaturalNeighbourBasis
-from .krylov import FGMRES_RESTART, fgmres, norm
+from .krylov import FGMRES_RESTART, MINRES_TOL_FACTOR, fgmres, norm, restarted_minres
 from .stokes_amg import rigid_modes, velocity_components, viscous_amg
 from .stokes_cache import REBUILD_GROWTH, REBUILD_SLACK, StokesCache
 from .stokes_factors import ComponentFactors, ViscousFactor
@@ -82,11 +82,6 @@ class SolverNotConverged(RuntimeError):
 INNER_RTOL = 1e-3
 # iteration limit of each inner AMG-CG solve of the viscous block
 INNER_MAXITER = 1000
-# MINRES stops when its preconditioned residual norm is below this factor
-# times tol (its own estimate drifts from the true residual; see solve_minres)
-MINRES_TOL_FACTOR = 10
-# MINRES restart asks for at most this relative reduction of the residual
-MINRES_MAX_RTOL = 0.5
 # conjugate-gradient steps (each preconditioned by one AMG V-cycle) per application
 # of the viscous-block preconditioner. Two were the fastest of 1-4 steps and of 1-2
 # stationary cycles at 4,000 and 16,000 nodes (SolCx, contrasts 1 and 1e6; the
@@ -542,35 +537,6 @@ def minres_operators(problem: SaddlePointProblem, Pu):
                                                                       x[n1:] / dp]),
                             dtype=float)
     return matvec, K, M
-
-
-def restarted_minres(matvec: Callable, K, M, rhs: np.ndarray, tol: float, maxiter: int):
-    """MINRES restarted on the true residual.
-
-    MINRES's own residual estimate drifts from the true one on these badly
-    conditioned systems: restart it on the true residual until the
-    preconditioned residual norm (the norm MINRES minimises) meets
-    ``MINRES_TOL_FACTOR * tol`` or ``maxiter`` iterations are spent. Returns
-    the solution, that relative norm, the number of restarts and of
-    iterations.
-    """
-    count = [0]
-    bnorm = float(np.sqrt(abs(rhs @ M.matvec(rhs)))) or 1.0
-    x = np.zeros_like(rhs)
-    r = rhs.copy()
-    res_m = 1.0
-    restarts = 0
-    while count[0] < maxiter:
-        res_m = float(np.sqrt(abs(r @ M.matvec(r)))) / bnorm
-        if res_m <= MINRES_TOL_FACTOR * tol:
-            break
-        dx, _ = spla.minres(K, r, M=M, rtol=min(MINRES_MAX_RTOL, MINRES_MAX_RTOL * tol / res_m),
-                            maxiter=maxiter - count[0],
-                            callback=lambda *_: count.__setitem__(0, count[0] + 1))
-        x = x + dx
-        r = rhs - matvec(x)
-        restarts += 1
-    return x, res_m, restarts, count[0]
 
 
 def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: dict,

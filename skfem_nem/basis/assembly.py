@@ -464,7 +464,6 @@ def _gradient_chunks(form, u, kwargs, Du, Dv, dim):
     pa, pb = (x.ravel() for x in np.meshgrid(np.arange(Du * L), np.arange(Dv * L),
                                              indexing="ij"))
     both = (pa % L > 0) & (pb % L > 0)
-    Phi, G = u.values_matrix, u.gradient_entries
     kernel = _contract_bilinear if _parallel(u) else _contract_bilinear_serial
     S = np.diff(u.stencil_ptr)
     for e0, e1, C, active in probe_coefficients(form, u, kwargs, Du, Dv, pa, pb):
@@ -472,7 +471,8 @@ def _gradient_chunks(form, u, kwargs, Du, Dv, dim):
         if grad.any():
             yield e0, e1, "gradients", (np.ascontiguousarray(C[grad].sum(axis=2)),
                                         pa[active[grad]], pb[active[grad]])
-        if not grad.all():
+        if not grad.all():  # (the values on the gradients' pattern: made on first use)
+            Phi, G = u.values_matrix, u.gradient_entries
             off = np.zeros(S.shape[0] + 1, dtype=np.int64)
             np.cumsum(Du * Dv * S[e0:e1] ** 2, out=off[e0 + 1:e1 + 1])
             K = np.empty(off[e1])

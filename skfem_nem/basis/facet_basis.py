@@ -76,6 +76,8 @@ class NaturalNeighbourFacetBasis(NaturalNeighbourBasisBase):
             Phi, G = self._build(x, geom.tind, self.dx)
         else:
             Phi, G = self._build_smoothed(x, geom.tind, self._cells_of(x, geom.tind))
+            if G is None:  # 3D: the facets' values joined with their cells' gradients
+                Phi, G = Phi.joined()
         self._set_functions(Phi, G, *self.dx.shape)
 
     def project(self, interp, facets=None, dtype=None) -> ndarray:

@@ -50,6 +50,7 @@ from .projection import (l2_project, normalize_elements, positions_in, projectio
 from .groups import GroupBasis
 from .stencils import fill_group, stencil_union
 from . import updates
+from .cell_rows import CellRows
 from .smoothing import smoothed_functions, value_rule, vertex_points
 from . import quadratic
 from .smoothing_quadratic import smoothed_quadratic
@@ -119,8 +120,10 @@ class NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
 
     def _build_smoothed(self, x, elems, cell_of, nodal=None):
         """Values at the (dim, ne, nq) points x and smoothed gradients
-        (:func:`~skfem_nem.basis.smoothing.smoothed_functions`)."""
-        return smoothed_functions(self.mesh, self._coordinates, x, elems, cell_of, nodal)
+        (:func:`~skfem_nem.basis.smoothing.smoothed_functions`); in 3D the values and the
+        cells' gradient rows apart (a :class:`~skfem_nem.basis.cell_rows.CellRows`, None)."""
+        out = smoothed_functions(self.mesh, self._coordinates, x, elems, cell_of, nodal)
+        return out if isinstance(out, tuple) else (out, None)
 
     @property
     def order(self) -> int:
@@ -136,20 +139,52 @@ class NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
 
     def _set_functions(self, Phi, G, ne, nq):
         """Values (CSR, one row per quadrature point) and gradients (dim, nnz)
-        on their pattern; the stencils follow. Forms on the basis are
-        assembled from these from now on (:mod:`skfem_nem.basis.assembly`)."""
+        on their pattern, or (``Phi`` a :class:`~skfem_nem.basis.cell_rows.CellRows`, ``G``
+        None) values and one gradient row per cell, joined on first use; the stencils
+        follow. Forms on the basis are assembled from these from now on
+        (:mod:`skfem_nem.basis.assembly`)."""
         assembly.install()
         nonlinear.install()
         from .facet_basis import NaturalNeighbourFacetBasis  # (it builds on this module)
         plotting.install(NaturalNeighbourBasis, NaturalNeighbourFacetBasis)
-        # values_matrix: (ne * nq, N) CSR of the functions' values at the points;
-        # gradient_entries: (dim, nnz) their gradients on that same sparsity pattern
-        self.values_matrix, self.gradient_entries = Phi, G
-        self._D = [self._on_pattern(Phi, G[k]) for k in range(G.shape[0])]
-        ptr, sten = stencil_union(Phi.indptr, Phi.indices, nq, ne)
+        self.cell_rows = Phi if isinstance(Phi, CellRows) else None
+        if self.cell_rows is None:
+            self._join(Phi, G)
+            ptr, sten = stencil_union(Phi.indptr, Phi.indices, nq, ne)
+        else:
+            self._values = self._gradients = self._gradient_matrices = None
+            ptr, sten = self.cell_rows.stencils(nq)
         self.stencil_ptr, self.stencil_nodes = ptr, sten
         self.stencil_sizes = np.diff(ptr)
         self._groups = None
+
+    def _join(self, Phi=None, G=None):
+        """Set (or, from the cell rows, make) the values and gradients on one pattern."""
+        if Phi is None:
+            Phi, G = self.cell_rows.joined()
+        self._values, self._gradients = Phi, G
+        self._gradient_matrices = [self._on_pattern(Phi, G[k]) for k in range(G.shape[0])]
+
+    @property
+    def values_matrix(self):
+        """(ne * nq, N) CSR: the functions' values at the quadrature points."""
+        if self._values is None:
+            self._join()
+        return self._values
+
+    @property
+    def gradient_entries(self):
+        """(dim, nnz): the functions' gradients on the pattern of ``values_matrix``."""
+        if self._gradients is None:
+            self._join()
+        return self._gradients
+
+    @property
+    def _D(self):
+        """The gradients as dim CSR matrices sharing ``values_matrix``'s pattern."""
+        if self._gradient_matrices is None:
+            self._join()
+        return self._gradient_matrices
 
     @staticmethod
     def _on_pattern(Phi, data):

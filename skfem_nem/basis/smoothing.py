@@ -61,6 +61,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..jit import serial_twin
+from .cell_rows import CellRows, two_pass
 
 #: Gauss-Legendre points per cell edge (2D). Any rule exact for linear
 #: functions passes the patch test. Measured on the Poisson problem of
@@ -70,9 +71,6 @@ from ..jit import serial_twin
 SEGMENT_POINTS = 1
 #: rows per block of the combination kernel (blocks go to threads)
 _BLOCK = 1024
-#: rows below which the serial kernel runs (waking threads costs more: about
-#: 0.3 us per row serially, so from a few blocks on two threads gain)
-_PARALLEL_MIN = 4096
 
 # barycentric coordinates of the 3-point rule's points, point i nearest vertex i
 _X3 = np.array([[1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
@@ -235,35 +233,86 @@ def cells_3d(p, t, t2f, facets, elems):
     opposite vertex o has the outward area vector ``-3 |T| grad lambda_o``, so
     the smoothed gradient is ``sum_o -9/4 grad lambda_o phi(c_o) + sum_v 1/4
     grad lambda_v phi(x_v)``, exact for linear functions (measured against
-    other rules in docs/ndim.md). Vectorised numpy: the coordinates, not the
-    cells, are the cost."""
-    k = elems.size
-    T = np.asarray(t)[:, elems]                         # (4, k)
-    F = np.asarray(t2f)[:, elems]                       # (4, k)
-    fac, finv = np.unique(F.ravel(), return_inverse=True)
-    finv = finv.reshape(F.shape)
-    FV = np.asarray(facets)[:, fac]                     # (3, nf)
-    points = (p[FV[0]] + p[FV[1]] + p[FV[2]]) / 3.0
-    # the vertex opposite each face: the tetrahedron's node not on it
-    opposite = T.sum(axis=0) - FV[:, finv].sum(axis=0)  # (4, k) node numbers
-    o = (T[None, :, :] == opposite[:, None, :]).argmax(axis=1)   # (4, k) local vertex
-    own = np.empty(fac.size, dtype=np.int64)
-    own[finv.ravel()] = np.tile(elems, 4)
-    slot = np.empty(fac.size, dtype=np.int64)
-    slot[finv.ravel()] = o.ravel()
-    V = p[T.T]                                          # (k, 4, 3)
-    E = V[:, 1:] - V[:, :1]                             # (k, 3, 3) edges from vertex 0
-    cof = np.stack([np.cross(E[:, 1], E[:, 2]), np.cross(E[:, 2], E[:, 0]),
-                    np.cross(E[:, 0], E[:, 1])], axis=1)  # (k, 3, 3)
-    det = np.einsum("kd,kd->k", E[:, 0], cof[:, 0])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scale = np.where(det != 0, 1.0 / det, 0.0)      # flat tetrahedra: no gradient
-    G = np.empty((k, 4, 3))                             # grad lambda_i
-    G[:, 1:] = cof * scale[:, None, None]
-    G[:, 0] = -G[:, 1:].sum(axis=1)
-    pts = np.concatenate([finv.T, fac.size + T.T], axis=1)          # (k, 8)
-    coef = np.concatenate([-2.25 * G[np.arange(k)[:, None], o.T], 0.25 * G], axis=1)
-    return points, own, pts, np.ascontiguousarray(coef), slot
+    other rules in docs/ndim.md)."""
+    return _cells_3d(np.ascontiguousarray(p, dtype=np.float64),
+                     np.ascontiguousarray(t, dtype=np.int64),
+                     np.ascontiguousarray(t2f, dtype=np.int64),
+                     np.ascontiguousarray(facets, dtype=np.int64),
+                     np.ascontiguousarray(elems, dtype=np.int64))
+
+
+@njit(cache=True)
+def _cells_3d(p, t, t2f, facets, elems):
+    """The kernel of :func:`cells_3d`. The faces are numbered in the order of the mesh's
+    own numbering; a face shared by two of the tetrahedra is owned by the one met last
+    going through the faces slot by slot (slot 3 after slot 0), each slot over ``elems``.
+    At 100,000 nodes the same steps in numpy (a sort of the faces) took 2.3 s."""
+    k = elems.shape[0]
+    local = np.full(facets.shape[1], -1, np.int64)
+    for i in range(4):
+        for j in range(k):
+            local[t2f[i, elems[j]]] = 0
+    nf = 0
+    for f in range(local.shape[0]):
+        if local[f] == 0:
+            local[f] = nf
+            nf += 1
+    points = np.empty((nf, 3))
+    own = np.empty(nf, np.int64)
+    slot = np.empty(nf, np.int64)
+    pts = np.empty((k, 8), np.int64)
+    coef = np.empty((k, 8, 3))
+    G, E = np.empty((4, 3)), np.empty((3, 3))
+    for i in range(4):
+        for j in range(k):
+            e = elems[j]
+            f = t2f[i, e]
+            q = local[f]
+            a, b, c = facets[0, f], facets[1, f], facets[2, f]
+            for d in range(3):
+                points[q, d] = (p[a, d] + p[b, d] + p[c, d]) / 3.0
+            # the vertex opposite the face: the tetrahedron's node not on it
+            o = 0
+            while t[o, e] == a or t[o, e] == b or t[o, e] == c:
+                o += 1
+            own[q] = e
+            slot[q] = o
+            pts[j, i] = q
+            pts[j, 4 + i] = nf + t[i, e]
+    for j in range(k):
+        _lambda_gradients(p, t, elems[j], E, G)
+        for i in range(4):
+            f = t2f[i, elems[j]]
+            a, b, c = facets[0, f], facets[1, f], facets[2, f]
+            o = 0
+            while t[o, elems[j]] == a or t[o, elems[j]] == b or t[o, elems[j]] == c:
+                o += 1
+            for d in range(3):
+                coef[j, i, d] = -2.25 * G[o, d]
+                coef[j, 4 + i, d] = 0.25 * G[i, d]
+    return points, own, pts, coef, slot
+
+
+@njit(cache=True, inline="always")
+def _lambda_gradients(p, t, e, E, G):
+    """``G[i]``: the gradient of tetrahedron e's barycentric coordinate i (zero for a flat
+    one), as the cofactors of its edges from vertex 0 over their determinant."""
+    v0 = t[0, e]
+    for r in range(3):
+        for d in range(3):
+            E[r, d] = p[t[r + 1, e], d] - p[v0, d]
+    for r in range(3):
+        a, b = E[(r + 1) % 3], E[(r + 2) % 3]
+        G[r + 1, 0] = a[1] * b[2] - a[2] * b[1]
+        G[r + 1, 1] = a[2] * b[0] - a[0] * b[2]
+        G[r + 1, 2] = a[0] * b[1] - a[1] * b[0]
+    det = E[0, 0] * G[1, 0] + E[0, 1] * G[1, 1] + E[0, 2] * G[1, 2]
+    scale = 0.0 if det == 0.0 else 1.0 / det
+    for r in range(1, 4):
+        for d in range(3):
+            G[r, d] *= scale
+    for d in range(3):
+        G[0, d] = -((G[1, d] + G[2, d]) + G[3, d])
 
 
 # ---------------------------------------------------------------------------
@@ -348,59 +397,23 @@ def _smoothed_rows(cell_of, pts, coef, v_ptr, v_idx, v_val, s_ptr, s_idx, s_val,
 _smoothed_rows_serial = serial_twin(_smoothed_rows)
 
 
-@njit(cache=True, parallel=True)
-def _joined_rows(cell_of, v_ptr, v_idx, v_val, c_ptr, c_idx, c_grad, count, out_ptr, out_idx,
-                 out_val, out_grad, fill):
-    """Row r as the merge of the value row r and the gradient row of its cell
-    cell_of[r] (both sorted by column); counts (``fill=False``) or writes
-    (``fill=True``) as :func:`_smoothed_rows`."""
-    nrows = cell_of.shape[0]
-    nb = (nrows + _BLOCK - 1) // _BLOCK
-    dim = c_grad.shape[0]
-    for blk in prange(nb):
-        for r in range(blk * _BLOCK, min(nrows, blk * _BLOCK + _BLOCK)):
-            c = cell_of[r]
-            i, ie, j, je = v_ptr[r], v_ptr[r + 1], c_ptr[c], c_ptr[c + 1]
-            n = 0
-            at = out_ptr[r] if fill else 0
-            while i < ie or j < je:
-                vi = v_idx[i] if i < ie else -1
-                cj = c_idx[j] if j < je else -1
-                take_v = vi >= 0 and (cj < 0 or vi <= cj)
-                take_c = cj >= 0 and (vi < 0 or cj <= vi)
-                if fill:
-                    out_idx[at + n] = vi if take_v else cj
-                    out_val[at + n] = v_val[i] if take_v else 0.0
-                    for d in range(dim):
-                        out_grad[d, at + n] = c_grad[d, j] if take_c else 0.0
-                i += take_v
-                j += take_c
-                n += 1
-            if not fill:
-                count[r] = n
-
-
-_joined_rows_serial = serial_twin(_joined_rows)
-
-
-def _run(kernel, serial, nrows, args, dim):
-    """The two passes of a row kernel (count, then fill) into one CSR pattern."""
-    kernel = kernel if nrows >= _PARALLEL_MIN else serial
-    count = np.zeros(nrows, np.int64)
-    ptr = np.zeros(nrows + 1, np.int64)
-    kernel(*args, count, ptr, np.empty(0, np.int64), np.empty(0), np.empty((dim, 0)), False)
-    np.cumsum(count, out=ptr[1:])
-    nnz = int(ptr[-1])
-    idx = np.empty(nnz, np.int64)
-    val = np.empty(nnz)
-    grad = np.empty((dim, nnz))
-    kernel(*args, count, ptr, idx, val, grad, True)
-    return ptr, idx, val, grad
-
-
 def _csr(M):
     M.sort_indices()
     return M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data
+
+
+def cell_gradients(S, pts, coef):
+    """The cells' smoothed gradient rows ``(c_ptr, c_idx, c_grad (dim, nnz))``: the
+    gradient of cell c is ``sum_j coef[c, j] * S[pts[c, j]]``, ``S`` the values at the
+    cells' boundary points, rows sorted: ``(indptr, indices, data)`` (int64 indices; row r
+    at ``indices[indptr[r]:indptr[r + 1]]``, which need not start at 0)."""
+    ncells, dim = pts.shape[0], coef.shape[2]
+    none = (np.zeros(ncells + 1, np.int64), np.empty(0, np.int64), np.empty(0))
+    args = (np.arange(ncells), np.ascontiguousarray(pts), np.ascontiguousarray(coef), *none,
+            *S)
+    c_ptr, c_idx, _, c_grad = two_pass(_smoothed_rows, _smoothed_rows_serial, ncells, args,
+                                       dim)
+    return c_ptr, c_idx, c_grad
 
 
 def combine(V, S, cell_of, pts, coef):
@@ -409,22 +422,15 @@ def combine(V, S, cell_of, pts, coef):
 
     ``V`` is the CSR matrix of the functions' values at the integration points
     (one row each), ``S`` that of the cells' boundary points; ``cell_of`` names
-    each integration point's cell, and the smoothed gradient of cell c is
-    ``sum_j coef[c, j] * S[pts[c, j]]``. Returns (indptr, indices, values,
-    grads (dim, nnz)) of len(cell_of) rows. Where cells hold several points
-    (3D: five), each cell's gradient row is merged once and then joined with
-    its points' value rows.
+    each integration point's cell (no two points share one: a cell of several points
+    keeps its gradient row apart, :func:`cell_gradients`), and the smoothed gradient of
+    cell c is ``sum_j coef[c, j] * S[pts[c, j]]``. Returns (indptr, indices, values,
+    grads (dim, nnz)) of len(cell_of) rows.
     """
-    nrows, ncells, dim = cell_of.shape[0], pts.shape[0], coef.shape[2]
+    nrows, dim = cell_of.shape[0], coef.shape[2]
     cells = (np.ascontiguousarray(pts), np.ascontiguousarray(coef))
-    if nrows <= ncells:
-        args = (np.ascontiguousarray(cell_of, dtype=np.int64), *cells, *_csr(V), *_csr(S))
-        return _run(_smoothed_rows, _smoothed_rows_serial, nrows, args, dim)
-    none = (np.zeros(ncells + 1, np.int64), np.empty(0, np.int64), np.empty(0))
-    args = (np.arange(ncells), *cells, *none, *_csr(S))
-    c_ptr, c_idx, _, c_grad = _run(_smoothed_rows, _smoothed_rows_serial, ncells, args, dim)
-    args = (np.ascontiguousarray(cell_of, dtype=np.int64), *_csr(V), c_ptr, c_idx, c_grad)
-    return _run(_joined_rows, _joined_rows_serial, nrows, args, dim)
+    args = (np.ascontiguousarray(cell_of, dtype=np.int64), *cells, *_csr(V), *_csr(S))
+    return two_pass(_smoothed_rows, _smoothed_rows_serial, nrows, args, dim)
 
 
 def with_nodes(Q, nodal):
@@ -432,28 +438,66 @@ def with_nodes(Q, nodal):
     row where ``nodal[r] < 0`` (a queried point), else 1 at column ``nodal[r]``
     (every natural-neighbour function is 1 at its node and 0 at the others)."""
     import scipy.sparse as sp
+    ptr, idx, val = node_rows(Q, nodal)
+    return sp.csr_matrix((val, idx, ptr), shape=(nodal.size, Q.shape[1]))
+
+
+def node_rows(Q, nodal):
+    """:func:`with_nodes` as ``(indptr, indices (int64), data)``, no scipy matrix (whose
+    constructor copies the indices to a smaller type)."""
+    nodal = np.ascontiguousarray(nodal, dtype=np.int64)
     ask = nodal < 0
     lengths = np.ones(nodal.size, np.int64)
     lengths[ask] = np.diff(Q.indptr)
     ptr = np.zeros(nodal.size + 1, np.int64)
     np.cumsum(lengths, out=ptr[1:])
     idx = np.empty(ptr[-1], np.int64)
-    val = np.ones(ptr[-1])
-    at = ptr[:-1][~ask]
-    idx[at] = nodal[~ask]
-    dest = np.repeat(ptr[:-1][ask] - Q.indptr[:-1], np.diff(Q.indptr)) + np.arange(Q.nnz)
-    idx[dest] = Q.indices
-    val[dest] = Q.data
-    return sp.csr_matrix((val, idx, ptr), shape=(nodal.size, Q.shape[1]))
+    val = np.empty(ptr[-1])
+    source = np.full(nodal.size, -1, np.int64)
+    source[ask] = np.arange(Q.shape[0])
+    _node_rows(Q.indptr.astype(np.int64), Q.indices.astype(np.int64), Q.data, nodal, source,
+               ptr, idx, val)
+    return ptr, idx, val
+
+
+@njit(cache=True, parallel=True)
+def _node_rows(qptr, qidx, qval, nodal, source, ptr, idx, val):
+    """Row r: 1 at ``nodal[r]``, or (``nodal[r] < 0``) row ``source[r]`` of Q."""
+    for r in prange(nodal.shape[0]):
+        d = ptr[r]
+        if nodal[r] >= 0:
+            idx[d] = nodal[r]
+            val[d] = 1.0
+            continue
+        q = source[r]
+        for k in range(qptr[q], qptr[q + 1]):
+            idx[d + k - qptr[q]] = qidx[k]
+            val[d + k - qptr[q]] = qval[k]
+
+
+def _rows_3d(Phi, nodal, ne, nq, nf, cell_of, cp, coef):
+    """3D: the values at the integration points (``nodal`` or all queried: the first rows
+    of ``Phi``) and the cells' gradients from the face rows that follow, as
+    :class:`~skfem_nem.basis.cell_rows.CellRows`. Node rows are appended after the face
+    rows (:func:`cells_3d` numbers them so), all in one copy of ``Phi``."""
+    n = Phi.shape[1]
+    Phi.sort_indices()
+    lead = np.full(ne * nq, -1, np.int64) if nodal is None else nodal
+    ptr, idx, val = node_rows(Phi, np.concatenate([lead, np.full(nf, -1, np.int64),
+                                                   np.arange(n)]))
+    r0 = ne * nq
+    grads = cell_gradients((ptr[r0:], idx, val), cp, coef)
+    return CellRows((ptr[:r0 + 1], idx, val), (r0, n), cell_of, *grads)
 
 
 def smoothed_functions(mesh, coordinates, x, elems, cell_of, nodal=None):
     """Values at the (dim, ne, nq) points x (in the elements ``elems``) and smoothed
     gradients over the cells ``cell_of`` (ne * nq,) of the cells of ``np.unique(elems)``:
-    ``(values CSR, gradients (dim, nnz) on its pattern)``. ``coordinates(points,
-    hint=...)`` gives the natural-neighbour coordinates (CSR) at (k, dim) points;
-    ``nodal`` (ne * nq,) names the node a point is (-1: none), whose values need no
-    query."""
+    2D ``(values CSR, gradients (dim, nnz) on its pattern)``, 3D (one cell per
+    tetrahedron) the values and the cells' gradient rows apart, a
+    :class:`~skfem_nem.basis.cell_rows.CellRows`. ``coordinates(points, hint=...)`` gives
+    the natural-neighbour coordinates (CSR) at (k, dim) points; ``nodal`` (ne * nq,) names
+    the node a point is (-1: none), whose values need no query."""
     import scipy.sparse as sp
     dim, ne, nq = x.shape
     pts = x.transpose(1, 2, 0).reshape(-1, dim)
@@ -474,10 +518,9 @@ def smoothed_functions(mesh, coordinates, x, elems, cell_of, nodal=None):
         faces = {"faces": np.concatenate([np.full(m, -1, np.int64), slot])}
     Phi = coordinates(np.concatenate([pts[ask], points]),
                       hint=np.concatenate([np.repeat(elems, nq)[ask], hint]), **faces)
+    if dim == 3:
+        return _rows_3d(Phi, nodal, ne, nq, points.shape[0], cell_of, cp, coef)
     V = Phi[:m] if nodal is None else with_nodes(Phi[:m], nodal)
-    # 3D: rows past the boundary points are the nodes (cells_3d)
-    S = Phi[m:] if dim == 2 else sp.vstack([Phi[m:], sp.identity(Phi.shape[1], format="csr")],
-                                           format="csr")
-    ptr, idx, val, grad = combine(V, S, cell_of, cp, coef)
+    ptr, idx, val, grad = combine(V, Phi[m:], cell_of, cp, coef)
     return sp.csr_matrix((val, idx.astype(Phi.indices.dtype), ptr),
                          shape=(ne * nq, Phi.shape[1])), grad

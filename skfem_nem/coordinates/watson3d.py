@@ -434,7 +434,7 @@ def rows_3d(R, T, NB, n, q, start, slot):
     start = np.asarray(start, np.int64)[order]
     slot = np.asarray(slot, np.int64)[order]
     count = np.empty(m, np.int64)
-    idx, val = [], []
+    chunks = []
     out_i = np.empty((min(m, ROW_CHUNK), ROW_CAP), np.int64)
     out_v = np.empty((min(m, ROW_CHUNK), ROW_CAP))
     for c0 in range(0, m, ROW_CHUNK):
@@ -444,18 +444,34 @@ def rows_3d(R, T, NB, n, q, start, slot):
               count[c0:c1])
         cptr = np.zeros(c1 - c0 + 1, np.int64)
         np.cumsum(np.maximum(count[c0:c1], 0), out=cptr[1:])
-        idx.append(np.empty(cptr[-1], np.int64))
-        val.append(np.empty(cptr[-1]))
-        _compact(out_i, out_v, cptr, idx[-1], val[-1])
+        chunks.append((c0, cptr, np.empty(cptr[-1], np.int64), np.empty(cptr[-1])))
+        _compact(out_i, out_v, cptr, chunks[-1][2], chunks[-1][3])
     flagged = order[count < 0]
     count[count < 0] = 0
-    sptr = np.zeros(m + 1, np.int64)
-    np.cumsum(count, out=sptr[1:])
+    back = np.empty(m, np.int64)
+    back[order] = np.arange(m)
     ptr = np.zeros(m + 1, np.int64)
-    np.cumsum(count[np.argsort(order)], out=ptr[1:])
-    I, V = np.empty(sptr[-1], np.int64), np.empty(sptr[-1])
-    _unsort(np.concatenate(idx), np.concatenate(val), sptr, order, ptr, I, V)
+    np.cumsum(count[back], out=ptr[1:])
+    I, V = np.empty(ptr[-1], np.int64), np.empty(ptr[-1])
+    for c0, cptr, idx, val in chunks:
+        _unsort(idx, val, cptr, order[c0:c0 + cptr.shape[0] - 1], ptr, I, V)
     return ptr, I, V, np.sort(flagged)
+
+
+@njit(cache=True, parallel=True)
+def _splice(wptr, widx, wval, flagged, fptr, fidx, fval, ptr, idx, val):
+    """Rows of (wptr, widx, wval) with the flagged ones (empty there) replaced by the rows
+    of (fptr, fidx, fval), in order, into (ptr, idx, val)."""
+    for r in prange(wptr.shape[0] - 1):
+        d = ptr[r]
+        for k in range(wptr[r], wptr[r + 1]):
+            idx[d + k - wptr[r]] = widx[k]
+            val[d + k - wptr[r]] = wval[k]
+    for j in prange(flagged.shape[0]):
+        d = ptr[flagged[j]]
+        for k in range(fptr[j], fptr[j + 1]):
+            idx[d + k - fptr[j]] = fidx[k]
+            val[d + k - fptr[j]] = fval[k]
 
 
 @njit(cache=True, parallel=True)
@@ -537,10 +553,8 @@ class TetrahedraRecords:
         np.cumsum(count, out=ptr[1:])
         idx = np.empty(ptr[-1], np.int64)
         val = np.empty(ptr[-1])
-        at = np.repeat(ptr[:-1] - wptr[:-1], np.diff(wptr)) + np.arange(widx.size)
-        idx[at], val[at] = widx, wval
-        at = np.repeat(ptr[flagged] - F.indptr[:-1], np.diff(F.indptr)) + np.arange(F.nnz)
-        idx[at], val[at] = F.indices, F.data
+        _splice(wptr, widx, wval, flagged, F.indptr.astype(np.int64),
+                F.indices.astype(np.int64), F.data, ptr, idx, val)
         return sp.csr_matrix((val, idx, ptr), shape=(m, n))
 
 

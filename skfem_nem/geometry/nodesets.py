@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Callable, Optional, Sequence
 
 import numpy as np
+from numba import njit
 
 __all__ = ["box_nodes", "draw_interior", "hilbert_order", "line_segments", "morton_order",
            "polyline_nodes", "remove_close"]
@@ -121,11 +122,22 @@ def morton_order(points) -> np.ndarray:
     lo = P.min(axis=0)
     span = np.where(P.max(axis=0) > lo, P.max(axis=0) - lo, 1.0)
     cell = np.minimum(((P - lo) / span * (1 << bits)).astype(np.int64), (1 << bits) - 1)
-    key = np.zeros(P.shape[0], dtype=np.int64)
-    for b in range(bits):
-        for k in range(d):
-            key |= ((cell[:, k] >> b) & 1) << (b * d + k)
-    return np.argsort(key, kind="stable")
+    return np.argsort(_morton_keys(cell, bits), kind="stable")
+
+
+@njit(cache=True)
+def _morton_keys(cell, bits):
+    """The Z-order key of each row of the integer cells (n, d): their bits interleaved
+    (in numpy, one pass over the array per bit and axis: 0.4 s for 2 million points)."""
+    n, d = cell.shape
+    key = np.zeros(n, np.int64)
+    for i in range(n):
+        x = 0
+        for b in range(bits):
+            for k in range(d):
+                x |= ((cell[i, k] >> b) & 1) << (b * d + k)
+        key[i] = x
+    return key
 
 
 def remove_close(points, keep, distance: float) -> np.ndarray:

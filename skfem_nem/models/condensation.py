@@ -30,7 +30,7 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from ..basis.assembly import parallel_kernels, stencil_position
-from ..basis.summation import blocks, incidence, node_pattern, stencil_union
+from ..basis.summation import basis_row_order, blocks, incidence, node_pattern, stencil_union
 from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 from .stokes_bases import ElementTriBubble
@@ -102,7 +102,7 @@ def _bubbles(ptr, sten, indptr, indices, grads, nq, w, gb, nodal, offg, Gl, off2
 
 @njit(cache=True, parallel=True)
 def _condensed_rows(ptr, sten, nq, w, offg, Gl, off2, X, Ainv, inc_ptr, inc_e, inc_l, cptr,
-                    cols, nodal, nblocks, indices_out, data_out):
+                    cols, nodal, order, nblocks, indices_out, data_out):
     """The condensed viscous block, row by row (node v's rows hold its couplings with
     the nodes ``cols[cptr[v]:cptr[v + 1]]``, CSR order for dofs ``2 node + c``): each
     triangle around v adds the row of its element matrix that belongs to v,
@@ -110,11 +110,13 @@ def _condensed_rows(ptr, sten, nq, w, offg, Gl, off2, X, Ainv, inc_ptr, inc_e, i
     the bubbles' ``A_bn^T A_bb^-1 A_bn``, computed where it is added (no element
     matrix is stored). Both terms are written so that swapping (j, cv) and (i, cu)
     multiplies the same numbers, and the triangles add in ascending order in every
-    row: the block comes out exactly symmetric."""
+    row: the block comes out exactly symmetric. Rows are taken in ``order``
+    (:func:`~skfem_nem.basis.summation.row_order`)."""
     n = cptr.shape[0] - 1
     for blk in prange(nblocks):
         pos = np.full(n, -1, np.int64)
-        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+        for i in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+            v = order[i]
             nv = cptr[v + 1] - cptr[v]
             base = 4 * cptr[v]
             for k in range(nv):
@@ -294,7 +296,7 @@ def _summed(ubasis, nodal, nq, w, offg, Gl, off2, X, Ainv, parallel) -> sp.csr_m
     indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
     (_condensed_rows if parallel else _condensed_rows_serial)(
         ubasis.stencil_ptr, ubasis.stencil_nodes, nq, w, offg, Gl, off2, X, Ainv, inc_ptr,
-        inc_e, inc_l, cptr, cols, nodal, blocks(n), indices, data)
+        inc_e, inc_l, cptr, cols, nodal, basis_row_order(ubasis), blocks(n), indices, data)
     nv = np.diff(cptr)
     indptr = np.empty(2 * n + 1, dtype=idt)
     indptr[:-1] = (4 * cptr[:-1, None] + 2 * nv[:, None] * np.arange(2)[None]).ravel()

@@ -31,7 +31,7 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from ..basis.assembly import parallel_kernels, stencil_position
-from ..basis.summation import blocks, node_pattern
+from ..basis.summation import basis_row_order, blocks, node_pattern
 from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 from .condensation import CondensedViscous
@@ -100,15 +100,17 @@ def _tet_blocks(ptr, sten, indptr, indices, grads, nq, w, gb, G, Wsum, gsum, X, 
 
 @njit(cache=True, parallel=True)
 def _condensed_rows_tet(ptr, sten, G, Wsum, g, Ainv, inc_ptr, inc_e, inc_l, cptr, cols, n3,
-                        nblocks, indices_out, data_out):
+                        order, nblocks, indices_out, data_out):
     """The condensed viscous block row by row: node v's three rows hold its couplings
     with the nodes ``cols[cptr[v]:cptr[v + 1]]`` (dofs ``3 node + c``, CSR order); each
     tetrahedron around v adds the row of its condensed element matrix that belongs to
-    v, computed where it is added (:func:`_add_row_tet`)."""
+    v, computed where it is added (:func:`_add_row_tet`). Rows are taken in ``order``
+    (:func:`~skfem_nem.basis.summation.row_order`)."""
     n = cptr.shape[0] - 1
     for blk in prange(nblocks):
         pos = np.full(n3, -1, np.int64)
-        for v in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+        for i in range(blk * n // nblocks, (blk + 1) * n // nblocks):
+            v = order[i]
             nv = cptr[v + 1] - cptr[v]
             base = 9 * cptr[v]
             for k in range(nv):
@@ -224,7 +226,7 @@ def _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel) -> sp.csr_matrix:
     indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
     (_condensed_rows_tet if parallel else _condensed_rows_tet_serial)(
         ubasis.stencil_ptr, ubasis.stencil_nodes, G, Wsum, gsum, Ainv, inc_ptr, inc_e, inc_l,
-        cptr, cols, n, blocks(n), indices, data)
+        cptr, cols, n, basis_row_order(ubasis), blocks(n), indices, data)
     nv = np.diff(cptr)
     indptr = np.empty(3 * n + 1, dtype=idt)
     indptr[:-1] = (9 * cptr[:-1, None] + 3 * nv[:, None] * np.arange(3)[None]).ravel()

@@ -136,7 +136,7 @@ _stencils_serial = serial_twin(_stencils)
 
 @njit(cache=True, parallel=True)
 def _stencil_gradients(nq, cell_of, ptr, sten, c_ptr, c_idx, c_grad, Gs):
-    """``Gs[:, s]``: the gradient of stencil function s of element e, its cell's gradient
+    """``Gs[s]``: the gradient of stencil function s of element e, its cell's gradient
     row entry, 0 where the row has none (both sorted)."""
     dim = c_grad.shape[0]
     for e in prange(ptr.shape[0] - 1):
@@ -145,7 +145,7 @@ def _stencil_gradients(nq, cell_of, ptr, sten, c_ptr, c_idx, c_grad, Gs):
         for s in range(ptr[e], ptr[e + 1]):
             hit = j < je and c_idx[j] == sten[s]
             for d in range(dim):
-                Gs[d, s] = c_grad[d, j] if hit else 0.0
+                Gs[s, d] = c_grad[d, j] if hit else 0.0
             j += hit
 
 
@@ -179,8 +179,8 @@ class CellRows:
         return ptr, sten
 
     def stencil_gradients(self, nq: int, ptr, sten):
-        """(dim, stencil entries): each stencil function's gradient on its element."""
-        Gs = np.empty((self.c_grad.shape[0], sten.shape[0]))
+        """(stencil entries, dim): each stencil function's gradient on its element."""
+        Gs = np.empty((sten.shape[0], self.c_grad.shape[0]))
         parallel = ptr.shape[0] - 1 >= PARALLEL_MIN
         (_stencil_gradients if parallel else _stencil_gradients_serial)(
             nq, self.cell_of, ptr, sten, self.c_ptr, self.c_idx, self.c_grad, Gs)

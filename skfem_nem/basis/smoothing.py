@@ -501,7 +501,8 @@ def smoothed_functions(mesh, coordinates, x, elems, cell_of, nodal=None):
     import scipy.sparse as sp
     dim, ne, nq = x.shape
     pts = x.transpose(1, 2, 0).reshape(-1, dim)
-    cells = np.unique(elems)
+    # (a whole mesh's or a subdomain's elements come sorted: no sort of them again)
+    cells = elems if np.all(elems[1:] > elems[:-1]) else np.unique(elems)
     faces = {}
     if dim == 3:
         points, hint, cp, coef, slot = cells_3d(mesh.p.T, mesh.t, mesh.t2f, mesh.facets, cells)

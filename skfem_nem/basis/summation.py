@@ -159,13 +159,13 @@ def _sum_gradient_rows(ptr, sten, Gs, Ce, pa, pb, L, e0, e1, inc_ptr, inc_e, inc
     """Add the gradient-gradient terms of the elements ``e0 .. e1 - 1`` into the global
     matrix (laid out as by :func:`_sum_rows`, which must have set it up), computing each
     element's row where it adds it: the gradients are the same at all of an element's
-    points (``Gs`` (dim, nnz of the stencils): the gradient of stencil function s), so
-    its test function j's row is ``sum_p Ce[p, e - e0] Gs[gv, j] Gs[gu, i]`` over the
+    points (``Gs`` (nnz of the stencils, dim): the gradient of stencil function s), so
+    its test function j's row is ``sum_p Ce[p, e - e0] Gs[j, gv] Gs[i, gu]`` over the
     pairs p = (component cu, d/dx_gu of u; cv, d/dx_gv of v), ``a = c L + 1 + g``. No
     element matrix is stored: the work is that of summing them. Rows are taken in
     ``order`` (:func:`row_order`)."""
     n = cptr.shape[0] - 1
-    dim = Gs.shape[0]
+    dim = Gs.shape[1]
     for blk in prange(nblocks):
         pos = np.full(n, -1, np.int64)
         w = np.empty((Dv, Du, dim))
@@ -187,32 +187,32 @@ def _sum_gradient_rows(ptr, sten, Gs, Ce, pa, pb, L, e0, e1, inc_ptr, inc_e, inc
                         for cu in range(Du):
                             x = 0.0
                             for g in range(dim):
-                                x += w[cv, cu, g] * Gs[g, s]
+                                x += w[cv, cu, g] * Gs[s, g]
                             data_out[at + cv * nv * Du + cu] += x
 
 
 @njit(cache=True, inline="always")
 def _test_row(Ce, pa, pb, L, c, Gs, sj, w):
-    """``w[cv, cu, gu] = sum_p Ce[p, c] Gs[gv, sj]`` over the pairs p = (cu, gu; cv, gv):
-    test function sj's row of its element's matrix is ``w . Gs[:, s]`` for trial function
+    """``w[cv, cu, gu] = sum_p Ce[p, c] Gs[sj, gv]`` over the pairs p = (cu, gu; cv, gv):
+    test function sj's row of its element's matrix is ``w . Gs[s]`` for trial function
     s."""
     w[:] = 0.0
     for p in range(pa.shape[0]):
         cu, gu = pa[p] // L, pa[p] % L - 1
         cv, gv = pb[p] // L, pb[p] % L - 1
-        w[cv, cu, gu] += Ce[p, c] * Gs[gv, sj]
+        w[cv, cu, gu] += Ce[p, c] * Gs[sj, gv]
 
 
 @njit(cache=True, parallel=True)
 def _stencil_gradients(ptr, sten, indptr, indices, grads, nq, Gs):
-    """``Gs[:, s]``: the gradient of stencil function s of its element at the element's
+    """``Gs[s]``: the gradient of stencil function s of its element at the element's
     first point (CSR row ``e nq``), zero where the row has none."""
     dim = grads.shape[0]
     for e in prange(ptr.shape[0] - 1):
         s0, s1 = ptr[e], ptr[e + 1]
         for s in range(s0, s1):
             for g in range(dim):
-                Gs[g, s] = 0.0
+                Gs[s, g] = 0.0
         r = e * nq
         for kk in range(indptr[r], indptr[r + 1]):
             lo, hi = s0, s1 - 1
@@ -223,7 +223,7 @@ def _stencil_gradients(ptr, sten, indptr, indices, grads, nq, Gs):
                 else:
                     hi = mid
             for g in range(dim):
-                Gs[g, lo] = grads[g, kk]
+                Gs[lo, g] = grads[g, kk]
 
 
 # Serial twins of the parallel kernels (small meshes: see assembly.PARALLEL_MIN)
@@ -293,7 +293,7 @@ def stencil_union(ptr, sten, inc_ptr, inc_e, n: int, parallel: bool = False) -> 
 def blocks(n: int) -> int:
     """How many row blocks the parallel row kernels split n nodes into."""
     import numba
-    return max(1, min(n // 256, 4 * numba.get_num_threads()))
+    return max(1, min(n // 64, 4 * numba.get_num_threads()))
 
 
 def _summed(u, v, Du, Dv, element_blocks, parallel, idt):
@@ -314,8 +314,9 @@ def _summed(u, v, Du, Dv, element_blocks, parallel, idt):
 
 
 def stencil_gradients(basis, parallel: bool = False):
-    """(dim, nnz of the stencils): the gradient of each stencil function of a basis whose
-    gradients are the same at all of an element's points, cached with the basis."""
+    """(nnz of the stencils, dim): the gradient of each stencil function of a basis whose
+    gradients are the same at all of an element's points, cached with the basis (a
+    function's gradient in one place: the row sums read them stencil by stencil)."""
     Gs = basis.__dict__.get("_stencil_gradients")
     if Gs is None and getattr(basis, "cell_rows", None) is not None:
         Gs = basis.cell_rows.stencil_gradients(basis.dx.shape[1], basis.stencil_ptr,
@@ -324,7 +325,7 @@ def stencil_gradients(basis, parallel: bool = False):
     if Gs is None:
         G = basis.gradient_entries
         Phi = basis.values_matrix
-        Gs = np.empty((G.shape[0], basis.stencil_nodes.shape[0]))
+        Gs = np.empty((basis.stencil_nodes.shape[0], G.shape[0]))
         kernel = _stencil_gradients if parallel else _stencil_gradients_serial
         kernel(basis.stencil_ptr, basis.stencil_nodes, Phi.indptr, Phi.indices, G,
                basis.dx.shape[1], Gs)

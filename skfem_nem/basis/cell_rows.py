@@ -20,7 +20,7 @@ from numba import njit, prange
 
 from ..jit import serial_twin
 
-__all__ = ["CellRows", "join_rows", "two_pass"]
+__all__ = ["CellRows", "gradient_rows", "join_rows", "two_pass"]
 
 #: rows per block of the row kernels (blocks go to threads)
 _BLOCK = 1024
@@ -90,48 +90,117 @@ def join_rows(V, cell_of, c_ptr, c_idx, c_grad):
 
 
 @njit(cache=True, inline="always")
-def _union_row(e, nq, cell, v_ptr, v_idx, c_ptr, c_idx, head, out, at, fill):
-    """The sorted union of the value rows ``e nq .. e nq + nq - 1`` and the gradient row
-    ``cell`` (source nq), written at ``out[at:]`` when filling; returns its length."""
-    for j in range(nq):
-        head[j] = v_ptr[e * nq + j]
-    head[nq] = c_ptr[cell]
-    n = 0
-    while True:
-        col = -1
-        for j in range(nq + 1):
-            stop = c_ptr[cell + 1] if j == nq else v_ptr[e * nq + j + 1]
-            if head[j] < stop:
-                x = c_idx[head[j]] if j == nq else v_idx[head[j]]
-                if col < 0 or x < col:
-                    col = x
-        if col < 0:
-            return n
-        for j in range(nq + 1):
-            stop = c_ptr[cell + 1] if j == nq else v_ptr[e * nq + j + 1]
-            if head[j] < stop and (c_idx[head[j]] if j == nq else v_idx[head[j]]) == col:
-                head[j] += 1
-        if fill:
-            out[at + n] = col
-        n += 1
+def _sort_entries(nodes, slots, cnt):
+    """Insertion sort of ``nodes[:cnt]`` carrying ``slots`` along (rows of tens)."""
+    for a in range(1, cnt):
+        x, y = nodes[a], slots[a]
+        b = a - 1
+        while b >= 0 and nodes[b] > x:
+            nodes[b + 1], slots[b + 1] = nodes[b], slots[b]
+            b -= 1
+        nodes[b + 1], slots[b + 1] = x, y
 
 
 @njit(cache=True, parallel=True)
-def _stencils(nq, cell_of, v_ptr, v_idx, c_ptr, c_idx, count, ptr, sten, fill):
+def _stencils(nq, cell_of, v_ptr, v_idx, c_ptr, c_idx, n, count, ptr, sten, fill):
     """Element e's stencil: the union of its points' value rows and its cell's gradient
-    row, sorted (counts, then fills at ``ptr[e]``)."""
+    row, sorted (counts, then fills at ``ptr[e]``). A node is marked when first met, so
+    each source is read once (a merge of the nq + 1 sorted rows compared all their heads at
+    every step)."""
     ne = count.shape[0]
     nb = (ne + _BLOCK - 1) // _BLOCK
     for blk in prange(nb):
-        head = np.empty(nq + 1, np.int64)
+        mark = np.full(n, -1, np.int64)
+        nodes = np.empty(0 if not fill else n, np.int64)
+        slots = np.empty(0 if not fill else n, np.int64)
         for e in range(blk * _BLOCK, min(ne, blk * _BLOCK + _BLOCK)):
-            n = _union_row(e, nq, cell_of[e * nq], v_ptr, v_idx, c_ptr, c_idx, head, sten,
-                           ptr[e] if fill else 0, fill)
+            cnt = 0
+            c = cell_of[e * nq]
+            for j in range(nq + 1):
+                lo = c_ptr[c] if j == nq else v_ptr[e * nq + j]
+                hi = c_ptr[c + 1] if j == nq else v_ptr[e * nq + j + 1]
+                for k in range(lo, hi):
+                    node = c_idx[k] if j == nq else v_idx[k]
+                    if mark[node] != e:
+                        mark[node] = e
+                        if fill:
+                            nodes[cnt] = node
+                            slots[cnt] = cnt
+                        cnt += 1
             if not fill:
-                count[e] = n
+                count[e] = cnt
+                continue
+            _sort_entries(nodes, slots, cnt)
+            for i in range(cnt):
+                sten[ptr[e] + i] = nodes[i]
 
 
 _stencils_serial = serial_twin(_stencils)
+
+
+@njit(cache=True, parallel=True)
+def _gradient_rows(pts, coef, s_ptr, s_idx, s_val, n, count, out_ptr, out_idx, out_grad,
+                   fill):
+    """Cell c's gradient row ``sum_j coef[c, j] * S[pts[c, j]]``, sorted by column (counts,
+    then fills at ``out_ptr[c]``). Each column's terms are added in the order of j, as a
+    merge of the rows adds them; a column is placed when first met and the row sorted at
+    the end (the merge of eight rows compared all their heads at every step)."""
+    ncells, m = pts.shape
+    dim = coef.shape[2]
+    nb = (ncells + _BLOCK - 1) // _BLOCK
+    for blk in prange(nb):
+        mark = np.full(n, -1, np.int64)
+        where = np.empty(n, np.int64)
+        nodes = np.empty(0 if not fill else n, np.int64)
+        slots = np.empty(0 if not fill else n, np.int64)
+        acc = np.empty((0 if not fill else n, dim))
+        for c in range(blk * _BLOCK, min(ncells, blk * _BLOCK + _BLOCK)):
+            cnt = 0
+            for j in range(m):
+                q = pts[c, j]
+                for k in range(s_ptr[q], s_ptr[q + 1]):
+                    node = s_idx[k]
+                    if mark[node] != c:
+                        mark[node] = c
+                        where[node] = cnt
+                        if fill:
+                            nodes[cnt] = node
+                            slots[cnt] = cnt
+                            for d in range(dim):
+                                acc[cnt, d] = 0.0
+                        cnt += 1
+                    if fill:
+                        for d in range(dim):
+                            acc[where[node], d] += coef[c, j, d] * s_val[k]
+            if not fill:
+                count[c] = cnt
+                continue
+            _sort_entries(nodes, slots, cnt)
+            for i in range(cnt):
+                out_idx[out_ptr[c] + i] = nodes[i]
+                for d in range(dim):
+                    out_grad[d, out_ptr[c] + i] = acc[slots[i], d]
+
+
+_gradient_rows_serial = serial_twin(_gradient_rows)
+
+
+def gradient_rows(pts, coef, S, n: int):
+    """The cells' gradient rows ``(c_ptr, c_idx, c_grad (dim, nnz))``: row c is
+    ``sum_j coef[c, j] * S[pts[c, j]]``, ``S = (indptr, indices, data)`` (int64 indices,
+    rows sorted; row r at ``indices[indptr[r]:indptr[r + 1]]``, which need not start at 0)
+    of n columns."""
+    ncells, dim = pts.shape[0], coef.shape[2]
+    kernel = _gradient_rows if ncells >= PARALLEL_MIN else _gradient_rows_serial
+    args = (np.ascontiguousarray(pts), np.ascontiguousarray(coef), *S, n)
+    count = np.zeros(ncells, np.int64)
+    ptr = np.zeros(ncells + 1, np.int64)
+    kernel(*args, count, ptr, np.empty(0, np.int64), np.empty((dim, 0)), False)
+    np.cumsum(count, out=ptr[1:])
+    idx = np.empty(ptr[-1], np.int64)
+    grad = np.empty((dim, ptr[-1]))
+    kernel(*args, count, ptr, idx, grad, True)
+    return ptr, idx, grad
 
 
 @njit(cache=True, parallel=True)
@@ -169,7 +238,7 @@ class CellRows:
         functions non-zero at its points or in its gradient."""
         ne = self.shape[0] // nq
         kernel = _stencils if ne >= PARALLEL_MIN else _stencils_serial
-        args = (nq, self.cell_of, self.V[0], self.V[1], self.c_ptr, self.c_idx)
+        args = (nq, self.cell_of, self.V[0], self.V[1], self.c_ptr, self.c_idx, self.shape[1])
         count = np.zeros(ne, np.int64)
         ptr = np.zeros(ne + 1, np.int64)
         kernel(*args, count, ptr, np.empty(0, np.int64), False)

@@ -153,9 +153,12 @@ def probe_coefficients(form, basis, kwargs, Du, Dv, which_u, which_v, lo=0, hi=N
     :class:`NotProbeable` if the form fails on the first chunk."""
     dim = basis.mesh.dim()
     ne, nq = basis.dx.shape
-    w = {**basis.default_parameters(), **form._normalize_asm_kwargs(kwargs, basis)}
+    given = form._normalize_asm_kwargs(kwargs, basis)
     reps = len(which_u)
     const = constant_coefficients(form.form, Du, Dv, dim, which_u, which_v, nq)
+    # the points' coordinates only for a form that reads w (1.4 ms of a 3D Laplacian's
+    # 90 at 1,000 nodes)
+    w = given if const is not None else {**basis.default_parameters(), **given}
     fields = {}
     for e0, e1 in _chunks(ne, 1 if const is not None else reps, lo, hi):
         if const is not None:

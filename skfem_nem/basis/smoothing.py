@@ -61,7 +61,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..jit import serial_twin
-from .cell_rows import CellRows, two_pass
+from .cell_rows import CellRows, gradient_rows, two_pass
 
 #: Gauss-Legendre points per cell edge (2D). Any rule exact for linear
 #: functions passes the patch test. Measured on the Poisson problem of
@@ -402,20 +402,6 @@ def _csr(M):
     return M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data
 
 
-def cell_gradients(S, pts, coef):
-    """The cells' smoothed gradient rows ``(c_ptr, c_idx, c_grad (dim, nnz))``: the
-    gradient of cell c is ``sum_j coef[c, j] * S[pts[c, j]]``, ``S`` the values at the
-    cells' boundary points, rows sorted: ``(indptr, indices, data)`` (int64 indices; row r
-    at ``indices[indptr[r]:indptr[r + 1]]``, which need not start at 0)."""
-    ncells, dim = pts.shape[0], coef.shape[2]
-    none = (np.zeros(ncells + 1, np.int64), np.empty(0, np.int64), np.empty(0))
-    args = (np.arange(ncells), np.ascontiguousarray(pts), np.ascontiguousarray(coef), *none,
-            *S)
-    c_ptr, c_idx, _, c_grad = two_pass(_smoothed_rows, _smoothed_rows_serial, ncells, args,
-                                       dim)
-    return c_ptr, c_idx, c_grad
-
-
 def combine(V, S, cell_of, pts, coef):
     """Values at the integration points and their cells' smoothed gradients,
     on one sparsity pattern.
@@ -423,9 +409,9 @@ def combine(V, S, cell_of, pts, coef):
     ``V`` is the CSR matrix of the functions' values at the integration points
     (one row each), ``S`` that of the cells' boundary points; ``cell_of`` names
     each integration point's cell (no two points share one: a cell of several points
-    keeps its gradient row apart, :func:`cell_gradients`), and the smoothed gradient of
-    cell c is ``sum_j coef[c, j] * S[pts[c, j]]``. Returns (indptr, indices, values,
-    grads (dim, nnz)) of len(cell_of) rows.
+    keeps its gradient row apart, :func:`~skfem_nem.basis.cell_rows.gradient_rows`), and
+    the smoothed gradient of cell c is ``sum_j coef[c, j] * S[pts[c, j]]``. Returns
+    (indptr, indices, values, grads (dim, nnz)) of len(cell_of) rows.
     """
     nrows, dim = cell_of.shape[0], coef.shape[2]
     cells = (np.ascontiguousarray(pts), np.ascontiguousarray(coef))
@@ -486,7 +472,7 @@ def _rows_3d(Phi, nodal, ne, nq, nf, cell_of, cp, coef):
     ptr, idx, val = node_rows(Phi, np.concatenate([lead, np.full(nf, -1, np.int64),
                                                    np.arange(n)]))
     r0 = ne * nq
-    grads = cell_gradients((ptr[r0:], idx, val), cp, coef)
+    grads = gradient_rows(cp, coef, (ptr[r0:], idx, val), n)
     return CellRows((ptr[:r0 + 1], idx, val), (r0, n), cell_of, *grads)
 
 

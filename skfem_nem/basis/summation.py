@@ -181,6 +181,12 @@ def _sum_gradient_rows(ptr, sten, Gs, Ce, pa, pb, L, e0, e1, inc_ptr, inc_e, inc
                     continue
                 s0 = ptr[e]
                 _test_row(Ce, pa, pb, L, e - e0, Gs, s0 + inc_l[t], w)
+                if Du == 1 and Dv == 1 and dim == 3:    # scalar forms in 3D: unrolled
+                    w0, w1, w2 = w[0, 0, 0], w[0, 0, 1], w[0, 0, 2]
+                    for s in range(s0, ptr[e + 1]):
+                        data_out[base + pos[sten[s]]] += (w0 * Gs[s, 0] + w1 * Gs[s, 1]
+                                                          + w2 * Gs[s, 2])
+                    continue
                 for s in range(s0, ptr[e + 1]):
                     at = base + pos[sten[s]] * Du
                     for cv in range(Dv):

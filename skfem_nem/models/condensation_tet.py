@@ -30,8 +30,8 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-from ..basis.assembly import parallel_kernels, stencil_position
-from ..basis.summation import basis_row_order, blocks, node_pattern
+from ..basis.assembly import parallel_kernels
+from ..basis.summation import basis_row_order, blocks, node_pattern, stencil_gradients
 from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 from .condensation import CondensedViscous
@@ -40,9 +40,9 @@ __all__ = ["condensed_viscous_tet", "condensed_divergence_tet", "divergence_tet"
 
 
 @njit(cache=True, parallel=True)
-def _tet_blocks(ptr, sten, indptr, indices, grads, nq, w, gb, G, Wsum, gsum, X, Ainv, det):
-    """Per tetrahedron e: its stencil functions' (constant) gradients into
-    ``G[3 ptr[e]:3 ptr[e + 1]]`` (3 per function), the summed weight ``Wsum[e]``, the
+def _tet_blocks(ptr, G, nq, w, gb, Wsum, gsum, X, Ainv, det):
+    """Per tetrahedron e, from its stencil functions' (constant) gradients
+    ``G[3 ptr[e]:3 ptr[e + 1]]`` (3 per function): the summed weight ``Wsum[e]``, the
     bubble's weighted gradient ``gsum[e] = sum_q eta_q dx_q grad b(x_q)``, the
     bubbles' coupling ``A_bn`` (3 x 3 S, row-major) into ``X[9 ptr[e]:9 ptr[e + 1]]``, the
     inverse of their 3 x 3 block into ``Ainv[e]`` and its determinant into ``det[e]``
@@ -51,13 +51,6 @@ def _tet_blocks(ptr, sten, indptr, indices, grads, nq, w, gb, G, Wsum, gsum, X, 
     for e in prange(ne):
         s0 = ptr[e]
         S = ptr[e + 1] - s0
-        for t in range(3 * S):
-            G[3 * s0 + t] = 0.0
-        r = e * nq                       # the gradients are the same at every point
-        for kk in range(indptr[r], indptr[r + 1]):
-            i = stencil_position(sten, s0, S, indices[kk])
-            for d in range(3):
-                G[3 * (s0 + i) + d] = grads[d, kk]
         W = 0.0
         g = np.zeros(3)
         M = np.zeros((3, 3))
@@ -195,18 +188,19 @@ def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
     symmetric. Raises ``ValueError`` naming the first tetrahedron whose bubble block is
     singular."""
     _nodal(ubasis)
-    ptr, sten = ubasis.stencil_ptr, ubasis.stencil_nodes
+    ptr = ubasis.stencil_ptr
     ne, nq = ubasis.dx.shape
     n_st = int(ptr[-1])
-    G, X = np.empty(3 * n_st), np.empty(9 * n_st)
+    X = np.empty(9 * n_st)
     Wsum, gsum, det = np.empty(ne), np.empty((ne, 3)), np.empty(ne)
     Ainv = np.zeros((ne, 3, 3))
     w = np.ascontiguousarray(eta * ubasis.dx)
-    Phi = ubasis.values_matrix
     parallel = parallel_kernels(ubasis)
+    # the stencil functions' gradients, 3 a function (cached with the basis: the Picard
+    # iterations of a step share them)
+    G = np.ascontiguousarray(stencil_gradients(ubasis, parallel)).reshape(-1)
     (_tet_blocks if parallel else _tet_blocks_serial)(
-        ptr, sten, Phi.indptr, Phi.indices, ubasis.gradient_entries, nq, w,
-        _bubble_gradient(bbasis), G, Wsum, gsum, X, Ainv, det)
+        ptr, G, nq, w, _bubble_gradient(bbasis), Wsum, gsum, X, Ainv, det)
     # flat tetrahedra (Qhull's, of co-spherical or co-planar nodes) carry no weight and
     # no bubble; any other singular block is an error
     bad = ~(det > 0) & (Wsum > 0)

@@ -250,11 +250,11 @@ def _bubble_matrices(ubasis, bbasis, X, Ainv) -> tuple:
     return Ainv_m, sp.csr_matrix((data, indices, indptr), shape=(3 * ne, ubasis.N))
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _inverse_times_coupling(ptr, sten, X, Ainv, indices, data):
     """Rows (e, c) of ``A_bb,e^-1 A_bn,e`` in CSR order: tetrahedron e's three rows of
     3 S entries each, columns ``3 sten + d`` (``X`` holds ``A_bn,e`` row-major)."""
-    for e in range(ptr.shape[0] - 1):
+    for e in prange(ptr.shape[0] - 1):
         s0 = ptr[e]
         S3 = 3 * (ptr[e + 1] - s0)
         o = 9 * s0

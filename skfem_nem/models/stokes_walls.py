@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
+from numba import njit, prange
 
 if TYPE_CHECKING:  # (only for annotations)
     from . import stokes_bases
@@ -261,21 +261,25 @@ def constraint_rows(constraints, nu: int) -> Tuple[sp.csr_matrix, np.ndarray]:
     return C, c
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _select(indptr, indices, data, rows, new_col):
     """CSR arrays of the rows ``rows`` and the columns with ``new_col >= 0`` (renumbered
-    to it) of a CSR matrix: one pass to count, one to copy (column order kept)."""
+    to it) of a CSR matrix: one pass to count, one to copy (column order kept), rows on
+    all threads (a 3D viscous block of 10,000 nodes: 80 ms a call on one)."""
     nr = rows.shape[0]
-    out_ptr = np.zeros(nr + 1, np.int64)
-    for r in range(nr):
+    count = np.zeros(nr, np.int64)
+    for r in prange(nr):
         c = 0
         for k in range(indptr[rows[r]], indptr[rows[r] + 1]):
             if new_col[indices[k]] >= 0:
                 c += 1
-        out_ptr[r + 1] = out_ptr[r] + c
+        count[r] = c
+    out_ptr = np.zeros(nr + 1, np.int64)
+    for r in range(nr):
+        out_ptr[r + 1] = out_ptr[r] + count[r]
     out_idx = np.empty(out_ptr[nr], indices.dtype)
     out_data = np.empty(out_ptr[nr], data.dtype)
-    for r in range(nr):
+    for r in prange(nr):
         o = out_ptr[r]
         for k in range(indptr[rows[r]], indptr[rows[r] + 1]):
             j = new_col[indices[k]]

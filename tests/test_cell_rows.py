@@ -136,3 +136,25 @@ def test_a_form_with_values_joins_the_rows_and_agrees(vector):
     fresh = _basis(200, 5, vector=vector)
     _ = fresh.values_matrix                                  # joined from the start
     assert abs(both.assemble(fresh) - K).max() == 0.0
+
+
+def test_stokes_loads_divergence_and_fields_need_no_joined_rows():
+    """The 3D Stokes load (body force and stress), the divergence block and ``interpolate``
+    read the cell rows: bitwise the numbers of the joined rows, which are never made."""
+    from skfem import Basis, ElementTetP1
+    from skfem_nem.models.condensation_tet import divergence_tet, loads_tet
+    b = _basis(150, 7, vector=True)
+    ne, nq = b.dx.shape
+    rng = np.random.default_rng(0)
+    f, tau = rng.normal(size=(3, ne, nq)), rng.normal(size=(3, 3, ne, nq))
+    u = rng.normal(size=b.N)
+    pbasis = Basis(b.mesh, ElementTetP1(), quadrature=b.quadrature)
+    got = (loads_tet(b, f, tau), divergence_tet(b, pbasis), b.interpolate(u))
+    assert b._values is None                                 # nothing joined
+    _ = b.values_matrix
+    b.cell_rows = None                                       # the joined rows' road
+    want = (loads_tet(b, f, tau), divergence_tet(b, pbasis), b.interpolate(u))
+    assert np.array_equal(got[0], want[0])
+    assert abs(got[1] - want[1]).max() == 0.0
+    assert np.array_equal(got[2][0], want[2][0])
+    assert np.array_equal(got[2][1], want[2][1])

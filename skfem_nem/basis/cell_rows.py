@@ -221,6 +221,30 @@ def _stencil_gradients(nq, cell_of, ptr, sten, c_ptr, c_idx, c_grad, Gs):
 _stencil_gradients_serial = serial_twin(_stencil_gradients)
 
 
+@njit(cache=True, parallel=True)
+def _cell_products(c_ptr, c_idx, c_grad, u, out):
+    """``out[d, c] = sum_k c_grad[d, k] u[c_idx[k]]`` over cell c's row, in its order (as a
+    CSR product adds)."""
+    for c in prange(c_ptr.shape[0] - 1):
+        for d in range(c_grad.shape[0]):
+            x = 0.0
+            for k in range(c_ptr[c], c_ptr[c + 1]):
+                x += c_grad[d, k] * u[c_idx[k]]
+            out[d, c] = x
+
+
+@njit(cache=True)
+def _transposed_products(cell_of, c_ptr, c_idx, c_grad, y, out):
+    """``out[d, j] += c_grad[d, k] y[d, r]`` for point r's cell's entries k (column j), the
+    points in order: the transposed product with the gradients at the points, adding in the
+    order a CSR matrix of them would (serial: that order is the point order)."""
+    for r in range(cell_of.shape[0]):
+        c = cell_of[r]
+        for k in range(c_ptr[c], c_ptr[c + 1]):
+            for d in range(c_grad.shape[0]):
+                out[d, c_idx[k]] += c_grad[d, k] * y[d, r]
+
+
 class CellRows:
     """The functions of a smoothed basis whose points share their cell's gradient: the
     values ``V = (indptr, indices, data)`` (int64 indices, one sorted row per point, nq
@@ -254,6 +278,31 @@ class CellRows:
         (_stencil_gradients if parallel else _stencil_gradients_serial)(
             nq, self.cell_of, ptr, sten, self.c_ptr, self.c_idx, self.c_grad, Gs)
         return Gs
+
+    def values(self):
+        """The values at the points, CSR (points, functions) on their own pattern (a
+        joined row also holds its gradient's columns, with value 0 there)."""
+        import scipy.sparse as sp
+        if getattr(self, "_values", None) is None:
+            ptr, idx, val = self.V
+            self._values = sp.csr_matrix((val[ptr[0]:ptr[-1]], idx[ptr[0]:ptr[-1]],
+                                          ptr - ptr[0]), shape=self.shape)
+        return self._values
+
+    def gradients_at_points(self, u):
+        """(dim, points): the gradient of the function of coefficients ``u`` (functions,)
+        at each point, its cell's; the same numbers as the joined rows' products."""
+        g = np.empty((self.c_grad.shape[0], self.c_ptr.shape[0] - 1))
+        _cell_products(self.c_ptr, self.c_idx, self.c_grad, np.ascontiguousarray(u, float), g)
+        return g[:, self.cell_of]
+
+    def transposed_gradients(self, y):
+        """(dim, functions): ``sum_r grad phi_j(x_r) y[d, r]`` for the (dim, points) ``y``:
+        the joined rows' transposed products, summed in the same order."""
+        out = np.zeros((self.c_grad.shape[0], self.shape[1]))
+        _transposed_products(self.cell_of, self.c_ptr, self.c_idx, self.c_grad,
+                             np.ascontiguousarray(y, float), out)
+        return out
 
     def joined(self):
         """The values (CSR) and the gradients (dim, nnz) on one pattern, row by row the

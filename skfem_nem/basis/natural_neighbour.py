@@ -304,6 +304,10 @@ class NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         sh = self.dx.shape
 
         def field(u):
+            if self.cell_rows is not None:      # (the same numbers, nothing joined)
+                rows = self.cell_rows
+                return ((rows.values() @ u).reshape(sh),
+                        rows.gradients_at_points(u).reshape((-1,) + sh))
             return ((self.values_matrix @ u).reshape(sh),
                     np.stack([(Dk @ u).reshape(sh) for Dk in self._D]))
 

@@ -28,3 +28,16 @@ def serial_twin(kernel, **options):
     g.__doc__ = f.__doc__
     g.__kwdefaults__ = f.__kwdefaults__
     return njit(cache=True, **options)(g)
+
+
+@njit(cache=True, inline="always")
+def sort_with(keys, carry, cnt):
+    """Insertion sort of ``keys[:cnt]`` in place, ``carry[:cnt]`` moved along (rows of
+    tens: a node's entries of a coordinate row, a stencil)."""
+    for a in range(1, cnt):
+        k, c = keys[a], carry[a]
+        b = a - 1
+        while b >= 0 and keys[b] > k:
+            keys[b + 1], carry[b + 1] = keys[b], carry[b]
+            b -= 1
+        keys[b + 1], carry[b + 1] = k, c

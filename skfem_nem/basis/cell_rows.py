@@ -18,9 +18,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ..jit import serial_twin
+from ..jit import serial_twin, sort_with
 
-__all__ = ["CellRows", "gradient_rows", "join_rows", "two_pass"]
+__all__ = ["CellRows", "count_then_fill", "gradient_rows", "join_rows", "two_pass"]
 
 #: rows per block of the row kernels (blocks go to threads)
 _BLOCK = 1024
@@ -64,19 +64,27 @@ def _joined_rows(cell_of, v_ptr, v_idx, v_val, c_ptr, c_idx, c_grad, count, out_
 _joined_rows_serial = serial_twin(_joined_rows)
 
 
-def two_pass(kernel, serial, nrows, args, dim):
-    """The two passes of a row kernel (count, then fill) into one CSR pattern:
-    ``(indptr, indices, values, gradients (dim, nnz))``."""
+def count_then_fill(kernel, serial, nrows, args, outputs):
+    """Run a row kernel twice: counting each row's entries (``fill=False``), then writing
+    them at the prefix sums of the counts; ``outputs(nnz)`` makes the arrays the kernel
+    writes (``outputs(0)``: the empty ones of the counting pass). Returns ``(indptr,
+    outputs)``. The serial twin below :data:`PARALLEL_MIN` rows."""
     kernel = kernel if nrows >= PARALLEL_MIN else serial
     count = np.zeros(nrows, np.int64)
     ptr = np.zeros(nrows + 1, np.int64)
-    kernel(*args, count, ptr, np.empty(0, np.int64), np.empty(0), np.empty((dim, 0)), False)
+    kernel(*args, count, ptr, *outputs(0), False)
     np.cumsum(count, out=ptr[1:])
-    nnz = int(ptr[-1])
-    idx = np.empty(nnz, np.int64)
-    val = np.empty(nnz)
-    grad = np.empty((dim, nnz))
-    kernel(*args, count, ptr, idx, val, grad, True)
+    out = outputs(int(ptr[-1]))
+    kernel(*args, count, ptr, *out, True)
+    return ptr, out
+
+
+def two_pass(kernel, serial, nrows, args, dim):
+    """:func:`count_then_fill` of a kernel writing columns, values and gradients: one CSR
+    pattern ``(indptr, indices, values, gradients (dim, nnz))``."""
+    ptr, (idx, val, grad) = count_then_fill(
+        kernel, serial, nrows, args,
+        lambda nnz: (np.empty(nnz, np.int64), np.empty(nnz), np.empty((dim, nnz))))
     return ptr, idx, val, grad
 
 
@@ -87,18 +95,6 @@ def join_rows(V, cell_of, c_ptr, c_idx, c_grad):
     args = (np.ascontiguousarray(cell_of, dtype=np.int64), *V, c_ptr, c_idx, c_grad)
     return two_pass(_joined_rows, _joined_rows_serial, cell_of.shape[0], args,
                     c_grad.shape[0])
-
-
-@njit(cache=True, inline="always")
-def _sort_entries(nodes, slots, cnt):
-    """Insertion sort of ``nodes[:cnt]`` carrying ``slots`` along (rows of tens)."""
-    for a in range(1, cnt):
-        x, y = nodes[a], slots[a]
-        b = a - 1
-        while b >= 0 and nodes[b] > x:
-            nodes[b + 1], slots[b + 1] = nodes[b], slots[b]
-            b -= 1
-        nodes[b + 1], slots[b + 1] = x, y
 
 
 @njit(cache=True, parallel=True)
@@ -130,7 +126,7 @@ def _stencils(nq, cell_of, v_ptr, v_idx, c_ptr, c_idx, n, count, ptr, sten, fill
             if not fill:
                 count[e] = cnt
                 continue
-            _sort_entries(nodes, slots, cnt)
+            sort_with(nodes, slots, cnt)
             for i in range(cnt):
                 sten[ptr[e] + i] = nodes[i]
 
@@ -175,7 +171,7 @@ def _gradient_rows(pts, coef, s_ptr, s_idx, s_val, n, count, out_ptr, out_idx, o
             if not fill:
                 count[c] = cnt
                 continue
-            _sort_entries(nodes, slots, cnt)
+            sort_with(nodes, slots, cnt)
             for i in range(cnt):
                 out_idx[out_ptr[c] + i] = nodes[i]
                 for d in range(dim):
@@ -190,16 +186,11 @@ def gradient_rows(pts, coef, S, n: int):
     ``sum_j coef[c, j] * S[pts[c, j]]``, ``S = (indptr, indices, data)`` (int64 indices,
     rows sorted; row r at ``indices[indptr[r]:indptr[r + 1]]``, which need not start at 0)
     of n columns."""
-    ncells, dim = pts.shape[0], coef.shape[2]
-    kernel = _gradient_rows if ncells >= PARALLEL_MIN else _gradient_rows_serial
+    dim = coef.shape[2]
     args = (np.ascontiguousarray(pts), np.ascontiguousarray(coef), *S, n)
-    count = np.zeros(ncells, np.int64)
-    ptr = np.zeros(ncells + 1, np.int64)
-    kernel(*args, count, ptr, np.empty(0, np.int64), np.empty((dim, 0)), False)
-    np.cumsum(count, out=ptr[1:])
-    idx = np.empty(ptr[-1], np.int64)
-    grad = np.empty((dim, ptr[-1]))
-    kernel(*args, count, ptr, idx, grad, True)
+    ptr, (idx, grad) = count_then_fill(
+        _gradient_rows, _gradient_rows_serial, pts.shape[0], args,
+        lambda nnz: (np.empty(nnz, np.int64), np.empty((dim, nnz))))
     return ptr, idx, grad
 
 
@@ -256,19 +247,14 @@ class CellRows:
         self.V, self.shape = V, tuple(shape)
         self.cell_of = np.ascontiguousarray(cell_of, dtype=np.int64)
         self.c_ptr, self.c_idx, self.c_grad = c_ptr, c_idx, c_grad
+        self._values = None                 # the values' CSR matrix, made on first use
 
     def stencils(self, nq: int):
         """``(ptr, sten)``: element e's sorted stencil ``sten[ptr[e]:ptr[e + 1]]``, the
         functions non-zero at its points or in its gradient."""
-        ne = self.shape[0] // nq
-        kernel = _stencils if ne >= PARALLEL_MIN else _stencils_serial
         args = (nq, self.cell_of, self.V[0], self.V[1], self.c_ptr, self.c_idx, self.shape[1])
-        count = np.zeros(ne, np.int64)
-        ptr = np.zeros(ne + 1, np.int64)
-        kernel(*args, count, ptr, np.empty(0, np.int64), False)
-        np.cumsum(count, out=ptr[1:])
-        sten = np.empty(ptr[-1], np.int64)
-        kernel(*args, count, ptr, sten, True)
+        ptr, (sten,) = count_then_fill(_stencils, _stencils_serial, self.shape[0] // nq, args,
+                                       lambda nnz: (np.empty(nnz, np.int64),))
         return ptr, sten
 
     def stencil_gradients(self, nq: int, ptr, sten):
@@ -283,7 +269,7 @@ class CellRows:
         """The values at the points, CSR (points, functions) on their own pattern (a
         joined row also holds its gradient's columns, with value 0 there)."""
         import scipy.sparse as sp
-        if getattr(self, "_values", None) is None:
+        if self._values is None:
             ptr, idx, val = self.V
             self._values = sp.csr_matrix((val[ptr[0]:ptr[-1]], idx[ptr[0]:ptr[-1]],
                                           ptr - ptr[0]), shape=self.shape)

@@ -165,26 +165,26 @@ class NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
         self._values, self._gradients = Phi, G
         self._gradient_matrices = [self._on_pattern(Phi, G[k]) for k in range(G.shape[0])]
 
+    def _joined(self):
+        """``(values, gradients, gradient matrices)`` on one pattern, joined on first use."""
+        if self._values is None:
+            self._join()
+        return self._values, self._gradients, self._gradient_matrices
+
     @property
     def values_matrix(self):
         """(ne * nq, N) CSR: the functions' values at the quadrature points."""
-        if self._values is None:
-            self._join()
-        return self._values
+        return self._joined()[0]
 
     @property
     def gradient_entries(self):
         """(dim, nnz): the functions' gradients on the pattern of ``values_matrix``."""
-        if self._gradients is None:
-            self._join()
-        return self._gradients
+        return self._joined()[1]
 
     @property
     def _D(self):
         """The gradients as dim CSR matrices sharing ``values_matrix``'s pattern."""
-        if self._gradient_matrices is None:
-            self._join()
-        return self._gradient_matrices
+        return self._joined()[2]
 
     @staticmethod
     def _on_pattern(Phi, data):

@@ -50,10 +50,12 @@ are carried by the vertices and the centroid (:func:`value_rule`), which
 share the tetrahedron's smoothed gradient; at a vertex the values are known,
 so the centroid is the one coordinate query of a tetrahedron's own.
 
-The smoothed gradients and the values at the integration points are stored
-on one CSR sparsity pattern per row (an integration point), as the Gauss
-path stores coordinates and their gradients, so stencils, groups and the
-whole-mesh assembly are unchanged.
+In 2D the smoothed gradients and the values at the integration points are
+stored on one CSR sparsity pattern per row (an integration point), as the
+Gauss path stores coordinates and their gradients, so stencils, groups and
+the whole-mesh assembly are unchanged. In 3D the five points of a
+tetrahedron share its gradient, which is kept once, beside the values
+(:class:`~skfem_nem.basis.cell_rows.CellRows`).
 """
 from __future__ import annotations
 
@@ -262,6 +264,7 @@ def _cells_3d(p, t, t2f, facets, elems):
     slot = np.empty(nf, np.int64)
     pts = np.empty((k, 8), np.int64)
     coef = np.empty((k, 8, 3))
+    opposite = np.empty((k, 4), np.int64)
     G, E = np.empty((4, 3)), np.empty((3, 3))
     for i in range(4):
         for j in range(k):
@@ -275,6 +278,7 @@ def _cells_3d(p, t, t2f, facets, elems):
             o = 0
             while t[o, e] == a or t[o, e] == b or t[o, e] == c:
                 o += 1
+            opposite[j, i] = o
             own[q] = e
             slot[q] = o
             pts[j, i] = q
@@ -282,13 +286,8 @@ def _cells_3d(p, t, t2f, facets, elems):
     for j in range(k):
         _lambda_gradients(p, t, elems[j], E, G)
         for i in range(4):
-            f = t2f[i, elems[j]]
-            a, b, c = facets[0, f], facets[1, f], facets[2, f]
-            o = 0
-            while t[o, elems[j]] == a or t[o, elems[j]] == b or t[o, elems[j]] == c:
-                o += 1
             for d in range(3):
-                coef[j, i, d] = -2.25 * G[o, d]
+                coef[j, i, d] = -2.25 * G[opposite[j, i], d]
                 coef[j, 4 + i, d] = 0.25 * G[i, d]
     return points, own, pts, coef, slot
 
@@ -441,8 +440,8 @@ def node_rows(Q, nodal):
     val = np.empty(ptr[-1])
     source = np.full(nodal.size, -1, np.int64)
     source[ask] = np.arange(Q.shape[0])
-    _node_rows(Q.indptr.astype(np.int64), Q.indices.astype(np.int64), Q.data, nodal, source,
-               ptr, idx, val)
+    _node_rows(np.asarray(Q.indptr, np.int64), np.asarray(Q.indices, np.int64), Q.data, nodal,
+               source, ptr, idx, val)
     return ptr, idx, val
 
 

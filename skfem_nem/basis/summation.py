@@ -391,14 +391,16 @@ def _merged_gradient_chunks(chunks):
         held.clear()
         return out
 
+    size = 0                                # coefficients held
     for chunk in chunks:
         e0, e1, kind, what = chunk
         if held and (kind != "gradients" or not _same_pairs(held[0][3], what)
-                     or sum(h[3][0].size for h in held) + what[0].size
-                     > GRADIENT_COEFFICIENT_BUDGET):
+                     or size + what[0].size > GRADIENT_COEFFICIENT_BUDGET):
             yield joined()
+            size = 0
         if kind == "gradients":
             held.append(chunk)
+            size += what[0].size
         else:
             yield chunk
     if held:

@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..geometry.nodesets import morton_order
+from ..jit import sort_with
 
 __all__ = ["RECORD_VALUES", "DEN_MIN", "ENTRY_MIN", "HULL_LAMBDA", "CAVITY_SLACK", "CAVITY_CAP",
            "conflict_tetrahedra", "face_volume", "power_and_volumes", "power_and_volumes_at",
@@ -388,18 +389,6 @@ def _row(R, T, NB, x, y, z, t0, k0, stamp, m, tets, E, mark, where, oi, ov, oa):
     return cnt
 
 
-@njit(cache=True, inline="always")
-def _sort_row(oi, ov, cnt):
-    """Insertion sort of the row's entries by node (rows of tens)."""
-    for a in range(1, cnt):
-        i, v = oi[a], ov[a]
-        b = a - 1
-        while b >= 0 and oi[b] > i:
-            oi[b + 1], ov[b + 1] = oi[b], ov[b]
-            b -= 1
-        oi[b + 1], ov[b + 1] = i, v
-
-
 @njit(cache=True, parallel=True, error_model="numpy")
 def _rows(R, T, NB, n, Q, start, slot, nblocks, out_i, out_v, count):
     """Rows of the queries Q (m, 3): query j in tetrahedron start[j], on its face opposite
@@ -417,7 +406,7 @@ def _rows(R, T, NB, n, Q, start, slot, nblocks, out_i, out_v, count):
             c = _row(R, T, NB, Q[j, 0], Q[j, 1], Q[j, 2], start[j], slot[j], stamp, j, tets, E,
                      mark, where, out_i[j], out_v[j], oa)
             if c > 0:
-                _sort_row(out_i[j], out_v[j], c)
+                sort_with(out_i[j], out_v[j], c)
             count[j] = c
 
 

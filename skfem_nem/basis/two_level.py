@@ -267,11 +267,12 @@ class TwoLevelPreconditioner:
         return out
 
 
-def v_cycle(ml, b: np.ndarray) -> np.ndarray:
+def v_cycle(ml, b: np.ndarray, level: int = 0) -> np.ndarray:
     """One V-cycle of pyamg's multilevel solver ``ml`` from zero for ``A x = b``
     (pyamg's own ``solve`` also computes two norms and a residual per cycle, which are
     not needed inside a Krylov method: 54 against 22 ms on the coarse level of SolCx at
-    33,242 velocity unknowns)."""
+    33,242 velocity unknowns); ``level``: the cycle from that level down, ``A`` its
+    matrix (a caller that treats the finer levels itself)."""
     levels = ml.levels
 
     def cycle(k, rhs):
@@ -284,7 +285,7 @@ def v_cycle(ml, b: np.ndarray) -> np.ndarray:
         lv.postsmoother(lv.A, x, rhs)
         return x
 
-    return cycle(0, b)
+    return cycle(level, b)
 
 
 class TwoLevelSpace:

@@ -14,8 +14,8 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
-__all__ = ["FGMRES_RESTART", "MINRES_MAX_RTOL", "MINRES_TOL_FACTOR", "cg_steps", "dot", "fgmres",
-           "norm", "restarted_minres"]
+__all__ = ["FGMRES_RESTART", "LANCZOS_STEPS", "MINRES_MAX_RTOL", "MINRES_TOL_FACTOR", "cg_steps",
+           "dot", "fgmres", "largest_eigenvalue", "norm", "restarted_minres"]
 
 # FGMRES restart length: it keeps two vectors of the system's size per iteration
 # up to this many, so memory stays linear in the unknowns (730 MB at 300,000
@@ -28,6 +28,14 @@ FGMRES_RESTART = 150
 MINRES_TOL_FACTOR = 10
 # MINRES restart asks for at most this relative reduction of the residual
 MINRES_MAX_RTOL = 0.5
+# Lanczos steps of largest_eigenvalue: the bound of a Chebyshev smoother. pyamg's own
+# estimate takes 15 Lanczos steps and restarts up to 5 times; on the scaled viscous blocks
+# of the 3D plate (9,956 nodes) 20 steps from a random start find its estimate to 1e-3
+LANCZOS_STEPS = 20
+# Lanczos stops early when the new vector's norm falls below this fraction of the largest
+# diagonal entry so far: the start spans an invariant subspace (a small or a reducible
+# operator), whose Ritz values are exact
+LANCZOS_BREAKDOWN = 1e-12
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> float:
@@ -157,3 +165,30 @@ def restarted_minres(matvec: Callable, K, M, rhs: np.ndarray, tol: float, maxite
         r = rhs - matvec(x)
         restarts += 1
     return x, res_m, restarts, count[0]
+
+
+def largest_eigenvalue(matvec: Callable, n: int, steps: int = LANCZOS_STEPS,
+                       seed: int = 0) -> float:
+    """An upper estimate of the largest eigenvalue of a symmetric positive semi-definite
+    operator of size ``n``: ``steps`` Lanczos steps (fully reorthogonalised) from a random
+    start drawn with ``seed``, the largest Ritz value plus its residual norm (an
+    eigenvalue lies within that of the Ritz value; the largest Ritz value approaches the
+    largest eigenvalue from below)."""
+    steps = max(1, min(steps, n))
+    V = np.empty((steps + 1, n))
+    alpha, beta = np.zeros(steps), np.zeros(steps)
+    v = np.random.default_rng(seed).standard_normal(n)
+    V[0] = v / norm(v)
+    k = steps
+    for j in range(steps):
+        w = np.asarray(matvec(V[j]), dtype=float)
+        alpha[j] = dot(w, V[j])
+        for _ in range(2):
+            w -= np.einsum("i,ij->j", np.einsum("ij,j->i", V[:j + 1], w), V[:j + 1])
+        beta[j] = norm(w)
+        if beta[j] <= LANCZOS_BREAKDOWN * abs(alpha[:j + 1]).max():
+            k = j + 1
+            break
+        V[j + 1] = w / beta[j]
+    theta, S = sla.eigh_tridiagonal(alpha[:k], beta[:k - 1])
+    return float(theta[-1] + beta[k - 1] * abs(S[-1, -1]))

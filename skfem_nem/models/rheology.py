@@ -516,6 +516,7 @@ class _PicardResult:
     residual: float
     history: list
     seconds: dict
+    rotated: np.ndarray          # (d, d, ne, nq) old stress rotated with grad's spin
 
 
 def _checked_stress(spaces: StokesSpaces, tau_old, dt, rotation: str) -> np.ndarray:
@@ -559,10 +560,11 @@ def _step_setup(spaces: StokesSpaces, material: Material, tau_old, dt, f, gravit
     return _StepSetup(tau_old, dt, rotation, eta_ve, chi, Y, eta_min, load, ps)
 
 
-def _plastic_viscosity(st: _StepSetup, eps: np.ndarray, G: np.ndarray) -> np.ndarray:
+def _plastic_viscosity(st: _StepSetup, eps: np.ndarray, rotated: np.ndarray) -> np.ndarray:
     """Effective viscosity: ``eta_ve``, or ``Y / (2 edot_eff_II)`` where the
-    trial stress exceeds the yield stress; at least ``eta_min``."""
-    edot = eps + 0.5 * st.chi[None, None] * st.rotated(G)
+    trial stress exceeds the yield stress; at least ``eta_min``. ``rotated``: the old
+    stress rotated with the iterate's spin (``st.rotated(G)``)."""
+    edot = eps + 0.5 * st.chi[None, None] * rotated
     IIe = second_invariant(edot)
     with np.errstate(divide="ignore", invalid="ignore"):
         eta_vp = np.where(2.0 * st.eta_ve * IIe > st.yield_stress,
@@ -579,15 +581,17 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
     history = []
     seconds = {"assembly": 0.0, "solver": 0.0}
     res, weight, du_last = np.inf, 1.0, None
+    rotated = st.rotated(G)    # once per iterate: the load and the viscosity share it
     for it in range(1, maxiter + 1):
-        tau0 = (eta_eff * st.chi)[None, None] * st.rotated(G)
+        tau0 = (eta_eff * st.chi)[None, None] * rotated
         sol = solve_stokes_bc(spaces, eta_eff, st.load, tau0, *walls, constraints=constraints,
                               **solve)
         for part in seconds:
             seconds[part] += sol.info[f"{part}_seconds"]
         G = velocity_gradient(spaces, sol)
         eps = strain_rate(G)
-        eta_new = _plastic_viscosity(st, eps, G)
+        rotated = st.rotated(G)
+        eta_new = _plastic_viscosity(st, eps, rotated)
         if u is None:
             res, du = (np.inf if st.iterate else 0.0), None
         else:
@@ -608,13 +612,13 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
         raise PicardNotConverged(f"visco-elasto-plastic Picard iterations did not converge: "
                                  f"{maxiter} iterations, relative velocity change {res:.3e} > "
                                  f"tol {tol:.1e} (raise maxiter or min_viscosity, or shorten dt)")
-    return _PicardResult(sol, G, eps, eta_eff, it, res, history, seconds)
+    return _PicardResult(sol, G, eps, eta_eff, it, res, history, seconds, rotated)
 
 
 def _vep_result(st: _StepSetup, pic: _PicardResult) -> VEPStep:
     """New stress by the radial return from the last iterate, and the plastic
     strain rate and strain."""
-    edot = pic.strain_rate + 0.5 * st.chi[None, None] * st.rotated(pic.grad)
+    edot = pic.strain_rate + 0.5 * st.chi[None, None] * pic.rotated
     tau_trial = 2.0 * st.eta_ve[None, None] * edot
     tau_new, factor = return_map(tau_trial, st.yield_stress)
     bad = ~np.isfinite(tau_new).all(axis=(0, 1))

@@ -1,0 +1,157 @@
+"""Products with a symmetric sparse matrix kept as its upper triangle and computed on all of
+numba's threads (:class:`SymmetricRows`): the finest level of the viscous block's multigrid.
+
+Why: a 3D natural-neighbour viscous block has some 460 entries a row (three components of
+some 150 neighbours), and the Stokes solves of the 3D plate spend most of their time in
+products with it (the preconditioner's conjugate-gradient steps and the Chebyshev
+smoothing of its V-cycles). scipy multiplies on one thread and reads every entry, and the
+product is bound by memory bandwidth. The upper triangle reads half the entries, and the
+threads share the rows. On the viscous block of a 3D plate step at 9,956 nodes (29,253
+unknowns, 13.5 million entries) a product takes 6.3 ms against scipy's 16.2 ms on two
+cores (docs/stokes_3d.md).
+
+Each thread takes a run of rows holding about the same number of entries and adds the
+transposed terms ``a_ij x_i`` (j > i) into a vector of its own; the vectors are summed at
+the end. Every entry is added by the same thread in the same order in every product, so the
+results repeat bit for bit for a given number of threads.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+import scipy.sparse as sp
+from numba import njit, prange
+
+__all__ = ["SymmetricRows"]
+
+
+class SymmetricRows:
+    """The symmetric matrix ``A`` (CSR, square; only its upper triangle is read) for
+    products ``A @ x`` on numba's threads. :meth:`refresh` takes new values of a matrix
+    of the same pattern without finding the triangle again.
+
+    ``values``: the precision the entries are kept in (``numpy.float32`` or
+    ``numpy.float64``); the products are summed in double precision either way. Single
+    precision reads two thirds of the bytes (4.5 against 7.8 ms on the block above), for
+    a preconditioner whose own error is far larger than the rounding.
+    """
+
+    def __init__(self, A: sp.spmatrix, values=np.float64):
+        A = sp.csr_matrix(A)
+        if A.shape[0] != A.shape[1]:
+            raise ValueError(f"SymmetricRows needs a square matrix, got shape {A.shape}")
+        self.values = np.dtype(values)
+        if self.values not in (np.float32, np.float64):
+            raise ValueError(f"SymmetricRows keeps float32 or float64 values, got {values!r}")
+        self.shape, self.dtype = A.shape, np.dtype(np.float64)
+        self._pattern = (A.indptr, A.indices)      # the index arrays read (not copied)
+        n = A.shape[0]
+        counts = np.zeros(n + 1, dtype=np.int64)
+        self.diagonal_source = np.full(n, -1, dtype=np.int64)    # -1: no diagonal entry
+        _upper_counts(A.indptr, A.indices, counts, self.diagonal_source)
+        self.indptr = np.cumsum(counts)
+        self.source = np.empty(self.indptr[-1], dtype=np.int64)   # entries of A kept
+        self.indices = np.empty(self.indptr[-1], dtype=np.uint32)
+        _upper_fill(A.indptr, A.indices, self.indptr, self.source, self.indices)
+        chunks = max(1, min(numba.get_num_threads(), n))
+        self.bounds = np.searchsorted(self.indptr, np.linspace(0, self.indptr[-1],
+                                                               chunks + 1)).astype(np.int64)
+        self.bounds[0], self.bounds[-1] = 0, n
+        self.buffers = np.zeros((chunks, n))
+        self.refresh(A)
+
+    @property
+    def nnz(self) -> int:
+        """Entries kept: the strict upper triangle and the diagonal."""
+        return int(self.indptr[-1]) + self.shape[0]
+
+    def same_pattern(self, A: sp.spmatrix) -> bool:
+        """True if ``A`` is a CSR matrix with the index arrays this one was made from."""
+        indptr, indices = self._pattern
+        return (sp.issparse(A) and A.format == "csr" and A.shape == self.shape
+                and (A.indices is indices or (np.array_equal(A.indptr, indptr)
+                                               and np.array_equal(A.indices, indices))))
+
+    def refresh(self, A: sp.spmatrix) -> None:
+        """Take the values of ``A``; a matrix of another pattern than the one this was made
+        from is taken as if new."""
+        if not self.same_pattern(A):
+            self.__init__(A, self.values)
+            return
+        values = np.asarray(A.data, dtype=np.float64)
+        self.data = np.empty(self.source.size, dtype=self.values)
+        self.diagonal = np.empty(self.shape[0])
+        _gather(values, self.source, self.data)
+        _gather(values, self.diagonal_source, self.diagonal)
+
+    def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        if x.shape != (self.shape[1],):
+            raise ValueError(f"SymmetricRows @ x needs x of shape ({self.shape[1]},), "
+                             f"got {x.shape}")
+        y = np.empty(self.shape[0])
+        _symmetric_product(self.indptr, self.indices, self.data, self.diagonal, x, self.bounds,
+                           self.buffers, y)
+        return y
+
+    matvec = __matmul__
+
+
+@njit(cache=True, parallel=True)
+def _upper_counts(indptr, indices, counts, diagonal):
+    """``counts[i + 1]``: entries of row i above the diagonal; ``diagonal[i]``: the
+    position of its diagonal entry (left at -1 if none)."""
+    for i in prange(indptr.size - 1):
+        c = 0
+        for k in range(indptr[i], indptr[i + 1]):
+            if indices[k] > i:
+                c += 1
+            elif indices[k] == i:
+                diagonal[i] = k
+        counts[i + 1] = c
+
+
+@njit(cache=True, parallel=True)
+def _upper_fill(indptr, indices, up_ptr, source, up_indices):
+    """The strict upper triangle's column indices and the positions of its entries in
+    ``A``."""
+    for i in prange(indptr.size - 1):
+        w = up_ptr[i]
+        for k in range(indptr[i], indptr[i + 1]):
+            if indices[k] > i:
+                source[w] = k
+                up_indices[w] = indices[k]
+                w += 1
+
+
+@njit(cache=True, parallel=True)
+def _gather(values, source, out):
+    """``out[k] = values[source[k]]``, zero where ``source[k]`` is -1."""
+    for k in prange(source.size):
+        out[k] = values[source[k]] if source[k] >= 0 else 0.0
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def _symmetric_product(indptr, indices, data, diagonal, x, bounds, buffers, y):
+    """``y = A x`` from the strict upper triangle and the diagonal of ``A``: chunk t of rows
+    (``bounds``) adds its rows' sums and its transposed terms into ``buffers[t]``; then the
+    buffers are summed. A chunk only writes at or after its first row, so only that part is
+    cleared."""
+    for t in prange(bounds.size - 1):
+        buf = buffers[t]
+        buf[bounds[t]:] = 0.0
+        for i in range(bounds[t], bounds[t + 1]):
+            xi = x[i]
+            acc = diagonal[i] * xi
+            for k in range(indptr[i], indptr[i + 1]):
+                j = indices[k]
+                a = data[k]
+                acc += a * x[j]
+                buf[j] += a * xi
+            buf[i] += acc
+    for i in prange(y.size):
+        acc = 0.0
+        for t in range(bounds.size - 1):
+            if i >= bounds[t]:
+                acc += buffers[t, i]
+        y[i] = acc

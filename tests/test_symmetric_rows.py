@@ -1,0 +1,92 @@
+"""Products with a symmetric matrix kept as its upper triangle
+(:class:`skfem_nem.models.symmetric_rows.SymmetricRows`), the Lanczos bound of the
+Chebyshev smoother (:func:`skfem_nem.models.krylov.largest_eigenvalue`) and the finest
+level of the viscous block's multigrid that uses both."""
+import numpy as np
+import pytest
+import scipy.sparse as sps
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from skfem_nem.models.krylov import largest_eigenvalue
+from skfem_nem.models.stokes_amg import ViscousAMG, scaled_block, unit_scale
+from skfem_nem.models.symmetric_rows import SymmetricRows
+
+
+def _symmetric(n, density, seed, diagonal=True):
+    """A random symmetric sparse matrix (rows may be empty, diagonal entries missing)."""
+    M = sps.random(n, n, density=density, random_state=seed, format="csr")
+    M = M + M.T
+    if diagonal:
+        M = M + sps.diags(np.random.default_rng(seed).random(n) + n)
+    return sps.csr_matrix(M)
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(1, 80), density=st.floats(0.0, 0.5), seed=st.integers(0, 10_000),
+       diagonal=st.booleans())
+def test_products_are_scipys(n, density, seed, diagonal):
+    A = _symmetric(n, density, seed, diagonal)
+    S = SymmetricRows(A)
+    x = np.random.default_rng(seed + 1).standard_normal(n)
+    ref = A @ x
+    assert np.allclose(S @ x, ref, rtol=1e-13, atol=1e-13 * (abs(A) @ abs(x)).max())
+    assert S.nnz == sps.triu(A, 1).nnz + n
+    assert np.array_equal(S @ x, S @ x)             # the same sums in the same order
+
+
+def test_refresh_takes_new_values_and_a_new_pattern():
+    A = _symmetric(60, 0.2, 1)
+    S = SymmetricRows(A)
+    x = np.random.default_rng(2).standard_normal(60)
+    band = sps.diags([np.ones(59), np.ones(59)], [-1, 1])
+    B = sps.csr_matrix(A + band)                     # new values, and a new pattern
+    C = A.copy()
+    C.data = 2 * C.data                              # the same pattern
+    assert S.same_pattern(C) and not S.same_pattern(B)
+    S.refresh(C)
+    assert np.allclose(S @ x, C @ x, rtol=1e-13)
+    S.refresh(B)
+    assert np.allclose(S @ x, B @ x, rtol=1e-13)
+
+
+def test_bad_input_is_named():
+    with pytest.raises(ValueError, match=r"square matrix, got shape \(2, 3\)"):
+        SymmetricRows(sps.csr_matrix(np.ones((2, 3))))
+    S = SymmetricRows(sps.identity(4, format="csr"))
+    with pytest.raises(ValueError, match=r"x of shape \(4,\), got \(3,\)"):
+        S @ np.ones(3)
+
+
+def test_largest_eigenvalue_is_an_upper_estimate():
+    rng = np.random.default_rng(0)
+    Q, _ = np.linalg.qr(rng.standard_normal((300, 300)))
+    lam = np.r_[np.linspace(0.01, 1.0, 299), 1.3]
+    A = (Q * lam) @ Q.T
+    est = largest_eigenvalue(lambda v: A @ v, 300)
+    assert 1.3 - 1e-12 <= est <= 1.3 * 1.05, est
+    # an invariant subspace: a 3 x 3 operator is exact after three steps
+    D = np.diag([1.0, 2.0, 5.0])
+    assert abs(largest_eigenvalue(lambda v: D @ v, 3) - 5.0) < 1e-12
+
+
+def test_the_finest_level_is_the_scaled_block():
+    """The multigrid's finest products and Chebyshev bound come from the scaled block: a
+    2D Laplacian of an elasticity-like pair of components."""
+    n = 40
+    L = sps.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    eta = sps.diags(np.sqrt(np.linspace(1, 100, 2 * n * n)))     # a viscosity ramp
+    A = sps.csr_matrix(eta @ sps.kron(sps.identity(2), sps.kronsum(L, L)) @ eta)
+    modes = np.kron(np.eye(2), np.ones((n * n, 1)))
+    amg = ViscousAMG(A, modes)
+    x = np.random.default_rng(3).standard_normal(A.shape[0])
+    scaled = scaled_block(A, unit_scale(A))
+    assert np.allclose(amg.fine @ x, scaled @ x, rtol=1e-13)
+    rho = np.linalg.eigvalsh(scaled.toarray())[-1]
+    assert amg.n_levels >= 2
+    # the smoother's interval reaches past the spectrum: Chebyshev damps every mode
+    est = largest_eigenvalue(amg.fine.matvec, A.shape[0])
+    assert rho - 1e-10 <= est <= 1.05 * rho
+    b = A @ x
+    err = [np.linalg.norm(amg.cg(b, k) - x) / np.linalg.norm(x) for k in (1, 4, 12)]
+    assert err[0] > err[1] > err[2] and err[2] < 1e-6, err

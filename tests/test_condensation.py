@@ -78,3 +78,30 @@ def test_a_singular_bubble_block_is_named():
     with pytest.raises(ValueError, match="degenerate triangle 7: its bubble block is "
                                          r"singular \(1 triangle"):
         condensed_viscous(spaces.ubasis, spaces.bbasis, eta)
+
+
+def test_condensed_tet_divergence_is_the_sparse_product():
+    """On tetrahedra the bubbles' part of the divergence block is added row by row
+    (``TetDivergence``): the same block as ``B_n - B_b A_bb^-1 A_bn`` by sparse products,
+    for a first viscosity (the pattern found) and a second (the pattern kept)."""
+    from skfem_nem.geometry.nodesets3d import box_nodes_3d
+    from skfem_nem.models.condensation_tet import TetDivergence, condensed_viscous_tet
+    from skfem_nem.models.stokes import _blocks_once
+    spaces = stokes_spaces(delaunay_mesh(box_nodes_3d(300, seed=2)))
+    cache = _blocks_once(spaces)
+    td = cache["tet_divergence"]
+    assert isinstance(td, TetDivergence)
+    Bn = sp.csr_matrix((td.Bn[2], td.Bn[1], td.Bn[0]), shape=td.shape)
+    ne, nq = spaces.ubasis.dx.shape
+    rng = np.random.default_rng(0)
+    for _ in range(2):
+        cv = condensed_viscous_tet(spaces.ubasis, spaces.bbasis,
+                                   np.exp(rng.standard_normal((ne, nq))))
+        ref = (Bn - cache["Bb"] @ cv.AiAbn).tocsr()
+        got = td.condensed(cv)
+        assert got.has_sorted_indices
+        assert abs(got - ref).max() <= 1e-14 * abs(ref).max()
+    other = cv.AiAbn.copy()
+    other.indices = other.indices[::-1].copy()
+    with pytest.raises(ValueError, match="another pattern"):
+        td.condensed(type(cv)(cv.A, cv.Ainv, other, None))

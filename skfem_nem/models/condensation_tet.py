@@ -21,8 +21,9 @@ stencils' pattern (:func:`_condensed_rows_tet`), as the 2D kernels of
 the block comes out exactly symmetric (each entry sums the same products in the same
 order as its transpose). The 2D kernels stay as they are: ``--dim 2`` is bitwise
 unchanged. The divergence block's natural-neighbour part is coefficient-free and
-assembled once; its condensation ``B_b (A_bb^-1 A_bn)`` is a sparse product with four
-entries per bubble row.
+assembled once; its condensation ``B_b (A_bb^-1 A_bn)`` is added row by row
+(:class:`TetDivergence`: 0.04 s at 9,956 nodes against 0.34 s as a sparse product and a
+difference).
 """
 from __future__ import annotations
 
@@ -31,12 +32,18 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from ..basis.assembly import parallel_kernels
-from ..basis.summation import basis_row_order, blocks, node_pattern, stencil_gradients
+from ..basis.cell_rows import PARALLEL_MIN, count_then_fill
+from ..basis.summation import (basis_row_order, blocks, incidence, node_pattern,
+                               stencil_gradients)
 from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 from .condensation import CondensedViscous
 
-__all__ = ["condensed_viscous_tet", "condensed_divergence_tet", "divergence_tet", "loads_tet"]
+__all__ = ["TetDivergence", "condensed_viscous_tet", "divergence_tet", "loads_tet"]
+
+# pressure rows per task of the condensed divergence kernel (each task keeps marks the
+# size of the velocity dofs)
+_ROWS = 256
 
 
 @njit(cache=True, parallel=True)
@@ -288,12 +295,100 @@ def divergence_tet(ubasis, pbasis) -> sp.csr_matrix:
     return out.tocsr()
 
 
-def condensed_divergence_tet(Bn: sp.csr_matrix, Bb: sp.csr_matrix,
-                             cv: CondensedViscous) -> sp.csr_matrix:
-    """The divergence block with the bubbles condensed out, ``B_n - B_b A_bb^-1 A_bn``,
-    from the natural-neighbour functions' block ``Bn`` (np, nu), the bubbles' ``Bb``
-    (np, nb) and the condensed viscous block ``cv``."""
-    return (Bn - Bb @ cv.AiAbn).tocsr()
+class TetDivergence:
+    """The parts of the condensed divergence block ``B_n - B_b A_bb^-1 A_bn`` that do not
+    change with the viscosity, prepared once per spaces: the natural-neighbour functions'
+    block ``Bn`` (np, nu), tetrahedron e's 4 x 3 block of the bubbles' ``Bb`` (np, 3 ne;
+    the bubble dofs ``3 e + c``) and the tetrahedra around each pressure dof.
+    :meth:`condensed` adds the bubbles' part row by row."""
+
+    def __init__(self, Bn: sp.csr_matrix, Bb: sp.csr_matrix, pbasis):
+        Bn = sp.csr_matrix(Bn)
+        Bn.sum_duplicates()
+        self.Bn = tuple(np.asarray(a, dtype=np.int64) for a in (Bn.indptr, Bn.indices)) + (
+            np.asarray(Bn.data, dtype=float),)
+        self.shape = Bn.shape
+        pd = np.asarray(pbasis.element_dofs)                   # (4, ne) pressure dofs
+        ne = pd.shape[1]
+        rows = np.repeat(pd.T, 3, axis=1).ravel()              # (e, k, c) order
+        cols = (3 * np.arange(ne)[:, None] + np.tile(np.arange(3), 4)[None]).ravel()
+        self.local = np.asarray(sp.csr_matrix(Bb)[rows, cols]).reshape(ne, 4, 3)
+        self.incidence = incidence(np.arange(0, 4 * ne + 1, 4), pd.T.ravel(), Bn.shape[0])
+        self.pattern = None     # the condensed block's rows and the coupling's, once found
+
+    def condensed(self, cv: CondensedViscous) -> sp.csr_matrix:
+        """The block with the bubbles of ``cv`` (its ``A_bb^-1 A_bn``, three rows of the
+        same columns per tetrahedron) condensed out, CSR with sorted rows; each row sums
+        its ``Bn`` entries and its tetrahedra's terms (:func:`_divergence_rows`). The
+        pattern is found on the first call and kept: it depends on the stencils alone."""
+        M = cv.AiAbn
+        args = (*self.Bn, *self.incidence, self.local,
+                np.asarray(M.indptr, dtype=np.int64), np.asarray(M.indices, dtype=np.int64),
+                M.data, self.shape[1])
+        kernel = (_divergence_rows if self.shape[0] >= PARALLEL_MIN
+                  else _divergence_rows_serial)
+        if self.pattern is None:
+            ptr, (idx, val) = count_then_fill(
+                _divergence_rows, _divergence_rows_serial, self.shape[0], args,
+                lambda nnz: (np.empty(nnz, np.int64), np.empty(nnz)))
+            self.pattern = (ptr, idx, M.indptr.copy(), M.indices.copy())
+        else:
+            ptr, idx, m_ptr, m_idx = self.pattern
+            if not (np.array_equal(m_ptr, M.indptr) and np.array_equal(m_idx, M.indices)):
+                raise ValueError("TetDivergence.condensed: the bubbles' coupling has another "
+                                 "pattern than the stencils it was first given")
+            val = np.empty(idx.size)
+            kernel(*args, np.empty(self.shape[0], np.int64), ptr, idx, val, 2)
+        idt = index_dtype(self.shape[1], int(ptr[-1]))
+        return sp.csr_matrix((val, idx.astype(idt), ptr.astype(idt)), shape=self.shape)
+
+
+@njit(cache=True, parallel=True)
+def _divergence_rows(bn_ptr, bn_idx, bn_val, inc_ptr, inc_e, inc_k, local, m_ptr, m_idx,
+                     m_val, nu, count, ptr, out_idx, out_val, fill):
+    """Row r of ``B_n - B_b A_bb^-1 A_bn``: r's ``Bn`` entries, less ``sum_c
+    Bb[r, 3 e + c] (A_bb^-1 A_bn)[3 e + c, :]`` for each tetrahedron e around r (r its
+    vertex k), summed in a dense row and cleared for the next. ``fill``: 0 counts the
+    row's columns into ``count[r]`` (listed when first met), 1 writes them sorted with
+    their values at ``ptr[r]``, 2 writes the values of the columns already there."""
+    npr = count.shape[0]
+    nb = (npr + _ROWS - 1) // _ROWS
+    for blk in prange(nb):
+        met = np.zeros(nu if fill < 2 else 0, np.bool_)
+        dense = np.zeros(nu)
+        cols = np.empty(nu if fill < 2 else 0, np.int64)
+        for r in range(blk * _ROWS, min(npr, blk * _ROWS + _ROWS)):
+            m = 0
+            for t in range(bn_ptr[r], bn_ptr[r + 1]):
+                j = bn_idx[t]
+                if fill < 2 and not met[j]:
+                    met[j], cols[m] = True, j
+                    m += 1
+                dense[j] += bn_val[t]
+            for t in range(inc_ptr[r], inc_ptr[r + 1]):
+                e, k = inc_e[t], inc_k[t]
+                o0, o1, o2 = m_ptr[3 * e], m_ptr[3 * e + 1], m_ptr[3 * e + 2]
+                w0, w1, w2 = local[e, k, 0], local[e, k, 1], local[e, k, 2]
+                for q in range(o1 - o0):
+                    j = m_idx[o0 + q]
+                    if fill < 2 and not met[j]:
+                        met[j], cols[m] = True, j
+                        m += 1
+                    dense[j] -= w0 * m_val[o0 + q] + w1 * m_val[o1 + q] + w2 * m_val[o2 + q]
+            if fill == 0:
+                count[r] = m
+            elif fill == 1:
+                out_idx[ptr[r]:ptr[r] + m] = np.sort(cols[:m])
+            for a in range(ptr[r], ptr[r + 1] if fill > 0 else ptr[r]):
+                out_val[a] = dense[out_idx[a]]
+                dense[out_idx[a]] = 0.0
+            for a in range(m if fill == 0 else 0):
+                met[cols[a]], dense[cols[a]] = False, 0.0
+            for a in range(m if fill == 1 else 0):
+                met[cols[a]] = False
+
+
+_divergence_rows_serial = serial_twin(_divergence_rows)
 
 
 def loads_tet(ubasis, f: np.ndarray, tau=None) -> np.ndarray:

@@ -108,7 +108,7 @@ from skfem import BilinearForm, LinearForm
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from .condensation import condensed_divergence, condensed_viscous
-from .condensation_tet import (condensed_divergence_tet, condensed_viscous_tet, divergence_tet,
+from .condensation_tet import (TetDivergence, condensed_viscous_tet, divergence_tet,
                                loads_tet)
 from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
 from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_columns,
@@ -286,7 +286,9 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
     ``"B"`` (without bubbles; with them it is assembled with their condensation), the
     exact boundary term ``"flux"`` of its integration by parts (B is then -(div u, q)
     also where the normal wall velocity is not zero), the bubbles' divergence ``"Bb"``
-    and the pressure functions' integrals ``"m"``."""
+    (on tetrahedra also ``"tet_divergence"``, the natural-neighbour part with what its
+    condensation needs, :class:`~skfem_nem.models.condensation_tet.TetDivergence`) and the
+    pressure functions' integrals ``"m"``."""
     cache = spaces.__dict__.setdefault("_cache", {})
     if "m" in cache:
         return cache
@@ -301,8 +303,8 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
         cache["B"] = (B - cache["flux"]).tocsr() if "flux" in cache else B
     else:
         cache["Bb"] = bform.assemble(bb, pb).tocsr()
-        if nem3:  # the natural-neighbour part, for condensed_divergence_tet
-            cache["Bn"] = divergence_tet(ub, pb)
+        if nem3:  # the natural-neighbour part and the bubbles' blocks, for the condensation
+            cache["tet_divergence"] = TetDivergence(divergence_tet(ub, pb), cache["Bb"], pb)
     cache["m"] = _unit.assemble(pb)
     return cache
 
@@ -351,7 +353,7 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     bb, Bb = spaces.bbasis, cache["Bb"]                      # Bb (np, nb)
     if spaces.dim == 3:  # by sparse products (models.condensation_tet)
         cv = condensed_viscous_tet(ub, bb, e)
-        B = condensed_divergence_tet(cache["Bn"], Bb, cv)
+        B = cache["tet_divergence"].condensed(cv)
     else:
         cv = condensed_viscous(ub, bb, e)
         B = condensed_divergence(ub, pb, bb, cv)

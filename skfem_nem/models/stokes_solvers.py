@@ -560,7 +560,7 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
     cache = StokesCache() if cache is None else cache
     ml, rebuilt = cache.amg(problem)
     two_level = isinstance(ml, ViscousTwoLevel)
-    matvec = saddle_matvec(problem, ml.matvec if two_level else None)
+    matvec = saddle_matvec(problem, ml.matvec)
     steps = TWO_LEVEL_CG_STEPS if two_level else VISCOUS_CG_STEPS
     precondition = _triangular_preconditioner(problem, lambda r: ml.cg(r, steps))
 

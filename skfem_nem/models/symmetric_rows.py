@@ -60,6 +60,18 @@ class SymmetricRows:
         self.buffers = np.zeros((chunks, n))
         self.refresh(A)
 
+    def twin(self, A: sp.spmatrix, values=np.float64) -> "SymmetricRows":
+        """The matrix ``A``, of this one's pattern, with values in ``values``: the
+        triangle's indices are shared, not found again (a matrix kept in two precisions)."""
+        if not self.same_pattern(A):
+            raise ValueError("SymmetricRows.twin needs a matrix of the same pattern")
+        other = object.__new__(SymmetricRows)
+        other.__dict__.update({k: v for k, v in self.__dict__.items()
+                               if k not in ("data", "diagonal", "buffers")})
+        other.values, other.buffers = np.dtype(values), np.zeros_like(self.buffers)
+        other.refresh(A)
+        return other
+
     @property
     def nnz(self) -> int:
         """Entries kept: the strict upper triangle and the diagonal."""

@@ -333,3 +333,30 @@ def test_picard_solves_stop_near_the_picard_tolerance(monkeypatch):
         with pytest.raises(ValueError, match="linear_tol"):
             vep_step(S, mat, tau, 1.0, f=f, linear_tol=bad)
     assert tols == []
+
+
+def test_on_iterate_sees_every_iterate_and_may_end_the_step(box):
+    """``vep_step(on_iterate=...)`` is called with each Picard iterate's solution, and an
+    exception it raises ends the step there and reaches the caller."""
+    S = box
+    ne, nq = S.quadrature_points.shape[1:]
+    X = S.quadrature_points
+    f = np.zeros((2, ne, nq))
+    f[1] = -1.0 * ((X[0] < 0.5) & (X[1] < 0.5))
+    mat, tau0 = Material(1.0, 1.0, 0.05), np.zeros((2, 2, ne, nq))
+    seen = []
+    r = vep_step(S, mat, tau0, 1.0, f=f, tol=1e-4, on_iterate=seen.append)
+    assert r.iterations >= 2 and len(seen) == r.iterations
+    np.testing.assert_array_equal(seen[-1].u, r.solution.u)
+
+    class Stop(Exception):
+        pass
+
+    def stop_at_second(sol):
+        if len(seen) == r.iterations + 1:
+            raise Stop
+        seen.append(sol)
+
+    with pytest.raises(Stop):
+        vep_step(S, mat, tau0, 1.0, f=f, tol=1e-4, on_iterate=stop_at_second)
+    assert len(seen) == r.iterations + 1

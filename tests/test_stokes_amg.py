@@ -121,3 +121,26 @@ def test_hierarchy_is_the_same_in_every_build_and_leaves_numpy_random_alone(spac
     b.refresh(p2.A)
     assert np.array_equal(a.cycle(r), b.cycle(r))
     assert np.array_equal(np.random.rand(3), expected)
+
+
+def test_a_small_change_renews_the_finest_level_alone(spaces, monkeypatch):
+    """A refresh with a block whose diagonal changed by less than COARSE_KEPT keeps the
+    coarse levels' matrices and renews the finest level (its products are the new
+    block's); a larger change renews the coarse levels too."""
+    from skfem_nem.models.stokes_amg import COARSE_KEPT
+    ex = SolCx(1.0, 1e6)
+    p1 = _problem(spaces, ex.viscosity, monkeypatch)
+    small = _problem(spaces, lambda x: ex.viscosity(x) * (1 + 0.2 * x[0]), monkeypatch)
+    large = _problem(spaces, lambda x: ex.viscosity(x) * (1 + 2 * COARSE_KEPT * x[0]),
+                     monkeypatch)
+    amg = viscous_amg(p1)
+    coarse = amg.ml.levels[1].A.copy()
+    x = np.random.default_rng(4).standard_normal(p1.A.shape[0])
+    amg.refresh(small.A)
+    assert abs(amg.ml.levels[1].A - coarse).max() == 0
+    assert np.allclose(amg.matvec(x), small.A @ x, rtol=1e-12)
+    fine = scaled_block(small.A.tocsr(), unit_scale(small.A)) @ x      # single precision
+    assert np.linalg.norm(amg.fine @ x - fine) <= 1e-6 * np.linalg.norm(fine)
+    amg.refresh(large.A)
+    assert abs(amg.ml.levels[1].A - coarse).max() > 0
+    assert np.allclose(amg.matvec(x), large.A @ x, rtol=1e-12)

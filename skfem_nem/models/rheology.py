@@ -382,7 +382,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
              min_viscosity: Optional[float] = None, u_guess: Optional[np.ndarray] = None,
              constraints=None, eta_guess: Optional[np.ndarray] = None,
              solver: str = "auto", cache: Optional[StokesCache] = None,
-             linear_tol: Optional[float] = None) -> VEPStep:
+             linear_tol: Optional[float] = None,
+             on_iterate: Optional[Callable[[StokesSolution], None]] = None) -> VEPStep:
     """One visco-elasto-plastic time step (see the module docstring).
 
     Parameters
@@ -428,6 +429,10 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         Stokes solver of the Picard iterations (``"auto"``: ``"schur"``, as they share
         a cache) and a :class:`~skfem_nem.models.stokes.StokesCache` kept across steps
         (default: a new one per step, shared by its Picard iterations).
+    on_iterate
+        Called with each Picard iterate's Stokes solution; an exception it raises ends
+        the step and reaches the caller (a time loop that sees from the first iterate
+        that the step is too long).
 
     Raises
     ------
@@ -449,7 +454,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     eta_eff = st.start_viscosity(eta_guess)
     walls = (prescribed, free_slip, no_slip, pressure_mean)
     pic = _picard(spaces, st, u, G, eta_eff, walls, constraints, tol, maxiter,
-                  dict(solver=solver, cache=cache, tol=_linear_tol(linear_tol, tol, st)))
+                  dict(solver=solver, cache=cache, tol=_linear_tol(linear_tol, tol, st)),
+                  on_iterate)
     return _vep_result(st, pic)
 
 
@@ -574,10 +580,10 @@ def _plastic_viscosity(st: _StepSetup, eps: np.ndarray, rotated: np.ndarray) -> 
 
 def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
             G: Optional[np.ndarray], eta_eff: np.ndarray, walls: tuple, constraints,
-            tol: float, maxiter: int, solve: dict) -> _PicardResult:
+            tol: float, maxiter: int, solve: dict, on_iterate=None) -> _PicardResult:
     """Stokes solves with the viscosity and rotated stress of the previous
     iterate until the relative velocity change is below ``tol``; ``solve``:
-    the solver keywords of :func:`solve_stokes_bc`."""
+    the solver keywords of :func:`solve_stokes_bc`; ``on_iterate``: see :func:`vep_step`."""
     history = []
     seconds = {"assembly": 0.0, "solver": 0.0}
     res, weight, du_last = np.inf, 1.0, None
@@ -588,6 +594,8 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
                               **solve)
         for part in seconds:
             seconds[part] += sol.info[f"{part}_seconds"]
+        if on_iterate is not None:
+            on_iterate(sol)
         G = velocity_gradient(spaces, sol)
         eps = strain_rate(G)
         rotated = st.rotated(G)

@@ -58,7 +58,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..basis import NaturalNeighbourBasis
-from .krylov import FGMRES_RESTART, MINRES_TOL_FACTOR, fgmres, norm, restarted_minres
+from .krylov import FGMRES_RESTART, MINRES_TOL_FACTOR, dot, fgmres, norm, restarted_minres
 from .stokes_amg import rigid_modes, velocity_components, viscous_amg
 from .stokes_cache import REBUILD_GROWTH, REBUILD_SLACK, StokesCache
 from .stokes_factors import ComponentFactors, ViscousFactor
@@ -470,7 +470,7 @@ def schur_pressure_cg(problem: SaddlePointProblem, lu, tol: float, maxiter: int,
     count = [counted]
 
     def schur(q):
-        return B @ lu.solve(B.T @ q) + S @ q + c * m * (m @ q)
+        return B @ lu.solve(B.T @ q) + S @ q + c * m * dot(m, q)
 
     Sop = spla.LinearOperator((npr, npr), matvec=schur, dtype=float)
     Pp = spla.LinearOperator((npr, npr), matvec=lambda q: q / problem.dp, dtype=float)
@@ -522,7 +522,7 @@ def saddle_matvec(problem: SaddlePointProblem, viscous: Optional[Callable] = Non
     def matvec(x):
         xu, xp = x[:n1], x[n1:]
         return np.concatenate([viscous(xu) + B.T @ xp,
-                               B @ xu - S @ xp - c * m * (m @ xp)])
+                               B @ xu - S @ xp - c * m * dot(m, xp)])
 
     return matvec
 

@@ -65,17 +65,17 @@ _joined_rows_serial = serial_twin(_joined_rows)
 
 
 def count_then_fill(kernel, serial, nrows, args, outputs):
-    """Run a row kernel twice: counting each row's entries (``fill=False``), then writing
-    them at the prefix sums of the counts; ``outputs(nnz)`` makes the arrays the kernel
-    writes (``outputs(0)``: the empty ones of the counting pass). Returns ``(indptr,
-    outputs)``. The serial twin below :data:`PARALLEL_MIN` rows."""
+    """Run a row kernel twice: counting each row's entries (``fill`` 0), then writing
+    them at the prefix sums of the counts (``fill`` 1); ``outputs(nnz)`` makes the arrays
+    the kernel writes (``outputs(0)``: the empty ones of the counting pass). Returns
+    ``(indptr, outputs)``. The serial twin below :data:`PARALLEL_MIN` rows."""
     kernel = kernel if nrows >= PARALLEL_MIN else serial
     count = np.zeros(nrows, np.int64)
     ptr = np.zeros(nrows + 1, np.int64)
-    kernel(*args, count, ptr, *outputs(0), False)
-    np.cumsum(count, out=ptr[1:])
+    kernel(*args, count, ptr, *outputs(0), 0)       # ``fill`` as an integer: kernels
+    np.cumsum(count, out=ptr[1:])                    # with more modes share the signature
     out = outputs(int(ptr[-1]))
-    kernel(*args, count, ptr, *out, True)
+    kernel(*args, count, ptr, *out, 1)
     return ptr, out
 
 

@@ -405,9 +405,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     plastic_strain
         Accumulated plastic strain (ne, nq) at the start (default zero).
     rotation
-        ``"jaumann"`` or ``"exact"`` (see :func:`rotate_stress`), or
-        ``"none"``. The spin is taken from the current Picard iterate (from
-        ``u_guess`` for the first solve, zero if not given).
+        ``"jaumann"``, ``"exact"`` (see :func:`rotate_stress`) or ``"none"``; the spin is
+        the current Picard iterate's (``u_guess``'s for the first solve, else zero).
     tol, maxiter, linear_tol
         Picard iterations stop when the relative change of the velocity (max norm)
         falls below ``tol``; each Stokes solve at the relative residual ``linear_tol``,
@@ -416,12 +415,9 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     min_viscosity
         Lower bound of the effective plastic viscosity (Pa s); default
         ``1e-8`` times the smallest visco-elastic viscosity.
-    u_guess
-        Velocity dof vector to start from (e.g. the previous step's).
-    eta_guess
-        Effective viscosity (ne, nq) to start the Picard iterations from
-        (e.g. the previous step's ``eta_eff``, carried by the evolving mesh);
-        clipped to ``[min_viscosity, eta_ve]``. Default ``eta_ve``.
+    u_guess, eta_guess
+        Velocity dofs and effective viscosity (ne, nq; clipped to ``[min_viscosity,
+        eta_ve]``, default ``eta_ve``) to start from, e.g. the previous step's.
     constraints
         Extra linear constraints on the velocity, ``C`` for ``C u = 0`` or ``(C, c)`` for
         ``C u = c`` (e.g. the net flux through a material outline), see :func:`solve_stokes_bc`.
@@ -431,15 +427,13 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         (default: a new one per step, shared by its Picard iterations).
     on_iterate
         Called with each Picard iterate's Stokes solution; an exception it raises ends
-        the step and reaches the caller (a time loop that sees from the first iterate
-        that the step is too long).
+        the step and reaches the caller (a step seen to be too long from its first).
 
     Raises
     ------
     ValueError
-        For a bad ``dt``, stress of the wrong shape or non-finite values
-        (naming the element), or a non-finite new stress (naming the element),
-        an unknown ``solver``, a ``cache`` it does not use, a ``linear_tol`` not in (0, 1).
+        For a bad ``dt``, ``solver``, ``cache`` or ``linear_tol`` (in (0, 1)), a stress of
+        the wrong shape, or a non-finite old or new stress (naming the element).
     RuntimeError
         If the Picard iterations do not converge in ``maxiter`` iterations
         (naming the count and the last residual).

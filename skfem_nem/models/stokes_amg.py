@@ -48,9 +48,11 @@ CHEBYSHEV_INTERVAL = (1.0 / 30.0, 1.1)
 # on the 3D plate at 9,956 nodes, solves 2 and 6 of a step (diagonal within a factor 1.7)
 # took 22 FGMRES iterations either way, and the refresh 0.32 s against 0.64 s
 COARSE_KEPT = 2.0
-# precision of the finest level's entries in the smoothing and the CG steps (sums in double
-# precision): single. The preconditioner is a perturbation of the block far larger than
-# this rounding, and the outer FGMRES multiplies with the block in double precision. On
+# precision of the finest level's entries in the smoothing and the CG steps of cg(), the
+# preconditioner of the flexible FGMRES (sums in double precision): single. It is a
+# perturbation of the block far larger than this rounding, and FGMRES multiplies with the
+# block in double precision. cycle() and preconditioner() (MINRES, "schur-amg") stay in
+# double precision: a fixed symmetric map to round-off. On
 # the 3D plate's block at 9,956 nodes a product takes 4.5 ms against 7.8 ms in double
 # precision (scipy, one thread: 21 ms), and its solves take the same iterations
 FINE_VALUES = np.float32
@@ -196,23 +198,29 @@ class ViscousAMG:
         degree = AMG_SMOOTHER[1]["degree"]
         return -chebyshev_polynomial_coefficients(low * rho, high * rho, degree)[:-1]
 
-    def _smooth(self, x, b: np.ndarray) -> np.ndarray:
-        """One Chebyshev step on the finest (scaled) level for ``x`` (None: zero)."""
-        F, c = self.fine, self.coefficients
+    def _smooth(self, F, x, b: np.ndarray) -> np.ndarray:
+        """One Chebyshev step with the finest (scaled) level's product ``F`` for ``x``
+        (None: zero)."""
+        c = self.coefficients
         r = b if x is None else b - F @ x
         h = c[0] * r
         for ck in c[1:]:
             h = ck * r + F @ h
         return h if x is None else x + h
 
-    def scaled_cycle(self, b: np.ndarray) -> np.ndarray:
-        """One V-cycle from zero for the scaled block."""
+    def scaled_cycle(self, b: np.ndarray, single: bool = False) -> np.ndarray:
+        """One V-cycle from zero for the scaled block; ``single``: with the finest level's
+        products in single precision (:data:`FINE_VALUES`), for a flexible outer method.
+        In double precision the cycle is a fixed symmetric map to round-off, as MINRES and
+        conjugate gradients need to reach a tolerance of 1e-9 (single precision stalled at
+        a relative residual of 1e-7)."""
         levels = self.ml.levels
         if len(levels) == 1:
             return self.ml.coarse_solver(levels[0].A, b)
-        x = self._smooth(None, b)
-        x += levels[0].P @ v_cycle(self.ml, levels[0].R @ (b - self.fine @ x), level=1)
-        return self._smooth(x, b)
+        F = self.fine if single else self.exact
+        x = self._smooth(F, None, b)
+        x += levels[0].P @ v_cycle(self.ml, levels[0].R @ (b - F @ x), level=1)
+        return self._smooth(F, x, b)
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """``A @ x`` in double precision through the scaled block's upper triangle,
@@ -230,7 +238,8 @@ class ViscousAMG:
         """``steps`` V-cycle-preconditioned CG steps from zero for ``A x = r``
         (:func:`~skfem_nem.models.krylov.cg_steps` on the scaled block)."""
         s = self.scale
-        return s * cg_steps(self.fine, self.scaled_cycle, s * r, steps)
+        return s * cg_steps(self.fine, lambda v: self.scaled_cycle(v, single=True), s * r,
+                            steps)
 
     def preconditioner(self) -> spla.LinearOperator:
         """One V-cycle as a linear operator approximating ``A^-1``."""

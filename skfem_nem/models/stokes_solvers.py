@@ -512,9 +512,13 @@ def solve_minres(problem: SaddlePointProblem, tol: float, maxiter: int,
     return SaddlePointSolution(x[:n1], p, its, res)
 
 
-def saddle_matvec(problem: SaddlePointProblem, viscous: Optional[Callable] = None) -> Callable:
+def saddle_matvec(problem: SaddlePointProblem, viscous: Optional[Callable] = None,
+                  inner: Callable = dot) -> Callable:
     """The product with the whole saddle-point matrix (mean-pressure term
-    included); ``viscous``: the product with the viscous block, if not ``A @``."""
+    included); ``viscous``: the product with the viscous block, if not ``A @``;
+    ``inner``: the dot product of the mean-pressure term (BLAS-free by default: from
+    10,000 entries OpenBLAS's dot wakes threads that then hold the cores numba's
+    products need, and the viscous products took twice as long)."""
     A, B, S, m, c = problem.A, problem.B, problem.S, problem.m, problem.mean_weight
     n1 = problem.n_velocity
     viscous = A.__matmul__ if viscous is None else viscous
@@ -522,7 +526,7 @@ def saddle_matvec(problem: SaddlePointProblem, viscous: Optional[Callable] = Non
     def matvec(x):
         xu, xp = x[:n1], x[n1:]
         return np.concatenate([viscous(xu) + B.T @ xp,
-                               B @ xu - S @ xp - c * m * dot(m, xp)])
+                               B @ xu - S @ xp - c * m * inner(m, xp)])
 
     return matvec
 
@@ -531,7 +535,10 @@ def minres_operators(problem: SaddlePointProblem, Pu):
     """The saddle-point product (as a function and an operator) and the
     block-diagonal preconditioner (``Pu`` on the velocity, ``1 / dp``)."""
     n1, npr, dp = problem.n_velocity, problem.n_pressure, problem.dp
-    matvec = saddle_matvec(problem)
+    # numpy's dot: with the BLAS-free dot's rounding MINRES stalled at a relative
+    # preconditioned residual of 1.1e-7 against 1e-9 (SolCx at a contrast of 1e6, the
+    # quadratic velocity, 3,000 iterations), a solver on the edge there (docs/stokes.md)
+    matvec = saddle_matvec(problem, inner=np.dot)
     K = spla.LinearOperator((n1 + npr, n1 + npr), matvec=matvec, dtype=float)
     M = spla.LinearOperator(K.shape, matvec=lambda x: np.concatenate([Pu @ x[:n1],
                                                                       x[n1:] / dp]),

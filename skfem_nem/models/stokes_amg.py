@@ -212,8 +212,7 @@ class ViscousAMG:
         """One V-cycle from zero for the scaled block; ``single``: with the finest level's
         products in single precision (:data:`FINE_VALUES`), for a flexible outer method.
         In double precision the cycle is a fixed symmetric map to round-off, as MINRES and
-        conjugate gradients need to reach a tolerance of 1e-9 (single precision stalled at
-        a relative residual of 1e-7)."""
+        conjugate gradients need; in single precision it is symmetric to about 1e-7."""
         levels = self.ml.levels
         if len(levels) == 1:
             return self.ml.coarse_solver(levels[0].A, b)

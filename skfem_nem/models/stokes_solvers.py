@@ -536,8 +536,9 @@ def minres_operators(problem: SaddlePointProblem, Pu):
     block-diagonal preconditioner (``Pu`` on the velocity, ``1 / dp``)."""
     n1, npr, dp = problem.n_velocity, problem.n_pressure, problem.dp
     # numpy's dot: with the BLAS-free dot's rounding MINRES stalled at a relative
-    # preconditioned residual of 1.1e-7 against 1e-9 (SolCx at a contrast of 1e6, the
-    # quadratic velocity, 3,000 iterations), a solver on the edge there (docs/stokes.md)
+    # preconditioned residual of 1.1e-7 against the 1e-8 it stops at (tol 1e-9; SolCx at a
+    # contrast of 1e6, the quadratic velocity, 3,000 iterations), a solver on the edge there
+    # (docs/stokes.md)
     matvec = saddle_matvec(problem, inner=np.dot)
     K = spla.LinearOperator((n1 + npr, n1 + npr), matvec=matvec, dtype=float)
     M = spla.LinearOperator(K.shape, matvec=lambda x: np.concatenate([Pu @ x[:n1],

@@ -470,7 +470,7 @@ def schur_pressure_cg(problem: SaddlePointProblem, lu, tol: float, maxiter: int,
     count = [counted]
 
     def schur(q):
-        return B @ lu.solve(B.T @ q) + S @ q + c * m * dot(m, q)
+        return B @ lu.solve(B.T @ q) + S @ q + c * m * (m @ q)
 
     Sop = spla.LinearOperator((npr, npr), matvec=schur, dtype=float)
     Pp = spla.LinearOperator((npr, npr), matvec=lambda q: q / problem.dp, dtype=float)
@@ -513,12 +513,13 @@ def solve_minres(problem: SaddlePointProblem, tol: float, maxiter: int,
 
 
 def saddle_matvec(problem: SaddlePointProblem, viscous: Optional[Callable] = None,
-                  inner: Callable = dot) -> Callable:
+                  inner: Callable = np.dot) -> Callable:
     """The product with the whole saddle-point matrix (mean-pressure term
     included); ``viscous``: the product with the viscous block, if not ``A @``;
-    ``inner``: the dot product of the mean-pressure term (BLAS-free by default: from
-    10,000 entries OpenBLAS's dot wakes threads that then hold the cores numba's
-    products need, and the viscous products took twice as long)."""
+    ``inner``: the dot product of the mean-pressure term. ``"fgmres"`` passes the BLAS-free
+    :func:`~skfem_nem.models.krylov.dot`: from 10,000 entries OpenBLAS's dot wakes threads
+    that then hold the cores numba's products need (they took twice as long); the other
+    solvers keep numpy's, and their results bit for bit."""
     A, B, S, m, c = problem.A, problem.B, problem.S, problem.m, problem.mean_weight
     n1 = problem.n_velocity
     viscous = A.__matmul__ if viscous is None else viscous
@@ -539,7 +540,7 @@ def minres_operators(problem: SaddlePointProblem, Pu):
     # preconditioned residual of 1.1e-7 against the 1e-8 it stops at (tol 1e-9; SolCx at a
     # contrast of 1e6, the quadratic velocity, 3,000 iterations), a solver on the edge there
     # (docs/stokes.md)
-    matvec = saddle_matvec(problem, inner=np.dot)
+    matvec = saddle_matvec(problem)
     K = spla.LinearOperator((n1 + npr, n1 + npr), matvec=matvec, dtype=float)
     M = spla.LinearOperator(K.shape, matvec=lambda x: np.concatenate([Pu @ x[:n1],
                                                                       x[n1:] / dp]),
@@ -568,7 +569,7 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
     cache = StokesCache() if cache is None else cache
     ml, rebuilt = cache.amg(problem)
     two_level = isinstance(ml, ViscousTwoLevel)
-    matvec = saddle_matvec(problem, ml.matvec)
+    matvec = saddle_matvec(problem, ml.matvec, inner=dot)
     steps = TWO_LEVEL_CG_STEPS if two_level else VISCOUS_CG_STEPS
     precondition = _triangular_preconditioner(problem, lambda r: ml.cg(r, steps))
 

@@ -23,6 +23,7 @@ same slices and on the slab's surface), ``diagnostics.png``, ``checkpoint.npz`` 
 """
 from __future__ import annotations
 
+import gc
 import json
 import time as _time
 from dataclasses import asdict
@@ -153,6 +154,11 @@ class SinkingPlate3D:
         iterations fail, down to ``min_dt`` (then :class:`StepStalled`); never accepted
         unconverged. The stress history is left as it was by a failed try. Returns the
         diagnostics row (``retries``: the tries before the one accepted)."""
+        # the last step's bases, blocks and hierarchy sit in reference cycles that Python's
+        # collector, counting objects rather than bytes, frees late: at 4,000 nodes the
+        # process grew from 0.8 to 2.0 GB over 12 steps (peak 2.17 GB); with a collection
+        # before each step it stays near 1.3 GB (peak 1.49 GB)
+        gc.collect()
         saved = dict(self.lm.ip_fields)
         for retry in range(RETRIES + 1):
             try:

@@ -654,6 +654,33 @@ def test_plate_3d_prints_steps_and_depths(capsys):
     assert "largest relative difference" in capsys.readouterr().out
 
 
+def test_plate_3d_time_step_study_extrapolates_the_depth(capsys):
+    """Three cfl values at one tiny resolution: a row per output time whose limit is the
+    straight line through the depths against the mean dt (read back from the header), each
+    run's difference from it as printed; a study without three cfl values is refused."""
+    bench = load_benchmark("plate_3d")
+    # a heavy plate, so that the cfl rather than the output times sets the steps
+    out = bench.main(["--nodes", "300", "--end-time", "20", "--cfl", "0.2", "0.4", "0.8",
+                      "--plate-density", "15"])
+    assert len(out["steps"].splitlines()[2:]) == 3 and "(cfl 0.2)" in out["steps"]
+    lines = out["cfl"].splitlines()
+    dts = [float(h.split("mean dt ")[1].strip().rstrip(")")) for h in lines[0].split("|")[2:5]]
+    assert dts[0] < dts[1] < dts[2]
+    for line, limit in zip(lines[2:], out["limit"]):
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        depths = [float(c.split()[0]) for c in cells[1:4]]
+        assert float(cells[-1]) == pytest.approx(limit, abs=1e-6)
+        assert limit == pytest.approx(np.polyval(np.polyfit(dts, depths, 1), 0.0), abs=2e-4)
+        for c, d in zip(cells[1:4], depths):
+            assert float(c.split("(")[1].rstrip("%)")) == pytest.approx(
+                100 * (d / limit - 1), abs=0.1)
+    assert len(lines) == 8 and float(lines[-1].split("|")[1]) == 20
+    with pytest.raises(SystemExit) as e:
+        bench.main(["--nodes", "300", "500", "--end-time", "20", "--cfl", "0.2", "0.4", "0.8"])
+    assert e.value.code == 2
+    assert "a time-step study" in capsys.readouterr().err
+
+
 def test_quadratic_stokes_measures_both_velocities_on_one_problem():
     """benchmarks/quadratic_stokes.py: the same SolCx, C-NEM2 with the two-level FGMRES and
     Taylor-Hood, their errors alike and the ratios in the table computed from the rows."""

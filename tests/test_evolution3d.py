@@ -138,3 +138,22 @@ def test_nodes_pressed_onto_a_wall_are_put_on_it():
     assert snapped > 0 and np.count_nonzero(m.nodes[:, 2] == 0) == walls0 + snapped
     m.advance(lambda x: np.c_[0 * x[:, :2], 1 + 0 * x[:, 2]], 0.1)    # lifted: they stay
     assert np.count_nonzero(m.nodes[:, 2] == 0) == walls0 + snapped
+
+
+def test_a_snapshot_takes_several_moves_back_whole():
+    """restore(snapshot()) after two moves: the nodes, tetrahedra, fields, clock and
+    reports of the snapshot, and the mesh moves on from there as before."""
+    p = cube_nodes(150, seed=4)
+    m = LagrangianMesh3D(p, {"x0": p})
+    first = m.advance(vortex, 0.05)
+    snap = m.snapshot()
+    nodes, t, fields = m.nodes.copy(), m.mesh.t.copy(), m.node_fields["x0"].copy()
+    m.advance(vortex, 0.05)
+    m.advance(vortex, 0.05)
+    assert m.step == 3 and len(m.history) == 3
+    m.restore(snap)
+    np.testing.assert_array_equal(m.nodes, nodes)
+    np.testing.assert_array_equal(m.mesh.t, t)
+    np.testing.assert_array_equal(m.node_fields["x0"], fields)
+    assert (m.step, m.time, m.history) == (1, 0.05, [first])
+    assert m.advance(vortex, 0.05)["step"] == 2

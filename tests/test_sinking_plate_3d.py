@@ -124,18 +124,28 @@ def small_sim(tmp_path, **kw):
     return SinkingPlate3D(Plate3DConfig(**cfg), tmp_path / "s")
 
 
-@pytest.mark.parametrize("stage", ["picard", "move"])
+@pytest.mark.parametrize("stage", ["picard", "move", "midpoint"])
 def test_a_failed_step_leaves_the_state_as_it_was(stage, tmp_path, monkeypatch):
     from skfem_nem.apps import sinking_plate_3d
     from skfem_nem.apps.sinking_plate import StepStalled
     from skfem_nem.evolution.stepping import StepTooLong
     from skfem_nem.models.rheology import PicardNotConverged
-    sim = small_sim(tmp_path, min_dt=4.0)
+    sim = small_sim(tmp_path, min_dt=4.0, midpoint=stage == "midpoint")
     sim.step(10.0)                                      # a stress history to lose
     before = {k: v.copy() for k, v in sim.lm.ip_fields.items()}
     nodes, t0, tries = sim.lm.nodes.copy(), sim.lm.time, []
+    step0, reports = sim.lm.step, len(sim.lm.history)
     assert np.abs(before["stress"]).max() > 0
-    if stage == "picard":
+    if stage == "midpoint":      # the second solve fails, after the half-way move
+        solve = sinking_plate_3d.vep_step
+
+        def fail(*a, **k):
+            if k.get("on_iterate") is None:
+                tries.append(a[3])
+                raise PicardNotConverged("no convergence")
+            return solve(*a, **k)
+        monkeypatch.setattr(sinking_plate_3d, "vep_step", fail)
+    elif stage == "picard":
         def fail(*a, **k):
             tries.append(a[3])
             raise PicardNotConverged("no convergence")
@@ -152,7 +162,7 @@ def test_a_failed_step_leaves_the_state_as_it_was(stage, tmp_path, monkeypatch):
     for k, v in before.items():
         np.testing.assert_array_equal(sim.lm.ip_fields[k], v)
     np.testing.assert_array_equal(sim.lm.nodes, nodes)
-    assert sim.lm.time == t0
+    assert sim.lm.time == t0 and sim.lm.step == step0 and len(sim.lm.history) == reports
 
 
 def test_a_step_longer_than_its_velocity_allows_is_solved_again(tmp_path, monkeypatch):
@@ -178,6 +188,36 @@ def test_a_step_longer_than_its_velocity_allows_is_solved_again(tmp_path, monkey
     assert row["retries"] >= 1 and row["dt"] < 500.0
     assert row["dt"] <= app.STABLE_SLACK * row["stable_dt"]
     assert iterations[0] == 1 and iterations[-1] == row["picard_iterations"] > 1
+
+
+def test_a_midpoint_step_solves_again_half_way(tmp_path, monkeypatch):
+    """midpoint: the second solve starts from the first's velocity on the nodes moved half
+    a step with it; the nodes end where the second velocity takes them from the start
+    (walls kept); one step, one report with both moves' flips."""
+    import skfem_nem.apps.sinking_plate_3d as app
+    calls = []
+    solve = app.vep_step
+
+    def spy(spaces, *a, **kw):
+        r = solve(spaces, *a, **kw)
+        calls.append((spaces.mesh.p.T.copy(), kw.get("u_guess"), r))
+        return r
+
+    monkeypatch.setattr(app, "vep_step", spy)
+    sim = small_sim(tmp_path, midpoint=True, split_edges=float("inf"))
+    x0, step0, reports = sim.lm.nodes.copy(), sim.lm.step, len(sim.lm.history)
+    row = sim.step(10.0)
+    assert row["retries"] == 0 and len(calls) == 2
+    (xa, _, r1), (xb, guess, r2) = calls
+    np.testing.assert_array_equal(xa, x0)
+    v1, v2 = r1.solution.velocity_at_nodes(), r2.solution.velocity_at_nodes()
+    lo, hi = x0.min(axis=0), x0.max(axis=0)
+    np.testing.assert_allclose(xb, np.clip(x0 + 5.0 * v1, lo, hi), atol=1e-12)
+    np.testing.assert_array_equal(guess, r1.solution.u)
+    np.testing.assert_allclose(sim.lm.nodes, np.clip(x0 + 10.0 * v2, lo, hi), atol=1e-12)
+    assert np.abs(v2 - v1).max() > 0
+    assert sim.lm.step == step0 + 1 == row["step"] and len(sim.lm.history) == reports + 1
+    assert sim.lm.history[-1]["dt"] == 10.0 and row["flips"] == sim.lm.history[-1]["flips"]
 
 
 def test_nodes_added_after_a_step_get_fields_and_output(tmp_path):

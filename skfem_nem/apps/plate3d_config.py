@@ -95,6 +95,9 @@ class Plate3DConfig:
     picard_tol: float = 1e-3
     #: remap of the stress history on flips: "conservative" or "average"
     remap: str = "conservative"
+    #: solve each step a second time on the nodes moved half a step (two solves a step):
+    #: the depth's time-step error more than halves (docs/stokes_3d.md)
+    midpoint: bool = False
     #: edges longer than this many target spacings (the initial node set's) are split after
     #: each step, a node added at the midpoint (``inf``: no nodes added)
     split_edges: float = 3.0
@@ -143,6 +146,8 @@ class Plate3DConfig:
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 1):
             raise ValueError(f"solver_tol must be 0 (from picard_tol) or a number in (0, 1), "
                              f"got {v!r}")
+        if not isinstance(self.midpoint, bool):
+            raise ValueError(f"midpoint must be true or false, got {self.midpoint!r}")
         if self.remap not in REMAP_RULES:
             raise ValueError(f"remap must be one of {', '.join(map(repr, REMAP_RULES))}, got "
                              f"{self.remap!r}")
@@ -195,6 +200,7 @@ HELP_3D = {
     "solver_tol": "relative residual of each Stokes solve (0: a thousandth of picard_tol)",
     "picard_tol": "Picard tolerance of the plastic iterations",
     "remap": 'remap of the stress history on flips: "conservative" or "average"',
+    "midpoint": "solve each step again on the nodes moved half a step (two solves a step)",
     "split_edges": "edges longer than this many target spacings are split after each step "
                    "(inf: no nodes added)",
     "solver": 'Stokes solver: "auto" (FGMRES with AMG in 3D), "fgmres", "schur", '

@@ -62,6 +62,8 @@ STABLE_SLACK = 1.25
 # from max_dt, always is: 9 Picard iterations at 9,956 nodes). The first iterate's velocity
 # differs from the converged one by some 13% there, well inside this margin
 FIRST_ITERATE_SLACK = 1.5
+#: what a midpoint step reports as the sum of its two moves
+MOVE_SUMS = ("iterations", "flips", "relocated", "rebuilt", "repair_seconds")
 
 
 def initial_nodes(c: Plate3DConfig) -> np.ndarray:
@@ -191,35 +193,83 @@ class SinkingPlate3D:
 
     def _step(self, dt: float) -> dict:
         """One try at ``dt``: the visco-elasto-plastic solve, the new stress history set
-        on the mesh, the move and repair (which carries it to the new tetrahedra)."""
+        on the mesh, the move and repair (which carries it to the new tetrahedra); with
+        ``midpoint``, :meth:`_midpoint_step`."""
         c, lm = self.cfg, self.lm
         t0 = _time.perf_counter()
         spaces = self._spaces()
         t_basis = _time.perf_counter() - t0
-        mat, force, s = self.materials(spaces)
-        r = vep_step(spaces, mat, to_quadrature(lm.ip_fields["stress"]), dt, f=force,
-                     plastic_strain=to_quadrature(lm.ip_fields["plastic_strain"]),
-                     tol=c.picard_tol, solver=c.solver, cache=self._cache,
-                     linear_tol=c.solver_tol or None, on_iterate=self._first_iterate(dt),
-                     **self._guesses(spaces))
-        v = r.solution.velocity_at_nodes()
-        stable = self._stable_dt(v)
-        if dt > STABLE_SLACK * stable:
-            raise _TooLong(stable)
+        r, s, v, stable = self._solve(spaces, dt, self._guesses(spaces),
+                                      self._first_iterate(dt))
+        if c.midpoint:
+            return self._midpoint_step(dt, r, v, stable, (t_basis, t0))
         t_solve = _time.perf_counter() - t0
-        lm.ip_fields = {"stress": from_quadrature(r.tau),
-                        "plastic_strain": from_quadrature(r.plastic_strain),
-                        "log_eta_eff": from_quadrature(np.log(r.eta_eff))}
+        self._keep_stress(r)
         P, u = spaces.ubasis, r.solution.u
 
         def velocity(x):
             return (P.probes(x.T) @ u).reshape(3, -1).T
 
-        split = c.split_edges if np.isfinite(c.split_edges) else None
-        report = lm.advance(velocity, dt, tol=1e-8, inject=split)
+        report = lm.advance(velocity, dt, tol=1e-8, inject=self._split())
         self._last = (r.solution, r, s)
         self.dt_next = stable
         return self._row(report, r, v, s, stable, seconds=(t_basis, t_solve, t0))
+
+    def _midpoint_step(self, dt: float, r, v, stable, times) -> dict:
+        """The rest of a midpoint try: the nodes moved half a step with the first solve's
+        velocity ``v`` (the flips carry the stress there), the step solved again on them,
+        and the nodes moved on to where that velocity takes them from the start; the
+        mesh is as it was if a part fails. One step: one row, one count."""
+        lm, (t_basis, t0) = self.lm, times
+        start = lm.snapshot()
+        try:
+            # the first solve's viscosity goes along (the second solve's start)
+            lm.ip_fields = dict(lm.ip_fields, log_eta_eff=from_quadrature(np.log(r.eta_eff)))
+            half = lm.advance(lambda x: v, 0.5 * dt, tol=1e-8)
+            spaces = self._spaces()
+            guesses = {"u_guess": r.solution.u,
+                       "eta_guess": np.exp(to_quadrature(lm.ip_fields["log_eta_eff"]))}
+            r2, s2, v2, stable2 = self._solve(spaces, dt, guesses, None)
+            t_solve = _time.perf_counter() - t0
+            self._keep_stress(r2)
+            w = 2.0 * v2 - v      # from the half-way nodes to x0 + dt v2
+            report = lm.advance(lambda x: w, 0.5 * dt, tol=1e-8, inject=self._split())
+        except BaseException:
+            lm.restore(start)
+            raise
+        lm.step -= 1              # two moves, one step, one report
+        report.update(step=lm.step, dt=dt, **{k: report[k] + half[k] for k in MOVE_SUMS})
+        lm.history[-2:] = [report]
+        self._last = (r2.solution, r2, s2)
+        self.dt_next = min(stable, stable2)
+        return self._row(report, r2, v2, s2, min(stable, stable2),
+                         seconds=(t_basis, t_solve, t0))
+
+    def _solve(self, spaces, dt: float, guesses: dict, on_iterate):
+        """``vep_step`` on ``spaces`` with the mesh's stress history: ``(result, plate
+        indicator, velocity at the nodes, its stable dt)``; :class:`_TooLong` if that dt is
+        more than :data:`STABLE_SLACK` times shorter than ``dt``."""
+        c, f = self.cfg, self.lm.ip_fields
+        mat, force, s = self.materials(spaces)
+        r = vep_step(spaces, mat, to_quadrature(f["stress"]), dt, f=force,
+                     plastic_strain=to_quadrature(f["plastic_strain"]), tol=c.picard_tol,
+                     solver=c.solver, cache=self._cache, linear_tol=c.solver_tol or None,
+                     on_iterate=on_iterate, **guesses)
+        v = r.solution.velocity_at_nodes()
+        stable = self._stable_dt(v)
+        if dt > STABLE_SLACK * stable:
+            raise _TooLong(stable)
+        return r, s, v, stable
+
+    def _keep_stress(self, r) -> None:
+        """The step's new stress history on the mesh (the move carries it on)."""
+        self.lm.ip_fields = {"stress": from_quadrature(r.tau),
+                             "plastic_strain": from_quadrature(r.plastic_strain),
+                             "log_eta_eff": from_quadrature(np.log(r.eta_eff))}
+
+    def _split(self):
+        """``advance``'s ``inject``: the edges to split after a step (None: none)."""
+        return self.cfg.split_edges if np.isfinite(self.cfg.split_edges) else None
 
     def _first_iterate(self, dt: float):
         """The check of a try's first Picard iterate: :class:`_TooLong` if its velocity

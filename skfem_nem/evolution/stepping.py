@@ -159,6 +159,18 @@ class LagrangianStep:
         ``walls="box"``)."""
         return self._box[0].copy(), self._box[1].copy()
 
+    def snapshot(self):
+        """Everything a step may change, for :meth:`restore`: a caller's step of several
+        moves (the 3D plate's midpoint step) is taken back whole when a later part fails."""
+        return self._state(), len(self.history)
+
+    def restore(self, snapshot) -> None:
+        """Put back the state of a :meth:`snapshot`: the moves since and their reports are
+        undone."""
+        state, reports = snapshot
+        self._restore(state)
+        del self.history[reports:]
+
     def _velocity(self, velocity, x):
         if self.walls != "box":
             return evaluate_velocity(velocity, x)

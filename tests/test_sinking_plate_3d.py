@@ -165,17 +165,19 @@ def test_a_failed_step_leaves_the_state_as_it_was(stage, tmp_path, monkeypatch):
     assert sim.lm.time == t0 and sim.lm.step == step0 and len(sim.lm.history) == reports
 
 
-def test_a_step_longer_than_its_velocity_allows_is_solved_again(tmp_path, monkeypatch):
+@pytest.mark.parametrize("midpoint", [False, True])
+def test_a_step_longer_than_its_velocity_allows_is_solved_again(midpoint, tmp_path,
+                                                                 monkeypatch):
     """A try far too long stops at its first Picard iterate (FIRST_ITERATE_SLACK) and is
     solved again at the dt that iterate asks for; the step taken keeps within
-    STABLE_SLACK of its own velocity's dt."""
+    STABLE_SLACK of its own velocity's dt (with midpoint, both solves' velocities)."""
     import skfem_nem.apps.sinking_plate_3d as app
     iterations = []
     solve = app.vep_step
 
     def counted(*a, **kw):
         seen = []
-        check = kw["on_iterate"]
+        check = kw["on_iterate"] or (lambda sol: None)
         kw["on_iterate"] = lambda sol: (seen.append(sol), check(sol))
         try:
             return solve(*a, **kw)
@@ -183,32 +185,37 @@ def test_a_step_longer_than_its_velocity_allows_is_solved_again(tmp_path, monkey
             iterations.append(len(seen))
 
     monkeypatch.setattr(app, "vep_step", counted)
-    sim = small_sim(tmp_path, max_dt=500.0, end_time=1000.0)
+    sim = small_sim(tmp_path, max_dt=500.0, end_time=1000.0, midpoint=midpoint)
     row = sim.step(500.0)
     assert row["retries"] >= 1 and row["dt"] < 500.0
     assert row["dt"] <= app.STABLE_SLACK * row["stable_dt"]
     assert iterations[0] == 1 and iterations[-1] == row["picard_iterations"] > 1
 
 
-def test_a_midpoint_step_solves_again_half_way(tmp_path, monkeypatch):
+@pytest.mark.parametrize("picard_tol", [1e-3, 3e-2])
+def test_a_midpoint_step_solves_again_half_way(picard_tol, tmp_path, monkeypatch):
     """midpoint: the second solve starts from the first's velocity on the nodes moved half
     a step with it; the nodes end where the second velocity takes them from the start
-    (walls kept); one step, one report with both moves' flips."""
+    (walls kept); one step, one report with both moves' flips. The first solve stops at
+    the looser of PREDICTOR_TOL and picard_tol, the second at picard_tol."""
     import skfem_nem.apps.sinking_plate_3d as app
     calls = []
     solve = app.vep_step
 
     def spy(spaces, *a, **kw):
         r = solve(spaces, *a, **kw)
-        calls.append((spaces.mesh.p.T.copy(), kw.get("u_guess"), r))
+        calls.append((spaces.mesh.p.T.copy(), kw.get("u_guess"), r, kw["tol"]))
         return r
 
     monkeypatch.setattr(app, "vep_step", spy)
-    sim = small_sim(tmp_path, midpoint=True, split_edges=float("inf"))
+    sim = small_sim(tmp_path, midpoint=True, split_edges=float("inf"),
+                    picard_tol=picard_tol)
     x0, step0, reports = sim.lm.nodes.copy(), sim.lm.step, len(sim.lm.history)
     row = sim.step(10.0)
     assert row["retries"] == 0 and len(calls) == 2
-    (xa, _, r1), (xb, guess, r2) = calls
+    (xa, _, r1, tol1), (xb, guess, r2, tol2) = calls
+    assert (tol1, tol2) == (max(app.PREDICTOR_TOL, picard_tol), picard_tol)
+    assert 1e-3 < app.PREDICTOR_TOL < 3e-2
     np.testing.assert_array_equal(xa, x0)
     v1, v2 = r1.solution.velocity_at_nodes(), r2.solution.velocity_at_nodes()
     lo, hi = x0.min(axis=0), x0.max(axis=0)
@@ -279,10 +286,16 @@ def test_the_plastic_strain_figure_shows_the_plate(run3d):
     sim = SinkingPlate3D.restart(run3d)
     lo, hi = plate_box(sim.cfg)
     slack = 0.15
+    # what is drawn interpolates the nodes' plastic strain linearly: within its range. That
+    # range dips below 0 by the conservative remap's undershoot (docs/stokes_3d.md)
+    strain = sim.lm.ip_at_nodes("plastic_strain")
+    low, top = strain.min() - 1e-12, strain.max() + 1e-12
+    assert top > 0 and low > -0.05 * top
     for title, plane, image, extent in plastic_slices(sim):
         inside = np.isfinite(image)
         assert inside.any() and (~inside).any()       # the plate only
-        assert image[inside].min() >= -1e-12 and image[inside].max() > 0
+        assert image[inside].min() >= low and image[inside].max() <= top
+        assert image[inside].max() > 0.5 * top
         rows, cols = image.shape
         x = np.linspace(extent[0], extent[1], cols)[None, :].repeat(rows, 0)
         assert np.all((x[inside] > lo[0] - slack) & (x[inside] < hi[0] + slack))
@@ -291,7 +304,7 @@ def test_the_plastic_strain_figure_shows_the_plate(run3d):
     assert triangles.shape[1:] == (3, 3) and values.shape == triangles.shape[:1]
     # (the surface cuts edges from plate nodes to the next nodes out, up to 0.3 long here)
     assert np.all((corners > lo - 2 * slack) & (corners < hi + 2 * slack))
-    assert values.min() >= -1e-12 and values.max() > 0
+    assert values.min() >= low and values.max() <= top and values.max() > 0.5 * top
     assert (run3d / "plastic_strain.png").exists()
 
 

@@ -14,15 +14,16 @@ step), for ``--steps`` steps or to ``--end-time``. Printed, in one run:
 * with ``--cfl`` and several values (one resolution, ``--end-time``): the time-step study.
   The depth at the output times for each ``cfl``, and its limit as the mean time step goes
   to zero, a straight line through the three finest runs' depths against their mean dt
-  (the step is first order in dt), with each run's difference from that limit.
+  (taken as first order in dt), with each run's difference from that limit; the steps are
+  the command's default midpoint steps, ``--no-midpoint`` gives one solve a step.
 
 Run ``python benchmarks/plate_3d.py [--nodes 5000 10000] [--steps 3 | --end-time 300]``, or
 ``python benchmarks/plate_3d.py --nodes 4000 --end-time 250 --cfl 0.35 0.5 0.75 1``; other
 options go to the command (``--plate-density 3``: the command refuses what it does not
 know).
-An elasto-plastic step (5 to 7 Picard iterations) takes about 23 s at 10,000 nodes on two
-quiet cores; a whole default run (10,032 nodes) about 10 minutes with numba's kernels cached,
-12 with their compilation.
+A midpoint step (two solves, the second of 5 to 6 Picard iterations) takes about 34 s at
+10,000 nodes on two quiet cores; a whole default run (10,032 nodes) about 8 minutes with
+numba's kernels cached, 10 and a half with their compilation.
 """
 from __future__ import annotations
 

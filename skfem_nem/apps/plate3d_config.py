@@ -202,7 +202,8 @@ HELP_3D = {
     "solver_tol": "relative residual of each Stokes solve (0: a thousandth of picard_tol)",
     "picard_tol": "Picard tolerance of the plastic iterations",
     "remap": 'remap of the stress history on flips: "conservative" or "average"',
-    "midpoint": "solve each step again on the nodes moved half a step (two solves a step)",
+    "midpoint": "solve each step again on the nodes moved half a step (two solves a step, "
+                "the first to a looser Picard tolerance; --no-midpoint: one)",
     "split_edges": "edges longer than this many target spacings are split after each step "
                    "(inf: no nodes added)",
     "solver": 'Stokes solver: "auto" (FGMRES with AMG in 3D), "fgmres", "schur", '

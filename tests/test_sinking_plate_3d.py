@@ -227,6 +227,30 @@ def test_a_midpoint_step_solves_again_half_way(picard_tol, tmp_path, monkeypatch
     assert sim.lm.history[-1]["dt"] == 10.0 and row["flips"] == sim.lm.history[-1]["flips"]
 
 
+def test_a_midpoint_step_frees_the_first_spaces_before_its_second_solve(tmp_path,
+                                                                         monkeypatch):
+    """The second solve runs with the first solve's spaces (and the hierarchy built on
+    them) gone: a midpoint step holds one set of bases at a time, besides the last
+    step's solution."""
+    import weakref
+
+    import skfem_nem.apps.sinking_plate_3d as app
+    seen, solve = [], app.vep_step
+
+    def spy(spaces, *a, **kw):
+        if seen:
+            seen.append(seen[0]() is None)
+        else:
+            seen.append(weakref.ref(spaces))
+        return solve(spaces, *a, **kw)
+
+    monkeypatch.setattr(app, "vep_step", spy)
+    sim = small_sim(tmp_path, split_edges=float("inf"))
+    assert sim.cfg.midpoint
+    sim.step(10.0)
+    assert len(seen) == 2 and seen[1] is True
+
+
 def test_nodes_added_after_a_step_get_fields_and_output(tmp_path):
     import meshio
 

@@ -266,16 +266,28 @@ def test_viscous_factor_precision_and_errors():
         ViscousFactor(S)
 
 
-def test_cache_rebuilds_when_iterations_grow(square):
+def test_cache_rebuilds_when_iterations_grow(square, monkeypatch):
+    """A rebuilt hierarchy replaces the old one, which is let go before the new one is
+    built (two hierarchies are never held at once)."""
+    import weakref
+
+    import skfem_nem.models.stokes_cache as stokes_cache
     sp_, _ = square
     ex = SolCx(1.0, 1.0)
     cache = StokesCache()
     solve_stokes(sp_, ex.viscosity, ex.force, solver="fgmres", cache=cache)
-    ml = cache.hierarchy
+    old, build, held = weakref.ref(cache.hierarchy), stokes_cache.viscous_amg, []
+
+    def watched(problem):
+        held.append(cache.hierarchy is None and old() is None)
+        return build(problem)
+
+    monkeypatch.setattr(stokes_cache, "viscous_amg", watched)
     cache.solution = None                     # no warm start, as for a new problem
     cache.last_iterations = 10 * cache.base_iterations + 100
     s = solve_stokes(sp_, ex.viscosity, ex.force, solver="fgmres", cache=cache)
-    assert s.info["amg_rebuilt"] and cache.hierarchy is not ml
+    assert s.info["amg_rebuilt"] and held == [True] and cache.hierarchy is not None
+    assert old() is None
 
 
 def test_fgmres_failure_names_maxiter(square):

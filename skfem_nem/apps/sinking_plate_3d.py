@@ -209,7 +209,9 @@ class SinkingPlate3D:
         r, s, v, stable = self._solve(spaces, dt, self._guesses(spaces),
                                       self._first_iterate(dt), tol)
         if c.midpoint:
-            return self._midpoint_step(dt, r, v, stable, (t_basis, t0))
+            first = (r.solution.u, r.eta_eff)
+            del r, s, spaces
+            return self._midpoint_step(dt, first, v, stable, (t_basis, t0))
         t_solve = _time.perf_counter() - t0
         self._keep_stress(r)
         P, u = spaces.ubasis, r.solution.u
@@ -222,7 +224,7 @@ class SinkingPlate3D:
         self.dt_next = stable
         return self._row(report, r, v, s, stable, seconds=(t_basis, t_solve, t0))
 
-    def _midpoint_step(self, dt: float, r, v, stable, times) -> dict:
+    def _midpoint_step(self, dt: float, first, v, stable, times) -> dict:
         """The rest of a midpoint try: the nodes moved half a step with the first solve's
         velocity ``v`` (the flips carry the stress there), the step solved again on them,
         and the nodes moved on to where that velocity takes them from the start; the
@@ -231,10 +233,13 @@ class SinkingPlate3D:
         start = lm.snapshot()
         try:
             # the first solve's viscosity goes along (the second solve's start)
-            lm.ip_fields = dict(lm.ip_fields, log_eta_eff=from_quadrature(np.log(r.eta_eff)))
+            u1, eta1 = first
+            lm.ip_fields = dict(lm.ip_fields, log_eta_eff=from_quadrature(np.log(eta1)))
             half = lm.advance(lambda x: v, 0.5 * dt, tol=1e-8)
+            self._spaces_of = None
+            gc.collect()
             spaces = self._spaces()
-            guesses = {"u_guess": r.solution.u,
+            guesses = {"u_guess": u1,
                        "eta_guess": np.exp(to_quadrature(lm.ip_fields["log_eta_eff"]))}
             r2, s2, v2, stable2 = self._solve(spaces, dt, guesses, None, self.cfg.picard_tol)
             t_solve = _time.perf_counter() - t0

@@ -68,6 +68,7 @@ class StokesCache:
             self.hierarchy.refresh(A)
             self.reuses += 1
             return self.hierarchy, False
+        self.hierarchy = None       # (freed before the new one is built)
         self.hierarchy = viscous_amg(problem)
         self.pattern = pattern_of(A, copy=True)
         self.base_iterations = None

@@ -22,8 +22,8 @@ Run ``python benchmarks/plate_3d.py [--nodes 5000 10000] [--steps 3 | --end-time
 options go to the command (``--plate-density 3``: the command refuses what it does not
 know).
 A midpoint step (two solves, the second of 5 to 6 Picard iterations) takes about 34 s at
-10,000 nodes on two quiet cores; a whole default run (10,032 nodes) about 8 minutes with
-numba's kernels cached, 10 and a half with their compilation.
+10,000 nodes on two quiet cores; a whole default run (10,032 nodes) about 7 and a half
+minutes with numba's kernels cached, 10 with their compilation.
 """
 from __future__ import annotations
 

@@ -90,3 +90,53 @@ def test_the_finest_level_is_the_scaled_block():
     b = A @ x
     err = [np.linalg.norm(amg.cg(b, k) - x) / np.linalg.norm(x) for k in (1, 4, 12)]
     assert err[0] > err[1] > err[2] and err[2] < 1e-6, err
+
+
+def test_the_pattern_is_read_from_the_triangle_not_kept_from_the_matrix():
+    """``same_pattern`` holds no reference to the matrix's index arrays (a 3D viscous
+    block's are 55 MB) and still tells a moved upper entry or a missing diagonal from new
+    values."""
+    A = _symmetric(50, 0.2, 4)
+    S = SymmetricRows(A)
+    held = [v for v in vars(S).values() if isinstance(v, np.ndarray)]
+    assert not any(np.shares_memory(v, a) for v in held for a in (A.indices, A.indptr))
+    assert S.source.dtype == np.int32                  # positions in 32 bits where they fit
+    C = A.copy()
+    C.data = 3 * C.data
+    assert S.same_pattern(C) and S.same_pattern(sps.csr_matrix(A.toarray() + 0.0))
+    U = sps.triu(A, 1).tocsr()
+    i = int(np.flatnonzero(np.diff(U.indptr) > 0)[0])
+    j = U.indices[U.indptr[i]]                            # an upper entry (i, j), j > i
+    moved = A.tolil()
+    moved[i, j], moved[j, i] = 0.0, 0.0
+    free = next(c for c in range(i + 1, 50) if A[i, c] == 0)
+    moved[i, free] = moved[free, i] = 1.0                 # the entry moved along its row
+    moved = sps.csr_matrix(moved)
+    moved.eliminate_zeros()
+    assert not S.same_pattern(moved)
+    no_diag = sps.csr_matrix(A - sps.diags(A.diagonal()))
+    no_diag.eliminate_zeros()
+    assert not S.same_pattern(no_diag)
+    assert not S.same_pattern(A.tocsc())
+
+
+def test_the_multigrid_keeps_no_finest_matrix():
+    """Past its set-up (and a refresh) the hierarchy multiplies through its triangles only:
+    no CSR copy of the scaled finest block stays, and a refresh that renews the coarse
+    levels (from a finest matrix made again) gives a cycle that still reduces the
+    residual."""
+    n = 30
+    L = sps.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    A = sps.csr_matrix(sps.kron(sps.identity(2), sps.kronsum(L, L)))
+    modes = np.kron(np.eye(2), np.ones((n * n, 1)))
+    amg = ViscousAMG(A, modes)
+    assert amg.n_levels >= 2 and amg.ml.levels[0].A is None
+    assert amg.same_pattern(A) and not amg.same_pattern(sps.csr_matrix(A + sps.eye(2 * n * n,
+                                                                                   k=5)))
+    A2 = sps.csr_matrix(A @ sps.diags(np.linspace(1, 5, 2 * n * n)))
+    A2 = sps.csr_matrix(0.5 * (A2 + A2.T))
+    amg.refresh(A2, coarse=True)
+    assert amg.ml.levels[0].A is None
+    b = np.random.default_rng(5).standard_normal(A.shape[0])
+    x = amg.cycle(b)
+    assert np.linalg.norm(A2 @ x - b) < 0.5 * np.linalg.norm(b)

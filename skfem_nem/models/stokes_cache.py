@@ -45,7 +45,6 @@ class StokesCache:
     """
 
     hierarchy: object = None
-    pattern: Optional[tuple] = None
     solution: Optional[np.ndarray] = None
     base_iterations: Optional[int] = None
     builds: int = 0
@@ -60,17 +59,16 @@ class StokesCache:
     def amg(self, problem):
         """The hierarchy for ``problem.A``: the kept one (refreshed) or a new one."""
         A = problem.A
-        pattern = pattern_of(A)
         stale = (self.base_iterations is not None and self.last_iterations is not None
                  and self.last_iterations > REBUILD_GROWTH * self.base_iterations
                  + REBUILD_SLACK)
-        if self.hierarchy is not None and not stale and same_pattern(self.pattern, pattern):
+        # (the hierarchy knows its block's pattern: no copy of the indices is kept here)
+        if self.hierarchy is not None and not stale and self.hierarchy.same_pattern(A):
             self.hierarchy.refresh(A)
             self.reuses += 1
             return self.hierarchy, False
         self.hierarchy = None       # (freed before the new one is built)
         self.hierarchy = viscous_amg(problem)
-        self.pattern = pattern_of(A, copy=True)
         self.base_iterations = None
         self.builds += 1
         return self.hierarchy, True

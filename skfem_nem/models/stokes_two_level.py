@@ -19,6 +19,7 @@ import scipy.sparse.linalg as spla
 
 from ..basis.two_level import TwoLevelSpace
 from .krylov import cg_steps
+from .stokes_cache import pattern_of, same_pattern
 
 __all__ = ["ViscousTwoLevel"]
 
@@ -35,6 +36,11 @@ class ViscousTwoLevel:
     def n_levels(self) -> int:
         """Number of levels: the quadratic dofs, then those of the coarse aggregation."""
         return self.M.levels
+
+    def same_pattern(self, A: sp.spmatrix) -> bool:
+        """True if ``A`` has the pattern of the block the method holds, so that
+        :meth:`refresh` may take its values."""
+        return same_pattern(pattern_of(self.matrix), pattern_of(sp.csr_matrix(A)))
 
     def refresh(self, A: sp.spmatrix) -> None:
         """New values of the block (the same dofs): the star blocks, the coarse matrix and

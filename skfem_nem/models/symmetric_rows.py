@@ -44,13 +44,18 @@ class SymmetricRows:
         if self.values not in (np.float32, np.float64):
             raise ValueError(f"SymmetricRows keeps float32 or float64 values, got {values!r}")
         self.shape, self.dtype = A.shape, np.dtype(np.float64)
-        self._pattern = (A.indptr, A.indices)      # the index arrays read (not copied)
+        # the row pointers of A, to know a matrix of its pattern again (its column indices
+        # are not kept: same_pattern checks them against the triangle's)
+        self.source_indptr = A.indptr.copy()
         n = A.shape[0]
         counts = np.zeros(n + 1, dtype=np.int64)
-        self.diagonal_source = np.full(n, -1, dtype=np.int64)    # -1: no diagonal entry
+        # the positions in A of the entries kept, in 32 bits where A's entries allow
+        # (a 3D viscous block of 10,000 nodes: 27 MB less)
+        position = np.int64 if A.indices.size >= np.iinfo(np.int32).max else np.int32
+        self.diagonal_source = np.full(n, -1, dtype=position)     # -1: no diagonal entry
         _upper_counts(A.indptr, A.indices, counts, self.diagonal_source)
         self.indptr = np.cumsum(counts)
-        self.source = np.empty(self.indptr[-1], dtype=np.int64)   # entries of A kept
+        self.source = np.empty(self.indptr[-1], dtype=position)
         self.indices = np.empty(self.indptr[-1], dtype=np.uint32)
         _upper_fill(A.indptr, A.indices, self.indptr, self.source, self.indices)
         chunks = max(1, min(numba.get_num_threads(), n))
@@ -78,11 +83,13 @@ class SymmetricRows:
         return int(self.indptr[-1]) + self.shape[0]
 
     def same_pattern(self, A: sp.spmatrix) -> bool:
-        """True if ``A`` is a CSR matrix with the index arrays this one was made from."""
-        indptr, indices = self._pattern
+        """True if ``A`` is a CSR matrix whose values this one reads from the same places:
+        the same row pointers, its diagonal and upper triangle at the same positions and
+        columns. (Its lower triangle is never read.)"""
         return (sp.issparse(A) and A.format == "csr" and A.shape == self.shape
-                and (A.indices is indices or (np.array_equal(A.indptr, indptr)
-                                               and np.array_equal(A.indices, indices))))
+                and np.array_equal(A.indptr, self.source_indptr)
+                and _same_upper(A.indptr, A.indices, self.indptr, self.source, self.indices,
+                                self.diagonal_source))
 
     def refresh(self, A: sp.spmatrix) -> None:
         """Take the values of ``A``; a matrix of another pattern than the one this was made
@@ -134,6 +141,29 @@ def _upper_fill(indptr, indices, up_ptr, source, up_indices):
                 source[w] = k
                 up_indices[w] = indices[k]
                 w += 1
+
+
+@njit(cache=True, parallel=True)
+def _same_upper(indptr, indices, up_ptr, source, up_indices, diagonal):
+    """True if the strict upper triangle of the CSR pattern ``indptr, indices`` is at the
+    positions ``source`` with the columns ``up_indices`` (rows by ``up_ptr``) and its
+    diagonal entries at ``diagonal`` (-1: none)."""
+    n = indptr.size - 1
+    bad = np.zeros(n, np.bool_)
+    for i in prange(n):
+        w, d = up_ptr[i], -1
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            if j > i:
+                if w >= up_ptr[i + 1] or source[w] != k or up_indices[w] != j:
+                    bad[i] = True
+                    break
+                w += 1
+            elif j == i:
+                d = k
+        if w != up_ptr[i + 1] or d != diagonal[i]:
+            bad[i] = True
+    return not bad.any()
 
 
 @njit(cache=True, parallel=True)

@@ -143,27 +143,26 @@ def _upper_fill(indptr, indices, up_ptr, source, up_indices):
                 w += 1
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _same_upper(indptr, indices, up_ptr, source, up_indices, diagonal):
     """True if the strict upper triangle of the CSR pattern ``indptr, indices`` is at the
     positions ``source`` with the columns ``up_indices`` (rows by ``up_ptr``) and its
-    diagonal entries at ``diagonal`` (-1: none)."""
-    n = indptr.size - 1
-    bad = np.zeros(n, np.bool_)
-    for i in prange(n):
+    diagonal entries at ``diagonal`` (-1: none). One thread: it runs once a solve, 42 ms
+    on 13.8 million entries (comparing two copies of the index arrays took 13 ms, but held
+    a copy of 55 MB), and a parallel kernel costs a run seconds more to compile."""
+    for i in range(indptr.size - 1):
         w, d = up_ptr[i], -1
         for k in range(indptr[i], indptr[i + 1]):
             j = indices[k]
             if j > i:
                 if w >= up_ptr[i + 1] or source[w] != k or up_indices[w] != j:
-                    bad[i] = True
-                    break
+                    return False
                 w += 1
             elif j == i:
                 d = k
         if w != up_ptr[i + 1] or d != diagonal[i]:
-            bad[i] = True
-    return not bad.any()
+            return False
+    return True
 
 
 @njit(cache=True, parallel=True)

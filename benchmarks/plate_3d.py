@@ -29,13 +29,25 @@ from __future__ import annotations
 
 import argparse
 import csv
-import resource
+import os
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+
+def run_measured(cmd) -> float:
+    """Run ``cmd`` (its output discarded); its own peak resident memory (MB), from its
+    rusage as it is reaped (``RUSAGE_CHILDREN`` would give the largest of every child so
+    far). ``CalledProcessError`` if it fails."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode:
+        raise subprocess.CalledProcessError(proc.returncode, cmd)
+    return usage.ru_maxrss / 1024
 
 
 def run_child(nodes: int, steps, end_time, out: Path, cfl=None, extra=()) -> dict:
@@ -52,8 +64,7 @@ def run_child(nodes: int, steps, end_time, out: Path, cfl=None, extra=()) -> dic
         # the output times cap the time step: one output at the end for a time-step study
         every = end_time if cfl is not None else end_time / 6
         cmd += ["--end-time", str(end_time), "--output-interval", str(every)]
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    peak = run_measured(cmd)
     with open(out / "diagnostics.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     d = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}

@@ -654,6 +654,20 @@ def test_plate_3d_prints_steps_and_depths(capsys):
     assert "largest relative difference" in capsys.readouterr().out
 
 
+def test_plate_3d_measures_each_childs_own_peak_memory():
+    """A child that holds 400 MB, then one that holds nothing: the second's peak is its
+    own, not the largest of the children so far; a failing child raises."""
+    import subprocess
+    import sys
+    bench = load_benchmark("plate_3d")
+    big = bench.run_measured([sys.executable, "-c",
+                              "import numpy as np; a = np.ones(50_000_000); a.sum()"])
+    small = bench.run_measured([sys.executable, "-c", "pass"])
+    assert big > 400 and small < 100, (big, small)
+    with pytest.raises(subprocess.CalledProcessError):
+        bench.run_measured([sys.executable, "-c", "raise SystemExit(3)"])
+
+
 def test_plate_3d_time_step_study_extrapolates_the_depth(capsys):
     """Three cfl values at one tiny resolution: a row per output time whose limit is the
     straight line through the depths against the mean dt (read back from the header), each

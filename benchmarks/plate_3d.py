@@ -41,7 +41,9 @@ import numpy as np
 def run_measured(cmd) -> float:
     """Run ``cmd`` (its output discarded); its own peak resident memory (MB), from its
     rusage as it is reaped (``RUSAGE_CHILDREN`` would give the largest of every child so
-    far). ``CalledProcessError`` if it fails."""
+    far). Linux counts into a child's peak the resident memory of the process that started
+    it, a floor: this script's own (numpy only) is some tens of MB. ``CalledProcessError``
+    if it fails."""
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)

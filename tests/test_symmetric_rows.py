@@ -140,3 +140,26 @@ def test_the_multigrid_keeps_no_finest_matrix():
     b = np.random.default_rng(5).standard_normal(A.shape[0])
     x = amg.cycle(b)
     assert np.linalg.norm(A2 @ x - b) < 0.5 * np.linalg.norm(b)
+
+
+def test_a_pattern_found_the_same_is_not_checked_again(monkeypatch):
+    """The hierarchy checks a block's pattern, then refreshes its triangles and their twin
+    from it: the index array found the same is remembered (weakly), not read three times."""
+    import gc
+
+    import skfem_nem.models.symmetric_rows as rows
+    A = _symmetric(40, 0.3, 7)
+    S = SymmetricRows(A)
+    calls = []
+    check = rows._same_upper
+    monkeypatch.setattr(rows, "_same_upper", lambda *a: calls.append(1) or check(*a))
+    C = sps.csr_matrix((2 * A.data, A.indices.copy(), A.indptr.copy()), shape=A.shape)
+    assert S.same_pattern(C)
+    S.refresh(C)
+    S.twin(C)
+    assert len(calls) == 1
+    D = sps.csr_matrix((A.data, C.indices.copy(), A.indptr), shape=A.shape)
+    del C
+    gc.collect()
+    assert S._checked() is None          # not held
+    assert S.same_pattern(D) and len(calls) == 2

@@ -17,6 +17,8 @@ results repeat bit for bit for a given number of threads.
 """
 from __future__ import annotations
 
+import weakref
+
 import numba
 import numpy as np
 import scipy.sparse as sp
@@ -47,6 +49,7 @@ class SymmetricRows:
         # the row pointers of A, to know a matrix of its pattern again (its column indices
         # are not kept: same_pattern checks them against the triangle's)
         self.source_indptr = A.indptr.copy()
+        self._checked = None        # a weak reference to the index array last found the same
         n = A.shape[0]
         counts = np.zeros(n + 1, dtype=np.int64)
         # the positions in A of the entries kept, in 32 bits where A's entries allow
@@ -86,10 +89,16 @@ class SymmetricRows:
         """True if ``A`` is a CSR matrix whose values this one reads from the same places:
         the same row pointers, its diagonal and upper triangle at the same positions and
         columns. (Its lower triangle is never read.)"""
-        return (sp.issparse(A) and A.format == "csr" and A.shape == self.shape
-                and np.array_equal(A.indptr, self.source_indptr)
-                and _same_upper(A.indptr, A.indices, self.indptr, self.source, self.indices,
-                                self.diagonal_source))
+        if not (sp.issparse(A) and A.format == "csr" and A.shape == self.shape
+                and np.array_equal(A.indptr, self.source_indptr)):
+            return False
+        if self._checked is not None and self._checked() is A.indices:
+            return True     # the index array found the same a moment ago (a refresh's twin)
+        same = _same_upper(A.indptr, A.indices, self.indptr, self.source, self.indices,
+                           self.diagonal_source)
+        # remembered by a weak reference: the array is not held
+        self._checked = weakref.ref(A.indices) if same else None
+        return same
 
     def refresh(self, A: sp.spmatrix) -> None:
         """Take the values of ``A``; a matrix of another pattern than the one this was made

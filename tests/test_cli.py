@@ -220,21 +220,29 @@ def test_first_run_notice(tmp_path, monkeypatch, capsys):
     from skfem_nem.apps import cli as cli
     from pathlib import Path
     package = Path(cli.__file__).resolve().parents[1]
-    for module in cli.FIRST_KERNELS:  # the names follow the package's layout
-        assert (package / f"{module}.py").exists(), module
-    assert not cli.kernels_cached(tmp_path)
-    for k, module in enumerate(cli.FIRST_KERNELS):
-        assert not cli.kernels_cached(tmp_path)
-        folder = tmp_path / module.split("/")[0] / "__pycache__"
-        folder.mkdir(parents=True)
-        (folder / f"{module.split('/')[1]}.kernel-{k}.py311.nbi").write_text("")
-    assert cli.kernels_cached(tmp_path)
-    # the command says so before the first step when the cache is empty
-    monkeypatch.setattr(cli, "kernels_cached", lambda folder=None: False)
+    for dim in (2, 3):
+        for module in cli.FIRST_KERNELS[dim]:  # the names follow the package's layout
+            assert (package / f"{module}.py").exists(), module
+        assert not cli.kernels_cached(tmp_path, dim=dim)
+        for k, module in enumerate(cli.FIRST_KERNELS[dim]):
+            assert not cli.kernels_cached(tmp_path, dim=dim)
+            folder = tmp_path / module.split("/")[0] / "__pycache__"
+            folder.mkdir(parents=True, exist_ok=True)
+            (folder / f"{module.split('/')[1]}.kernel-{k}.py311.nbi").write_text("")
+        assert cli.kernels_cached(tmp_path, dim=dim)
+    # the 2D kernels cached say nothing of the 3D ones
+    (tmp_path / "models" / "__pycache__" / "condensation_tet.kernel-2.py311.nbi").unlink()
+    assert cli.kernels_cached(tmp_path, dim=2) and not cli.kernels_cached(tmp_path, dim=3)
+    # the command says so before the first step when the cache is empty, with the
+    # plate's own estimate
+    asked = []
+    monkeypatch.setattr(cli, "kernels_cached",
+                        lambda folder=None, dim=2: asked.append(dim) or False)
     assert main(["sinking-plate", "-o", str(tmp_path / "run"), "--nodes", "300",
                  "--end-time", "1", "--quiet"]) == 0
-    assert "compiling the numerical kernels" in capsys.readouterr().out
-    monkeypatch.setattr(cli, "kernels_cached", lambda folder=None: True)
+    assert "compiling the numerical kernels (about half a minute, once)" in \
+        capsys.readouterr().out and asked == [2]
+    monkeypatch.setattr(cli, "kernels_cached", lambda folder=None, dim=2: True)
     assert main(["sinking-plate", "-o", str(tmp_path / "run2"), "--nodes", "300",
                  "--end-time", "1", "--quiet"]) == 0
     assert "compiling" not in capsys.readouterr().out

@@ -138,9 +138,9 @@ def _run_plate(sim, cfg, args) -> int:
     """Run the constructed ``sim``: progress, the one-line stop, the files written."""
     print(f"sinking plate: {sim.lm.nodes.shape[0]} nodes, {sim.cells}, "
           f"t = {sim.lm.time:g} -> {cfg.end_time:g}; output in {args.output}")
-    if not kernels_cached():
-        print("first run after installing: compiling the numerical kernels (about half a "
-              "minute, once) before the first step", flush=True)
+    if not kernels_cached(dim=sim.dim):
+        print(f"first run after installing: compiling the numerical kernels "
+              f"({FIRST_COMPILE[sim.dim]}, once) before the first step", flush=True)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning
@@ -209,18 +209,24 @@ def _retried_steps(path) -> int:
     return int(np.count_nonzero(d.get("retries", np.zeros(0)) > 0))
 
 
-#: modules whose numba kernels every run compiles first (their on-disk cache
-#: tells whether this is the first run after installing), relative to the package
-FIRST_KERNELS = ("coordinates/area2d", "basis/smoothing", "geometry/delaunay2d")
+#: modules whose numba kernels every run of the 2D and of the 3D plate compiles first
+#: (their on-disk cache tells whether this is the plate's first run after installing),
+#: relative to the package
+FIRST_KERNELS = {2: ("coordinates/area2d", "basis/smoothing", "geometry/delaunay2d"),
+                 3: ("geometry/delaunay3d_build", "coordinates/watson3d",
+                     "models/condensation_tet")}
+#: how long the plate's first run compiles its kernels, on two cores (the 3D plate's
+#: are some 150 kernels; docs/stokes_3d.md)
+FIRST_COMPILE = {2: "about half a minute", 3: "about three minutes"}
 
 
-def kernels_cached(root=None) -> bool:
-    """Whether numba's on-disk cache holds the kernels of :data:`FIRST_KERNELS`,
-    i.e. whether this is not the first run after installing (``root``: the
-    package folder, by default this package's)."""
+def kernels_cached(root=None, dim: int = 2) -> bool:
+    """Whether numba's on-disk cache holds the kernels of :data:`FIRST_KERNELS` of the
+    ``dim``-D plate, i.e. whether this is not its first run after installing (``root``:
+    the package folder, by default this package's)."""
     from pathlib import Path
     root = Path(__file__).resolve().parents[1] if root is None else Path(root)
-    for module in FIRST_KERNELS:
+    for module in FIRST_KERNELS[dim]:
         folder, name = (root / module).parent, (root / module).name
         if not any((folder / "__pycache__").glob(f"{name}.*.nbi")):
             return False

@@ -135,6 +135,8 @@ class SinkingPlate:
     from the checkpoint in ``out``.
     """
 
+    dim = 2
+
     def __init__(self, cfg: PlateConfig, out, _state=None):
         cfg.validate()
         self.cfg = cfg

@@ -183,8 +183,10 @@ def query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC,
                 continue
             # the simplices whose circumcentres are vertices of cell i, as rows
             # of constraint ids (0: x, j + 1: neighbour j), after the conflict
-            # simplices' local indices in Tc[:ncav]
-            nT = 0
+            # simplices' local indices in Tc[:ncav] (counts start as np.int64: a plain 0
+            # or 1 is typed Literal[int] on numba's first pass over the loop, which
+            # compiles the kernels called with them a second time)
+            nT = np.int64(0)
             base = ncav
             if not full:
                 for c in range(ncav):
@@ -237,7 +239,7 @@ def query(P, S, NB, ctr, x, hint, d, stamp_q, want_grad, kind, tols, cached, CC,
                 A[0, 0, k] = q[i, k] / h
             B[0, 0] = 0.0
             I[0, 0] = 0
-            m = 1
+            m = np.int64(1)
             for j in range(K):
                 if j == i or (not full and stamp[j + 1] != sc[0]):
                     continue

@@ -355,7 +355,9 @@ def _row(R, T, NB, x, y, z, t0, k0, stamp, m, tets, E, mark, where, oi, ov, oa):
     nc = conflict_tetrahedra(R, NB, x, y, z, t0, sc, stamp, m, tets, E)
     if nc < 0:
         return -1
-    cnt, total, mag = 0, 0.0, 0.0
+    # np.int64: a plain 0 is typed Literal[int](0) on numba's first pass over the loop,
+    # which would compile _pair a second time
+    cnt, total, mag = np.int64(0), 0.0, 0.0
     for c in range(nc):
         t = tets[c]
         if k0 >= 0 and (t == t0 or t == t2):
@@ -553,7 +555,7 @@ def _locate(R, NB, Q, order, nblocks, out):
     fails), the queries taken in ``order`` in ``nblocks`` blocks, each walk from the last."""
     m = order.shape[0]
     for b in prange(nblocks):
-        t = 0
+        t = np.int64(0)  # not a literal 0: one specialization of walk
         for s in range(b * m // nblocks, (b + 1) * m // nblocks):
             j = order[s]
             t1 = walk(R, NB, Q[j, 0], Q[j, 1], Q[j, 2], t)

@@ -92,7 +92,9 @@ def finite_conflict(P, T, t, q):
                       P[q, 0], P[q, 1], P[q, 2])
     if s != 0.0:
         return s > 0.0
-    return _perturbed_inside(P, a, b, c, d, q)
+    # q as int64 whichever width the caller's index has (an insertion's point index, or a
+    # vertex read from T): one specialization of _perturbed_inside
+    return _perturbed_inside(P, a, b, c, d, np.int64(q))
 
 
 @njit(cache=True, inline="always")
@@ -416,9 +418,11 @@ def build(P, order):
     if k1 < 0:
         return T, N, 0, FLAT, -1, -1
     _init_tets(P, G, T, N, order[0], order[k1], order[k2], order[k3])
-    ntet, nfree = 5, 0
+    # counts and the start tet as int64s, not literals: the kernels below get the same
+    # argument types from every caller and compile once
+    ntet, nfree = np.int64(5), np.int64(0)
     skip = np.array([0, k1, k2, k3], np.int64)      # the first tet's
-    return insert_all(P, G, T, N, stamp, conf, free, nfree, ntet, order, skip, 0)
+    return insert_all(P, G, T, N, stamp, conf, free, nfree, ntet, order, skip, np.int64(0))
 
 
 @njit(cache=True)
@@ -427,7 +431,7 @@ def insert_all(P, G, T, N, stamp, conf, free, nfree, ntet, order, skip, last):
     one, each located from the last one's new tets (from tet ``last`` first); the stamps
     must be fresh. Returns ``(T, N, ntet, status, i, j)`` as :func:`build`."""
     work = new_work()
-    seed = 12345
+    seed = np.int64(12345)  # not a literal: one specialization of locate
     for k in range(order.shape[0]):
         skipped = False
         for j in range(skip.shape[0]):
@@ -455,7 +459,7 @@ def add_points(P, T, N, ntet, G0, order):
     coincides with point j. By the symbolic perturbation the result is the one a build of
     all the points gives."""
     G = P.shape[0]
-    last = -1
+    last = np.int64(-1)  # not a literal: insert_all compiles once (as for build)
     for t in range(ntet):
         if T[t, 0] >= 0:
             if last < 0:

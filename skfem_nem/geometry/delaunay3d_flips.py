@@ -218,7 +218,7 @@ def _flip(P, G, T, N, t, i, free, nfree, ntet):
     for k in range(3):
         s[k] = o3(P, f[k], f[(k + 1) % 3], e, d)
     if s[0] > 0.0 and s[1] > 0.0 and s[2] > 0.0:  # 2-3
-        tets = np.empty((3, 4), np.int64)
+        tets = np.empty((3, 4), np.int32)  # int32 as T: glue, internal compile once
         for k in range(3):
             tets[k, 0], tets[k, 1], tets[k, 2], tets[k, 3] = f[k], f[(k + 1) % 3], e, d
         nfree, ntet, rows = _replace(T, N, np.array([t, u], np.int32), tets, free, nfree, ntet)
@@ -237,7 +237,7 @@ def _flip(P, G, T, N, t, i, free, nfree, ntet):
     if T[w, 3] == G or T[w, _apex_slot(N, t, _slot(T, t, z))] != e \
             or N[u, _slot(T, u, z)] != w:
         return _STUCK, nfree, ntet, none
-    tets = np.empty((2, 4), np.int64)
+    tets = np.empty((2, 4), np.int32)
     tets[0, 0], tets[0, 1], tets[0, 2], tets[0, 3] = z, d, e, x
     tets[1, 0], tets[1, 1], tets[1, 2], tets[1, 3] = z, d, e, y
     if o3(P, z, d, e, x) * o3(P, z, d, e, y) >= 0.0:  # x y must pierce z d e
@@ -281,7 +281,7 @@ def _flip_hull(P, G, T, N, t, i, free, nfree, ntet):
         return _STUCK, nfree, ntet, none
     if o3(P, b, d, x, a) * o3(P, b, d, x, c) >= 0.0:  # the quadrilateral a b c d convex
         return _STUCK, nfree, ntet, none
-    tets = np.empty((4, 4), np.int64)
+    tets = np.empty((4, 4), np.int32)
     tets[0, 0], tets[0, 1], tets[0, 2], tets[0, 3] = a, b, d, x
     tets[1, 0], tets[1, 1], tets[1, 2], tets[1, 3] = c, b, d, x
     if not (_positive(P, tets[0]) and _positive(P, tets[1])):
@@ -319,7 +319,7 @@ def flip_to_delaunay(P, G, T, N, ntet, free, nfree, stack, v2t):
     tet at each vertex) is kept up to date."""
     flips = 0
     stuck = np.empty(16, np.int32)
-    nstuck = 0
+    nstuck = np.int64(0)  # not a literal 0: one specialization of push
     nstack = stack.shape[0]
     budget = _FLIP_BUDGET * ntet + 1000
     while nstack > 0:
@@ -332,7 +332,7 @@ def flip_to_delaunay(P, G, T, N, ntet, free, nfree, stack, v2t):
         if T[t, 0] < 0:
             continue
         if ntet + 1 >= T.shape[0]:  # a 2-3 flip may take one new row
-            T, N, free = _grow(T, -1), _grow(N, -1), _grow(free, 0)
+            T, N, free = _grow(T, np.int64(-1)), _grow(N, np.int64(-1)), _grow(free, np.int64(0))
         for i in range(4):
             if not face_fails(P, G, T, N, t, i):
                 continue

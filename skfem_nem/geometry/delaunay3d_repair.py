@@ -118,7 +118,9 @@ def scan(P, G, T, N, ntet, flags):
         for i in range(4):
             u = N[t, i]
             beneath = (T[t, 3] == G) != (T[u, 3] == G)  # a hull face: inverted if failing
-            if (beneath or u < t) and face_fails(P, G, T, N, t, i):
+            # t as int32, as the tets' rows hold it (prange's index is int64 in typing and
+            # uint64 in the parallel loop): one specialization of face_fails
+            if (beneath or u < t) and face_fails(P, G, T, N, np.int32(t), i):
                 if beneath:
                     flags[t] = 1
                     break
@@ -135,7 +137,7 @@ def freeze(P, P0, G, T, N, v2t, moved, frozen, flags):
     mark = np.zeros(P.shape[0], np.bool_)
     count = 0
     for t in np.flatnonzero(flags == 1):
-        count += _mark(T, N, G, t, moved, frozen, mark)
+        count += _mark(T, N, G, np.int32(t), moved, frozen, mark)  # int32 as the tets' rows
     stamp = np.zeros(T.shape[0], np.int64)
     star = np.empty(64, np.int32)
     stack = np.flatnonzero(flags == 2).astype(np.int32)
@@ -220,13 +222,15 @@ def _fill(P, G, v, link):
     Tl, Nl, ntl, status, _, _ = build(Pl, np.arange(m))
     if status != OK:
         return empty, empty, False
-    start = 0
+    # int64s, not literals, as the insertions pass: one specialization of locate, cavity
+    start = np.int64(0)
     while Tl[start, 0] < 0:
         start += 1
-    t0, _ = locate(Pl, Gl, Tl, Nl, start, m, 12345)
+    t0, _ = locate(Pl, Gl, Tl, Nl, start, m, np.int64(12345))
     stamp = np.zeros(Tl.shape[0], np.int64)
     conf = np.zeros(Tl.shape[0], np.bool_)
-    cav, ncav = cavity(Pl, Gl, Tl, Nl, stamp, conf, 1, t0, m, np.empty(64, np.int32))
+    cav, ncav = cavity(Pl, Gl, Tl, Nl, stamp, conf, np.int64(1), t0, m,
+                       np.empty(64, np.int32))
     index = np.full(Tl.shape[0], -1, np.int32)
     for k in range(ncav):
         index[cav[k]] = k
@@ -309,7 +313,7 @@ def relocate(P, P1, G, T, N, ntet, v2t, order):
     conf = np.zeros(T.shape[0], np.bool_)
     work = new_work()
     star = np.empty(64, np.int32)
-    it, seed = 0, 12345
+    it, seed = 0, np.int64(12345)
     for v in order:
         T, N, stamp, conf, free = reserve(T, N, stamp, conf, free, ntet + _ROOM)
         it += 1

@@ -158,7 +158,7 @@ def _minor4(P, rows, w, out):
     acc = w[o + 3 * _M3:o + 3 * _M3 + _M4]
     nxt = w[o + 3 * _M3 + _M4:o + 3 * _M3 + 2 * _M4]
     acc[0] = 0.0
-    nacc = 1
+    nacc = np.int64(1)  # not a literal 1: one specialization of expansion_sum and _copy
     for r in range(4):
         if r == 0:
             i, j, k = rows[1], rows[2], rows[3]
@@ -190,7 +190,7 @@ def _det5(P, w):
     acc = w[o:o + _D5]
     nxt = w[o + _D5:o + 2 * _D5]
     acc[0] = 0.0
-    nacc = 1
+    nacc = np.int64(1)  # not a literal 1: one specialization of expansion_sum, approximate
     lift = np.empty(_LIFT)
     for r in range(5):
         rows = (0, 0, 0, 0)
@@ -208,7 +208,7 @@ def _det5(P, w):
         nl = _lift(P[r, 0], P[r, 1], P[r, 2], lift)
         sgn = -1.0 if r % 2 == 0 else 1.0
         tacc[0] = 0.0
-        nt = 1
+        nt = np.int64(1)
         for c in range(nl):
             ns = scale_expansion(m4, n4, sgn * lift[c], term)
             nt = expansion_sum(tacc, nt, term, ns, tnxt)
@@ -365,7 +365,8 @@ def _orient3d_exact(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
     _load(P, k, (bx, by, bz, ax, ay, az, cx, cy, cz, dx, dy, dz))
     work = np.empty(_M4_WORK + _M4)
     det = work[_M4_WORK:]
-    n = _minor4(P, (0, 1, 2, 3), work, det)
+    # the rows as int64s, not a tuple of literals: one specialization of _minor4
+    n = _minor4(P, (np.int64(0), np.int64(1), np.int64(2), np.int64(3)), work, det)
     return unscale(approximate(det, n), 3 * k)
 
 

@@ -338,7 +338,7 @@ def locate_simplex(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol, flat_tol)
             prev = s
             s = t
             continue
-        k = 0
+        k = np.int64(0)  # not a literal 0: one specialization of hull_distance
         for j in range(1, d + 1):
             if lam[j] < lam[k]:
                 k = j

@@ -233,6 +233,17 @@ def test_first_run_notice(tmp_path, monkeypatch, capsys):
     # the 2D kernels cached say nothing of the 3D ones
     (tmp_path / "models" / "__pycache__" / "condensation_tet.kernel-2.py311.nbi").unlink()
     assert cli.kernels_cached(tmp_path, dim=2) and not cli.kernels_cached(tmp_path, dim=3)
+    # a cache kept elsewhere (NUMBA_CACHE_DIR) is where the kernels are looked for
+    import numba
+    elsewhere = tmp_path / "elsewhere"
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(elsewhere))
+    assert not cli.kernels_cached(tmp_path, dim=2)
+    for module in cli.FIRST_KERNELS[2]:
+        folder = elsewhere / f"{module.split('/')[0]}_0123abcd"
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / f"{module.split('/')[1]}.kernel-0.py311.nbi").write_text("")
+    assert cli.kernels_cached(tmp_path, dim=2) and not cli.kernels_cached(tmp_path, dim=3)
+    monkeypatch.undo()
     # the command says so before the first step when the cache is empty, with the
     # plate's own estimate
     asked = []

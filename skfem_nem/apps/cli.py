@@ -225,10 +225,14 @@ def kernels_cached(root=None, dim: int = 2) -> bool:
     ``dim``-D plate, i.e. whether this is not its first run after installing (``root``:
     the package folder, by default this package's)."""
     from pathlib import Path
+
+    import numba
     root = Path(__file__).resolve().parents[1] if root is None else Path(root)
+    elsewhere = numba.config.CACHE_DIR     # NUMBA_CACHE_DIR: one folder per source folder
     for module in FIRST_KERNELS[dim]:
         folder, name = (root / module).parent, (root / module).name
-        if not any((folder / "__pycache__").glob(f"{name}.*.nbi")):
+        found = (Path(elsewhere).rglob if elsewhere else (folder / "__pycache__").glob)
+        if not any(found(f"{name}.*.nbi")):
             return False
     return True
 

@@ -22,7 +22,10 @@ import numpy as np
 from ..evolution.remap3d import REMAP_RULES
 from ..models.stokes_solvers import SOLVERS
 
-__all__ = ["HELP_3D", "Plate3DConfig", "plate_box"]
+__all__ = ["HELP_3D", "Plate3DConfig", "VISCOSITY_MEANS", "plate_box"]
+
+#: the blends of the viscosity across the plate's edge (``viscosity_mean``)
+VISCOSITY_MEANS = ("harmonic", "geometric")
 
 
 @dataclass
@@ -31,10 +34,11 @@ class Plate3DConfig:
     fluid viscosity 1, buoyancy scale ``plate_density * gravity * height`` = 1.5)."""
 
     #: what a checkpoint written before a parameter existed ran with: the viscous plate, no
-    #: nodes added, one solve a step (read by
+    #: nodes added, one solve a step, the geometric blend (read by
     #: :func:`~skfem_nem.apps.plate_config.stored_config` on ``--restart``)
     OLDER_CHECKPOINTS: ClassVar[dict] = {"shear_modulus": math.inf, "yield_stress": math.inf,
-                                         "split_edges": math.inf, "midpoint": False}
+                                         "split_edges": math.inf, "midpoint": False,
+                                         "viscosity_mean": "geometric"}
 
     #: box height (z)
     height: float = 1.0
@@ -70,6 +74,10 @@ class Plate3DConfig:
     shear_modulus: float = 2.0
     #: plate von Mises yield stress, sqrt(J2) (``inf``: no plasticity)
     yield_stress: float = 0.12
+    #: how the viscosity is blended across the plate's edge: "harmonic" (the Maxwell
+    #: compliance linear in the plate indicator) or "geometric" (the log-viscosity linear in
+    #: it, the default before); :mod:`~skfem_nem.apps.plate3d_materials`
+    viscosity_mean: str = "harmonic"
     #: number of random interior nodes drawn (before thinning near the walls): 10,100 gives
     #: 10,032 nodes, and the elasto-plastic run takes about 10 minutes on two cores
     #: (docs/stokes_3d.md)
@@ -150,6 +158,10 @@ class Plate3DConfig:
                              f"got {v!r}")
         if not isinstance(self.midpoint, bool):
             raise ValueError(f"midpoint must be true or false, got {self.midpoint!r}")
+        if self.viscosity_mean not in VISCOSITY_MEANS:
+            raise ValueError(f"viscosity_mean must be one of "
+                             f"{', '.join(map(repr, VISCOSITY_MEANS))}, got "
+                             f"{self.viscosity_mean!r}")
         if self.remap not in REMAP_RULES:
             raise ValueError(f"remap must be one of {', '.join(map(repr, REMAP_RULES))}, got "
                              f"{self.remap!r}")
@@ -190,6 +202,8 @@ HELP_3D = {
     "plate_viscosity": "plate viscosity (Maxwell)",
     "shear_modulus": "plate shear modulus (inf: a viscous plate)",
     "yield_stress": "plate von Mises yield stress, sqrt(J2) (inf: no plasticity)",
+    "viscosity_mean": 'viscosity across the plate\'s edge: "harmonic" (compliance linear in '
+                      'the plate indicator) or "geometric" (log-viscosity linear in it)',
     "nodes": "number of random interior nodes drawn",
     "seed": "random seed of the node set",
     "density_length": "node density ~ 1 / (1 + distance to the plate / density_length)^3",

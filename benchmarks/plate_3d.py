@@ -21,9 +21,10 @@ Run ``python benchmarks/plate_3d.py [--nodes 5000 10000] [--steps 3 | --end-time
 ``python benchmarks/plate_3d.py --nodes 4000 --end-time 250 --cfl 0.35 0.5 0.75 1``; other
 options go to the command (``--plate-density 3``: the command refuses what it does not
 know).
-A midpoint step (two solves, the second of 5 to 6 Picard iterations) takes about 34 s at
-10,000 nodes on two quiet cores; a whole default run (10,032 nodes) about 7 and a half
-minutes with numba's kernels cached, 10 with their compilation.
+A midpoint step (two solves, the second of 4 to 5 Picard iterations) takes about 28 s at
+10,000 nodes on two quiet cores; a whole default run (10,032 nodes) about 9 and a half
+minutes with the compilation of numba's kernels. ``--viscosity-mean geometric`` runs the
+blend of the plate's edge that the tables before it ran with (docs/stokes_3d.md).
 """
 from __future__ import annotations
 

@@ -79,8 +79,8 @@ class Plate3DConfig:
     #: it, the default before); :mod:`~skfem_nem.apps.plate3d_materials`
     viscosity_mean: str = "harmonic"
     #: number of random interior nodes drawn (before thinning near the walls): 10,100 gives
-    #: 10,032 nodes, and the elasto-plastic run takes about 10 minutes on two cores
-    #: (docs/stokes_3d.md)
+    #: 10,032 nodes, and the elasto-plastic run takes about 9 and a half minutes on two
+    #: cores, its kernels' compilation included (docs/stokes_3d.md)
     nodes: int = 10100
     #: random seed of the node set
     seed: int = 0

@@ -21,11 +21,9 @@ import numpy as np
 
 from ..evolution.remap3d import REMAP_RULES
 from ..models.stokes_solvers import SOLVERS
+from .plate3d_materials import VISCOSITY_MEANS
 
-__all__ = ["HELP_3D", "Plate3DConfig", "VISCOSITY_MEANS", "plate_box"]
-
-#: the blends of the viscosity across the plate's edge (``viscosity_mean``)
-VISCOSITY_MEANS = ("harmonic", "geometric")
+__all__ = ["HELP_3D", "Plate3DConfig", "plate_box"]
 
 
 @dataclass

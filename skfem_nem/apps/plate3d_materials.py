@@ -15,10 +15,9 @@ a vanishing spacing with the geometric mean and 4-8% above it with the harmonic 
 between 6,131 and 10,032 nodes it differs by up to 4.0% and 3.0% (docs/stokes_3d.md, at
 three resolutions). Harmonic averaging is also what geodynamic codes found best for
 sinking and subducting slabs on smoothed interfaces (Schmeling et al. 2008, Deubelbeiss &
-Kaus 2008). On the viscous plate's first solve at
-5,166 and 9,953 nodes the geometric mean moved the velocity by 13%, the nodes'
-viscosities interpolated by the velocity's functions by 40%, a sharp plate (s > 1/2) by
-36%, with 3.5 times the FGMRES iterations.
+Kaus 2008). On the viscous plate's first solve at 5,166 and 9,953 nodes the geometric
+mean moved the velocity by 13%, the nodes' viscosities interpolated by the velocity's
+functions by 40%, a sharp plate (s > 1/2) by 36%, with 3.5 times the FGMRES iterations.
 """
 from __future__ import annotations
 
@@ -28,7 +27,10 @@ import numpy as np
 
 from ..models.rheology import Material
 
-__all__ = ["blended_viscosity", "plate_materials", "YIELD_INDICATOR"]
+__all__ = ["blended_viscosity", "plate_materials", "VISCOSITY_MEANS", "YIELD_INDICATOR"]
+
+#: the blends of the viscosity across the plate's edge (``Plate3DConfig.viscosity_mean``)
+VISCOSITY_MEANS = ("harmonic", "geometric")
 
 #: the plate yields where the interpolated indicator reaches this (its half-way line,
 #: the plate's edge); the blend outside is visco-elastic only
@@ -63,9 +65,9 @@ def plate_materials(cfg, spaces, node_fields):
 def blended_viscosity(fluid, plate: float, s, mean: str):
     """The viscosity where a fraction ``s`` (array in [0, 1]) is plate of viscosity
     ``plate`` and the rest fluid of viscosity ``fluid`` (array of s's shape): ``mean``
-    "harmonic" or "geometric"; ``ValueError`` naming any other."""
+    one of :data:`VISCOSITY_MEANS`; ``ValueError`` naming any other."""
     if mean == "harmonic":
         return 1.0 / ((1.0 - s) / fluid + s / plate)
     if mean == "geometric":
         return np.exp((1.0 - s) * np.log(fluid) + s * math.log(plate))
-    raise ValueError(f"mean must be 'harmonic' or 'geometric', got {mean!r}")
+    raise ValueError(f"mean must be {' or '.join(map(repr, VISCOSITY_MEANS))}, got {mean!r}")

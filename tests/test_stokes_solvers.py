@@ -426,3 +426,31 @@ def test_schur_with_component_factors_agrees_with_direct(square, monkeypatch, co
     assert again.info["factor_reused"] and cache.factorisations == 1
     _close(again, solve_stokes(sp_, lambda x: 2 * ex.viscosity(x), ex.force,
                                solver="direct"), 1e-8)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_minres_steps_meet_their_preconditioned_residual(seed):
+    """MINRES on a symmetric indefinite system (eigenvalues from -10 to -1 and 1 to 1e3):
+    it stops where the preconditioned residual norm, recomputed from the result, is at
+    ``rtol`` of the start's (to the gap between its recurrence and the true residual, some
+    eps times the condition squared), and its solution is the system's to that accuracy."""
+    from skfem_nem.models.krylov import minres_steps
+    rng = np.random.default_rng(seed)
+    n = 120
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    lam = np.concatenate([np.logspace(0, 3, n - 30), -np.logspace(0, 1, 30)])
+    A = (Q * lam) @ Q.T
+    A = (A + A.T) / 2
+    d = 1.0 / np.abs(np.diag(A))                    # Jacobi: symmetric positive definite
+    b = rng.standard_normal(n)
+    count = [0]
+    x = minres_steps(lambda v: A @ v, lambda v: d * v, b, 1e-9, 2000, count)
+    r = b - A @ x
+    assert np.sqrt(r @ (d * r)) <= 2e-9 * np.sqrt(b @ (d * b))
+    assert 0 < count[0] <= 2000
+    exact = np.linalg.solve(A, b)
+    assert np.linalg.norm(x - exact) <= 1e-6 * np.linalg.norm(exact)
+    # a looser rtol stops sooner
+    fewer = [0]
+    minres_steps(lambda v: A @ v, lambda v: d * v, b, 1e-3, 2000, fewer)
+    assert fewer[0] < count[0]

@@ -437,3 +437,21 @@ def test_a_toml_file_with_a_2d_key_is_refused(tmp_path, capsys):
         main(["sinking-plate", "--dim", "3", "--config", str(cfg), "-o", str(tmp_path / "o")])
     assert exc.value.code == 2 and "unknown configuration key 'outline_spacing'" in \
         capsys.readouterr().err
+
+
+def test_the_nodes_are_numbered_along_the_z_order_curve():
+    """Neighbours get nearby numbers (the viscous block's rows touch nearby memory): the
+    median number distance along the tetrahedra's edges is a small fraction of the drawn
+    order's, and the node set itself is the drawn one."""
+    from skfem_nem import delaunay_mesh
+    from skfem_nem.apps.plate3d_config import Plate3DConfig
+    from skfem_nem.apps.sinking_plate_3d import initial_nodes
+    from skfem_nem.geometry.nodesets import morton_order
+    cfg = Plate3DConfig(nodes=3000)
+    p = initial_nodes(cfg)
+    np.testing.assert_array_equal(morton_order(p), np.arange(p.shape[0]))
+    t = delaunay_mesh(p).t
+    edges = np.concatenate([t[[i, j]] for i in range(4) for j in range(i + 1, 4)], axis=1)
+    drawn = np.random.default_rng(0).permutation(p.shape[0])   # any order but a local one
+    gap = np.median(np.abs(edges[0] - edges[1]))
+    assert gap < 0.05 * np.median(np.abs(drawn[edges[0]] - drawn[edges[1]]))

@@ -19,12 +19,13 @@ from numba import njit, prange
 
 from ..basis.rigid_modes import rigid_modes, velocity_components
 from ..basis.two_level import v_cycle
-from .krylov import cg_steps, largest_eigenvalue
+from .krylov import cg_steps, dot, largest_eigenvalue, norm
 from .symmetric_rows import SymmetricRows
 
 __all__ = ["AMG_COARSE_SOLVER", "AMG_MAX_COARSE", "AMG_SEED", "AMG_SMOOTHER", "AMG_STRENGTH",
-           "CHEBYSHEV_INTERVAL", "COARSE_KEPT", "FINE_VALUES", "ViscousAMG", "rigid_modes",
-           "scaled_block", "unit_scale", "v_cycle", "velocity_components", "viscous_amg"]
+           "CHEBYSHEV_INTERVAL", "COARSE_KEPT", "FINE_VALUES", "K_CYCLE_3D", "K_CYCLE_TOL",
+           "ViscousAMG", "k_cycle", "rigid_modes", "scaled_block", "unit_scale", "v_cycle",
+           "velocity_components", "viscous_amg"]
 
 # coarsest AMG level size (pyamg's max_coarse): solved directly there
 AMG_MAX_COARSE = 500
@@ -78,6 +79,18 @@ AMG_SMOOTH_3D = None
 # from zero took 36 FGMRES iterations against 34, a warm-started one 22 both. A step of the
 # plate builds one hierarchy (its tetrahedra are new) and refreshes it for the others
 AMG_IMPROVE_3D = None
+# The flexible solver's cycles of the 3D block are K-cycles (k_cycle; Notay & Vassilevski
+# 2008): each coarse correction is two flexible CG steps on the coarse level, preconditioned
+# by that level's own cycle. Plain aggregation coarsens the 3D block some 15 times a level,
+# and with V-cycles FGMRES took 25, 28, 34 and 39 iterations from 1,484 to 109,916 nodes
+# (viscosity ratio 1): the coarse levels' own error grew with their number. With K-cycles
+# 25, 28, 31 and 31 (the sinker: 95 against 100 at 34,553 nodes), and the solve at 109,916
+# nodes took 47 s against 69 s (docs/stokes_3d.md). The fixed preconditioners (MINRES,
+# "schur-amg") keep the V-cycle: a K-cycle is not a linear map
+K_CYCLE_3D = True
+# a K-cycle's coarse correction stops after its first CG step where that step has reduced
+# the coarse residual below this fraction (Notay's threshold)
+K_CYCLE_TOL = 0.25
 
 
 @contextmanager
@@ -102,6 +115,7 @@ def viscous_amg(problem):
         return ViscousTwoLevel(problem.A, problem.ubasis, problem.free)
     three_d = problem.ubasis.mesh.dim() == 3
     return ViscousAMG(problem.A, rigid_modes(problem.ubasis, problem.free),
+                      k_cycles=three_d and K_CYCLE_3D,
                       **({"smooth": AMG_SMOOTH_3D, "improve_candidates": AMG_IMPROVE_3D}
                          if three_d else {}))
 
@@ -124,11 +138,14 @@ class ViscousAMG:
     same triangle.
     """
 
-    def __init__(self, A: sp.spmatrix, modes: np.ndarray, **options):
-        """``options``: more keywords of pyamg's ``smoothed_aggregation_solver`` (for the 3D
-        block the prolongator smoothing ``smooth``, :data:`AMG_SMOOTH_3D`, and
-        ``improve_candidates``, :data:`AMG_IMPROVE_3D`)."""
+    def __init__(self, A: sp.spmatrix, modes: np.ndarray, k_cycles: bool = False, **options):
+        """``k_cycles``: :meth:`cg` cycles with :func:`k_cycle` below the finest level
+        (:data:`K_CYCLE_3D`), else V-cycles. ``options``: more keywords of pyamg's
+        ``smoothed_aggregation_solver`` (for the 3D block the prolongator smoothing
+        ``smooth``, :data:`AMG_SMOOTH_3D`, and ``improve_candidates``,
+        :data:`AMG_IMPROVE_3D`)."""
         import pyamg
+        self.k_cycles = bool(k_cycles)
         self.scale = unit_scale(A)
         scaled = scaled_block(sp.csr_matrix(A), self.scale)
         with seeded_global_random():
@@ -226,16 +243,18 @@ class ViscousAMG:
         return h if x is None else x + h
 
     def scaled_cycle(self, b: np.ndarray, single: bool = False) -> np.ndarray:
-        """One V-cycle from zero for the scaled block; ``single``: with the finest level's
-        products in single precision (:data:`FINE_VALUES`), for a flexible outer method.
-        In double precision the cycle is a fixed symmetric map to round-off, as MINRES and
-        conjugate gradients need; in single precision it is symmetric to about 1e-7."""
+        """One cycle from zero for the scaled block; ``single``: for a flexible outer
+        method, with the finest level's products in single precision
+        (:data:`FINE_VALUES`) and, with ``k_cycles``, a K-cycle below it. In double
+        precision the cycle is a fixed symmetric map to round-off, as MINRES and conjugate
+        gradients need; in single precision it is symmetric to about 1e-7."""
         levels = self.ml.levels
         if len(levels) == 1:
             return self.ml.coarse_solver(levels[0].A, b)
         F = self.fine if single else self.exact
+        below = k_cycle if single and self.k_cycles else v_cycle
         x = self._smooth(F, None, b)
-        x += levels[0].P @ v_cycle(self.ml, levels[0].R @ (b - F @ x), level=1)
+        x += levels[0].P @ below(self.ml, levels[0].R @ (b - F @ x), level=1)
         return self._smooth(F, x, b)
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
@@ -261,6 +280,43 @@ class ViscousAMG:
         """One V-cycle as a linear operator approximating ``A^-1``."""
         n = self.scale.size
         return spla.LinearOperator((n, n), matvec=self.cycle, dtype=float)
+
+
+def k_cycle(ml, b: np.ndarray, level: int = 0) -> np.ndarray:
+    """A K-cycle of pyamg's multilevel solver ``ml`` for ``A x = b`` on ``level`` (Notay &
+    Vassilevski 2008): two flexible CG steps on the level, each preconditioned by its
+    cycle, whose coarse correction is again such a pair on the next level; the coarsest
+    level is solved. The second step is skipped where the first has reduced the residual
+    below :data:`K_CYCLE_TOL` of its own. Not a linear map of ``b``: for flexible outer
+    methods only. Each level's cost is at most doubled against a V-cycle, and with a
+    coarsening of some 15 times a level the finest level's products still dominate."""
+    levels, last = ml.levels, len(ml.levels) - 1
+
+    def cycle(k, rhs):
+        lv = levels[k]
+        x = np.zeros_like(rhs)
+        lv.presmoother(lv.A, x, rhs)
+        x += lv.P @ pair(k + 1, lv.R @ (rhs - lv.A @ x))
+        lv.postsmoother(lv.A, x, rhs)
+        return x
+
+    def pair(k, r):
+        if k == last:
+            return ml.coarse_solver(levels[k].A, r)
+        A = levels[k].A
+        c1 = cycle(k, r)
+        v1 = A @ c1
+        rho1, a1 = dot(c1, v1), dot(c1, r)
+        r2 = r - (a1 / rho1) * v1
+        if norm(r2) <= K_CYCLE_TOL * norm(r):
+            return (a1 / rho1) * c1
+        c2 = cycle(k, r2)
+        v2 = A @ c2
+        g, a2 = dot(c2, v1), dot(c2, r2)
+        rho2 = dot(c2, v2) - g * g / rho1
+        return (a1 / rho1 - g * a2 / (rho1 * rho2)) * c1 + (a2 / rho2) * c2
+
+    return pair(level, b)
 
 
 def unit_scale(A: sp.spmatrix) -> np.ndarray:

@@ -33,7 +33,7 @@ from numba import njit
 from .rigid_modes import rigid_modes
 
 __all__ = ["nested_prolongation", "star_dofs", "star_smoother", "TwoLevelPreconditioner",
-           "TwoLevelSpace", "natural_neighbour_solver", "v_cycle", "CHEBYSHEV_DEGREE",
+           "TwoLevelSpace", "level_step", "natural_neighbour_solver", "v_cycle", "CHEBYSHEV_DEGREE",
            "SOLVER_TOL"]
 
 # degree of the Chebyshev smoother on the quadratic matrix, preconditioned by the node stars
@@ -273,19 +273,27 @@ def v_cycle(ml, b: np.ndarray, level: int = 0) -> np.ndarray:
     not needed inside a Krylov method: 54 against 22 ms on the coarse level of SolCx at
     33,242 velocity unknowns); ``level``: the cycle from that level down, ``A`` its
     matrix (a caller that treats the finer levels itself)."""
-    levels = ml.levels
+    last = len(ml.levels) - 1
 
     def cycle(k, rhs):
-        lv = levels[k]
-        if k == len(levels) - 1:
-            return ml.coarse_solver(lv.A, rhs)
-        x = np.zeros_like(rhs)
-        lv.presmoother(lv.A, x, rhs)
-        x += lv.P @ cycle(k + 1, lv.R @ (rhs - lv.A @ x))
-        lv.postsmoother(lv.A, x, rhs)
-        return x
+        if k == last:
+            return ml.coarse_solver(ml.levels[k].A, rhs)
+        return level_step(ml, k, rhs, cycle)
 
     return cycle(level, b)
+
+
+def level_step(ml, k: int, b: np.ndarray, correction) -> np.ndarray:
+    """Level ``k`` of a cycle of ``ml`` from zero for ``A_k x = b`` (not the coarsest):
+    pre-smoothing, the coarse correction ``correction(k + 1, r)`` of the restricted
+    residual, post-smoothing. A V-cycle's correction is the next level's cycle; a K-cycle's
+    (:func:`skfem_nem.models.stokes_amg.k_cycle`) two CG steps preconditioned by it."""
+    lv = ml.levels[k]
+    x = np.zeros_like(b)
+    lv.presmoother(lv.A, x, b)
+    x += lv.P @ correction(k + 1, lv.R @ (b - lv.A @ x))
+    lv.postsmoother(lv.A, x, b)
+    return x
 
 
 class TwoLevelSpace:

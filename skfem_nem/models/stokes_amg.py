@@ -18,7 +18,7 @@ import scipy.sparse.linalg as spla
 from numba import njit, prange
 
 from ..basis.rigid_modes import rigid_modes, velocity_components
-from ..basis.two_level import v_cycle
+from ..basis.two_level import level_step, v_cycle
 from .krylov import cg_steps, dot, largest_eigenvalue, norm
 from .symmetric_rows import SymmetricRows
 
@@ -293,12 +293,7 @@ def k_cycle(ml, b: np.ndarray, level: int = 0) -> np.ndarray:
     levels, last = ml.levels, len(ml.levels) - 1
 
     def cycle(k, rhs):
-        lv = levels[k]
-        x = np.zeros_like(rhs)
-        lv.presmoother(lv.A, x, rhs)
-        x += lv.P @ pair(k + 1, lv.R @ (rhs - lv.A @ x))
-        lv.postsmoother(lv.A, x, rhs)
-        return x
+        return level_step(ml, k, rhs, pair)
 
     def pair(k, r):
         if k == last:

@@ -269,3 +269,20 @@ def test_free_columns_is_scipys_fancy_indexing(seed, rows):
     got = free_columns(A, free, rows=rows)
     assert got.shape == ref.shape and np.array_equal(got.toarray(), ref)
     assert got.has_sorted_indices
+    # written over A's own arrays: the same matrix; no new index or value array where
+    # at least half the entries stay (scipy copies a view of less than half its base)
+    data, indices, nnz = A.data, A.indices, A.nnz
+    over = free_columns(A, free, rows=rows, overwrite=True)
+    assert over.shape == ref.shape and np.array_equal(over.toarray(), ref)
+    if 2 * over.nnz >= nnz > 0:
+        assert np.shares_memory(over.data, data) and np.shares_memory(over.indices, indices)
+
+
+def test_free_columns_over_its_input_needs_csr():
+    import scipy.sparse as sp
+    from skfem_nem.models.stokes_walls import free_columns
+    A = sp.random(6, 6, density=0.5, random_state=1, format="coo")
+    with pytest.raises(ValueError, match="overwrite=True.*CSR.*coo_matrix"):
+        free_columns(A, np.arange(3), rows=True, overwrite=True)
+    assert np.array_equal(free_columns(A, np.arange(3), rows=True).toarray(),
+                          A.toarray()[:3, :3])

@@ -278,9 +278,9 @@ def test_cache_rebuilds_when_iterations_grow(square, monkeypatch):
     solve_stokes(sp_, ex.viscosity, ex.force, solver="fgmres", cache=cache)
     old, build, held = weakref.ref(cache.hierarchy), stokes_cache.viscous_amg, []
 
-    def watched(problem):
+    def watched(problem, *args):
         held.append(cache.hierarchy is None and old() is None)
-        return build(problem)
+        return build(problem, *args)
 
     monkeypatch.setattr(stokes_cache, "viscous_amg", watched)
     cache.solution = None                     # no warm start, as for a new problem

@@ -92,6 +92,36 @@ def test_the_finest_level_is_the_scaled_block():
     assert err[0] > err[1] > err[2] and err[2] < 1e-6, err
 
 
+def test_a_hierarchy_made_over_the_blocks_values_is_the_same():
+    """``overwrite``: the hierarchy made and refreshed over the block's own values cycles
+    as the one made from a copy, and the block then holds the scaled block (no second
+    copy); a block it cannot write over is named."""
+    n = 30
+    L = sps.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    eta = sps.diags(np.sqrt(np.linspace(1, 100, 2 * n * n)))
+    A = sps.csr_matrix(eta @ sps.kron(sps.identity(2), sps.kronsum(L, L)) @ eta)
+    modes = np.kron(np.eye(2), np.ones((n * n, 1)))
+    b = np.random.default_rng(5).standard_normal(A.shape[0])
+    copy = A.copy()
+    kept, over = ViscousAMG(A, modes), ViscousAMG(copy, modes, overwrite=True)
+    assert np.allclose(copy.toarray(), scaled_block(A, unit_scale(A)).toarray(), rtol=1e-15)
+    assert np.array_equal(kept.cg(b, 3), over.cg(b, 3))
+    assert np.array_equal(kept.matvec(b), over.matvec(b))
+    A2 = sps.csr_matrix(2.0 * A + sps.identity(A.shape[0]))
+    copy2 = A2.copy()
+    kept.refresh(A2)
+    over.refresh(copy2, overwrite=True)
+    assert np.allclose(copy2.toarray(), scaled_block(A2, unit_scale(A2)).toarray(),
+                       rtol=1e-15)
+    assert np.array_equal(kept.cg(b, 3), over.cg(b, 3))
+    with pytest.raises(ValueError, match="overwrite=True needs a CSR matrix of float64.*csc"):
+        ViscousAMG(A.tocsc(), modes, overwrite=True)
+    with pytest.raises(ValueError, match="overwrite=True needs a CSR matrix of float64.*"
+                                         "float32"):
+        over.refresh(A2.astype(np.float32), overwrite=True)
+    assert np.array_equal(kept.cg(b, 3), over.cg(b, 3))      # (left as it was)
+
+
 def test_the_pattern_is_read_from_the_triangle_not_kept_from_the_matrix():
     """``same_pattern`` holds no reference to the matrix's index arrays (a 3D viscous
     block's are 55 MB) and still tells a moved upper entry or a missing diagonal from new

@@ -28,7 +28,7 @@ import json
 import time as _time
 from dataclasses import asdict
 from pathlib import Path
-from typing import Optional
+from typing import NamedTuple, Optional
 
 import numpy as np
 
@@ -94,6 +94,20 @@ def initial_nodes(c: Plate3DConfig) -> np.ndarray:
     return p[morton_order(p)]
 
 
+class LastSolve(NamedTuple):
+    """What a step keeps of its Stokes solve: the velocity dofs ``u`` (the next step's
+    start) and the velocity (n, 3) and pressure (n,) at the nodes it was solved on. The
+    solution itself holds the spaces, a gigabyte at 30,000 nodes."""
+
+    u: np.ndarray
+    velocity: np.ndarray
+    pressure: np.ndarray
+
+    @classmethod
+    def of(cls, solution) -> "LastSolve":
+        return cls(solution.u, solution.velocity_at_nodes(), solution.pressure_at_nodes())
+
+
 class _TooLong(Exception):
     """A step's own velocity asks for a shorter dt (:data:`STABLE_SLACK`)."""
 
@@ -112,7 +126,7 @@ class SinkingPlate3D:
         self.cfg = cfg
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
-        self._last = None         # (solution, VEP step) of the last step
+        self._last = None         # LastSolve of the last step
         self._spaces_of = None    # (mesh, its Stokes spaces)
         self._cache = StokesCache() if cfg.solver in CACHED_SOLVERS else None
         if _state is not None:
@@ -147,9 +161,9 @@ class SinkingPlate3D:
         ``spaces`` (:func:`~skfem_nem.apps.plate3d_materials.plate_materials`)."""
         return plate_materials(self.cfg, spaces, self.lm.node_fields)
 
-    def solution(self):
-        """The Stokes solution of the last step (None before the first step)."""
-        return None if self._last is None else self._last[0]
+    def solution(self) -> Optional["LastSolve"]:
+        """What the last step kept of its Stokes solve (None before the first step)."""
+        return self._last
 
     def _stable_dt(self, v: np.ndarray) -> float:
         """cfl times each node's mean edge length over its speed, at most max_dt."""
@@ -171,11 +185,6 @@ class SinkingPlate3D:
         iterations fail, down to ``min_dt`` (then :class:`StepStalled`); never accepted
         unconverged. The stress history is left as it was by a failed try. Returns the
         diagnostics row (``retries``: the tries before the one accepted)."""
-        # the last step's bases, blocks and hierarchy sit in reference cycles that Python's
-        # collector, counting objects rather than bytes, frees late: at 4,000 nodes the
-        # process grew from 0.8 to 2.0 GB over 12 steps (peak 2.17 GB); with a collection
-        # before each step it stays near 1.3 GB (peak 1.49 GB)
-        gc.collect()
         saved = dict(self.lm.ip_fields)
         for retry in range(RETRIES + 1):
             try:
@@ -203,8 +212,21 @@ class SinkingPlate3D:
         """The Stokes spaces of the current tetrahedra (built once per mesh: a step solved
         again at a shorter dt reuses them)."""
         if self._spaces_of is None or self._spaces_of[0] is not self.lm.mesh:
+            self._release()
             self._spaces_of = (self.lm.mesh, stokes_spaces(self.lm.mesh))
         return self._spaces_of[1]
+
+    def _release(self) -> None:
+        """Let go of the last spaces, their blocks and hierarchy before new ones are
+        built. They sit in reference cycles that Python's collector, counting objects
+        rather than bytes, frees late: at 4,000 nodes the process grew from 0.8 to 2.0 GB
+        over 12 steps without a collection here. The step keeps only :class:`LastSolve`,
+        and the cache its solution: at 30,300 nodes 1.6 GB of the last step were still
+        held while the next built its spaces."""
+        self._spaces_of = None
+        if self._cache is not None:
+            self._cache.release_operators()
+        gc.collect()
 
     def _step(self, dt: float) -> dict:
         """One try at ``dt``: the visco-elasto-plastic solve, the new stress history set
@@ -229,7 +251,7 @@ class SinkingPlate3D:
             return (P.probes(x.T) @ u).reshape(3, -1).T
 
         report = lm.advance(velocity, dt, tol=1e-8, inject=self._split())
-        self._last = (r.solution, r, s)
+        self._last = LastSolve.of(r.solution)
         self.dt_next = stable
         return self._row(report, r, v, s, stable, seconds=(t_basis, t_solve, t0))
 
@@ -245,9 +267,7 @@ class SinkingPlate3D:
             u1, eta1 = first
             lm.ip_fields = dict(lm.ip_fields, log_eta_eff=from_quadrature(np.log(eta1)))
             half = lm.advance(lambda x: v, 0.5 * dt, tol=1e-8)
-            self._spaces_of = None  # the first spaces sit in reference cycles: collected
-            gc.collect()            # here, a step holds one set (1 GB less at 10,000 nodes)
-            spaces = self._spaces()
+            spaces = self._spaces()     # (the first spaces go first: 1 GB at 10,000 nodes)
             guesses = {"u_guess": u1,
                        "eta_guess": np.exp(to_quadrature(lm.ip_fields["log_eta_eff"]))}
             r2, s2, v2, stable2 = self._solve(spaces, dt, guesses, None, self.cfg.picard_tol)
@@ -261,7 +281,7 @@ class SinkingPlate3D:
         lm.step -= 1              # two moves, one step, one report
         report.update(step=lm.step, dt=dt, **{k: report[k] + half[k] for k in MOVE_SUMS})
         lm.history[-2:] = [report]
-        self._last = (r2.solution, r2, s2)
+        self._last = LastSolve.of(r2.solution)
         self.dt_next = min(stable, stable2)
         return self._row(report, r2, v2, s2, min(stable, stable2),
                          seconds=(t_basis, t_solve, t0))
@@ -369,7 +389,7 @@ class SinkingPlate3D:
     def _solved_at_nodes(self, sol):
         """Velocity (n, 3) and pressure (n,) of the last solve at the nodes; at nodes added
         after it, their Sibson interpolants from the others."""
-        v, p = sol.velocity_at_nodes(), sol.pressure_at_nodes()
+        v, p = sol.velocity, sol.pressure
         x = self.lm.nodes
         if x.shape[0] > v.shape[0]:
             Phi = sibson_coordinates(x[:v.shape[0]], x[v.shape[0]:])

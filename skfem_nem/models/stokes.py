@@ -438,7 +438,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     D, uD = fixed_velocity(spaces, free_slip, no_slip, prescribed)
     if pressure_mean is None:
         pressure_mean = walls_fix_pressure(spaces, D)
-    red, sys_ = _reduce(spaces, sys_, D, uD, pressure_mean, constraints, share)
+    red, sys_ = _reduce(spaces, sys_, D, uD, pressure_mean, constraints, share, system is None)
     t1 = time.perf_counter()
     info = {"fixed_velocity_dofs": int(D.size), "fixed": D, "pressure_mean": pressure_mean,
             "assembled_triangles": assembled, "assembly_seconds": t1 - t0}
@@ -522,11 +522,14 @@ def _with_constraints(sys_: StokesSystem, A: sp.csr_matrix, constraints, nu: int
 
 
 def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndarray,
-            pressure_mean: bool, constraints, share: Optional[_Share] = None):
+            pressure_mean: bool, constraints, share: Optional[_Share] = None,
+            own: bool = False):
     """The saddle-point problem on the free velocity dofs (fixed values moved
     to the right side), and ``sys_`` without its whole viscous block: the solve reads the
     block on the free dofs, the reactions its fixed rows, and the caller lets the whole
-    block go (a 3D block holds some 460 entries a row)."""
+    block go (a 3D block holds some 460 entries a row). ``own``: ``sys_`` was assembled
+    for this solve alone, and its block is reduced over its own arrays
+    (:func:`~skfem_nem.models.stokes_walls.free_columns` with ``overwrite``)."""
     nu = spaces.n_velocity
     fixed_dof = np.zeros(nu, dtype=bool)
     fixed_dof[D] = True
@@ -541,12 +544,14 @@ def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndar
     c = float(mass) / area ** 2 if pressure_mean else 0.0
     fixed = np.zeros(nu)
     fixed[D] = uD[D]
+    f = (sys_.f - Afull @ fixed)[free] if fixed.any() else sys_.f[free]
+    A_fixed = Afull[D]      # (before an own block is written over)
     problem = SaddlePointProblem(
-        A=free_columns(Afull, free, rows=True), B=free_columns(Bfull, free), S=Sb,
-        f=(sys_.f - Afull @ fixed)[free], g=g0 - Bfull @ fixed, m=mvec,
+        A=free_columns(Afull, free, rows=True, overwrite=own and Afull is sys_.A),
+        B=free_columns(Bfull, free), S=Sb, f=f, g=g0 - Bfull @ fixed, m=mvec,
         dp=dp, mean_weight=c, pressure_mean=pressure_mean, ubasis=spaces.ubasis, free=free,
-        total=None if share is None else share.total)
-    return (_Reduced(problem, Afull[D], Bfull, D, uD, spaces.n_pressure, share),
+        total=None if share is None else share.total, owned=own)
+    return (_Reduced(problem, A_fixed, Bfull, D, uD, spaces.n_pressure, share),
             replace(sys_, A=None))
 
 

@@ -13,7 +13,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .stokes_amg import viscous_amg
+from .stokes_amg import ViscousAMG, viscous_amg
 
 __all__ = ["StokesCache", "pattern_of", "same_pattern", "REBUILD_GROWTH", "REBUILD_SLACK"]
 
@@ -56,22 +56,37 @@ class StokesCache:
     factorisations: int = 0
     factor_reuses: int = 0
 
-    def amg(self, problem):
-        """The hierarchy for ``problem.A``: the kept one (refreshed) or a new one."""
+    def amg(self, problem, overwrite: bool = False):
+        """The hierarchy for ``problem.A``: the kept one (refreshed) or a new one;
+        ``overwrite``: made over the values of ``problem.A`` where the hierarchy scales it
+        (:class:`~skfem_nem.models.stokes_amg.ViscousAMG`), which then holds the scaled
+        block."""
         A = problem.A
         stale = (self.base_iterations is not None and self.last_iterations is not None
                  and self.last_iterations > REBUILD_GROWTH * self.base_iterations
                  + REBUILD_SLACK)
         # (the hierarchy knows its block's pattern: no copy of the indices is kept here)
         if self.hierarchy is not None and not stale and self.hierarchy.same_pattern(A):
-            self.hierarchy.refresh(A)
+            if isinstance(self.hierarchy, ViscousAMG):
+                self.hierarchy.refresh(A, overwrite=overwrite)
+            else:
+                self.hierarchy.refresh(A)
             self.reuses += 1
             return self.hierarchy, False
         self.hierarchy = None       # (freed before the new one is built)
-        self.hierarchy = viscous_amg(problem)
+        self.hierarchy = viscous_amg(problem, overwrite)
         self.base_iterations = None
         self.builds += 1
         return self.hierarchy, True
+
+    def release_operators(self) -> None:
+        """Let go of the hierarchy and the factorisation, keeping the last solution as a
+        start: for a time loop whose next block belongs to new spaces (moved nodes, a new
+        pattern), which would rebuild them anyway. Without it they stay alive while the
+        new spaces and blocks are built: 0.43 GB of a 3D plate step's peak at 30,000
+        nodes."""
+        self.hierarchy = None
+        self.factor = self.factor_pattern = None
 
     def kept_factor(self, A: sp.spmatrix):
         """The kept factorisation (``"schur"``) if it was made for a viscous block of

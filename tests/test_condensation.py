@@ -97,11 +97,38 @@ def test_condensed_tet_divergence_is_the_sparse_product():
     for _ in range(2):
         cv = condensed_viscous_tet(spaces.ubasis, spaces.bbasis,
                                    np.exp(rng.standard_normal((ne, nq))))
-        ref = (Bn - cache["Bb"] @ cv.AiAbn).tocsr()
+        ref = (Bn - cache["Bb"] @ cv.AiAbn.tocsr()).tocsr()
         got = td.condensed(cv)
         assert got.has_sorted_indices
         assert abs(got - ref).max() <= 1e-14 * abs(ref).max()
-    other = cv.AiAbn.copy()
-    other.indices = other.indices[::-1].copy()
+    M = cv.AiAbn
+    other = type(M)(M.ptr, M.sten[::-1].copy(), M.G, M.g, M.Q, M.shape[1])
     with pytest.raises(ValueError, match="another pattern"):
         td.condensed(type(cv)(cv.A, cv.Ainv, other, None))
+
+
+def test_the_tetrahedra_bubbles_coupling_is_an_operator_of_its_entries():
+    """``A_bb^-1 A_bn`` on tetrahedra is never stored (``TetCoupling``): its products and
+    its transpose's are those of its entries (``tocsr``), on all threads and on one; a
+    vector of the wrong length is named."""
+    from skfem_nem.geometry.nodesets3d import box_nodes_3d
+    from skfem_nem.models.condensation_tet import condensed_viscous_tet
+    from skfem_nem.models.coupling_tet import TetCoupling
+    spaces = stokes_spaces(delaunay_mesh(box_nodes_3d(300, seed=2)))
+    ne, nq = spaces.ubasis.dx.shape
+    rng = np.random.default_rng(1)
+    M = condensed_viscous_tet(spaces.ubasis, spaces.bbasis,
+                              np.exp(rng.standard_normal((ne, nq)))).AiAbn
+    assert isinstance(M, TetCoupling) and M.shape == (3 * ne, spaces.ubasis.N)
+    C = M.tocsr()
+    assert C.nnz == 9 * M.ptr[-1]
+    u, y = rng.standard_normal(M.shape[1]), rng.standard_normal(M.shape[0])
+    ref, ref_t = C @ u, C.T @ y
+    serial = TetCoupling(M.ptr, M.sten, M.G, M.g, M.Q, M.shape[1], parallel=False)
+    for op in (M, serial):
+        assert np.abs(op @ u - ref).max() <= 1e-13 * np.abs(ref).max()
+        assert np.abs(op.T @ y - ref_t).max() <= 1e-13 * np.abs(ref_t).max()
+    with pytest.raises(ValueError, match=rf"TetCoupling @ u needs u of shape \({M.shape[1]},"):
+        M @ u[:-1]
+    with pytest.raises(ValueError, match=rf"TetCoupling.T @ y needs y of shape \({M.shape[0]},"):
+        M.T @ u

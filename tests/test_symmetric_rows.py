@@ -114,6 +114,15 @@ def test_a_hierarchy_made_over_the_blocks_values_is_the_same():
     assert np.allclose(copy2.toarray(), scaled_block(A2, unit_scale(A2)).toarray(),
                        rtol=1e-15)
     assert np.array_equal(kept.cg(b, 3), over.cg(b, 3))
+    # between solves the finest values go; a refresh brings them back, the same
+    over.release_values()
+    for call in (lambda: over.cg(b, 3), lambda: over.matvec(b), lambda: over.fine @ b):
+        with pytest.raises(RuntimeError, match="values were let go"):
+            call()
+    copy3 = A2.copy()
+    over.refresh(copy3, overwrite=True)
+    kept.refresh(A2)
+    assert np.array_equal(kept.cg(b, 3), over.cg(b, 3))
     with pytest.raises(ValueError, match="overwrite=True needs a CSR matrix of float64.*csc"):
         ViscousAMG(A.tocsc(), modes, overwrite=True)
     with pytest.raises(ValueError, match="overwrite=True needs a CSR matrix of float64.*"

@@ -212,9 +212,11 @@ _divergence_rows_serial = serial_twin(_divergence_rows)
 class CondensedViscous:
     """The viscous block with the bubbles condensed out, and what the rest of the
     condensation needs: ``A`` (nu, nu) CSR, exactly symmetric; ``Ainv`` (nb, nb) the
-    block-diagonal inverse of the bubbles' block; ``AiAbn`` (nb, nu) ``A_bb^-1 A_bn``."""
+    block-diagonal inverse of the bubbles' block; ``AiAbn`` (nb, nu) ``A_bb^-1 A_bn``, a
+    CSR matrix on triangles, on tetrahedra an operator that is not stored
+    (:class:`~skfem_nem.models.coupling_tet.TetCoupling`: ``@``, ``.T @``)."""
 
-    def __init__(self, A: sp.csr_matrix, Ainv: sp.csr_matrix, AiAbn: sp.csr_matrix,
+    def __init__(self, A: sp.csr_matrix, Ainv: sp.csr_matrix, AiAbn,
                  local: tuple):
         self.A, self.Ainv, self.AiAbn = A, Ainv, AiAbn
         # (offsets, values) of A_bb^-1 A_bn triangle by triangle, for the divergence

@@ -20,10 +20,12 @@ stencils' pattern (:func:`_condensed_rows_tet`), as the 2D kernels of
 :mod:`skfem_nem.models.condensation` do for triangles; no element matrix is stored, and
 the block comes out exactly symmetric (each entry sums the same products in the same
 order as its transpose). The 2D kernels stay as they are: ``--dim 2`` is bitwise
-unchanged. The divergence block's natural-neighbour part is coefficient-free and
-assembled once; its condensation ``B_b (A_bb^-1 A_bn)`` is added row by row
-(:class:`TetDivergence`: 0.04 s at 9,956 nodes against 0.34 s as a sparse product and a
-difference).
+unchanged. ``A_bb^-1 A_bn`` is not stored either: it is a formula in ``G``, ``g`` and the
+block's inverse (:class:`~skfem_nem.models.coupling_tet.TetCoupling`), where as a sparse
+matrix it took 1.5 GB at 100,000 nodes and its making as much again. The divergence
+block's natural-neighbour part is coefficient-free and assembled once; its condensation
+``B_b (A_bb^-1 A_bn)`` is added row by row (:class:`TetDivergence`: 0.04 s at 9,956 nodes
+against 0.34 s as a sparse product and a difference).
 """
 from __future__ import annotations
 
@@ -38,6 +40,7 @@ from ..basis.summation import (basis_row_order, blocks, incidence, node_pattern,
 from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
 from .condensation import CondensedViscous
+from .coupling_tet import TetCoupling, add_weighted_rows
 
 __all__ = ["TetDivergence", "condensed_viscous_tet", "divergence_tet", "loads_tet"]
 
@@ -47,17 +50,15 @@ _ROWS = 256
 
 
 @njit(cache=True, parallel=True)
-def _tet_blocks(ptr, G, nq, w, gb, Wsum, gsum, X, Ainv, det):
-    """Per tetrahedron e, from its stencil functions' (constant) gradients
-    ``G[3 ptr[e]:3 ptr[e + 1]]`` (3 per function): the summed weight ``Wsum[e]``, the
-    bubble's weighted gradient ``gsum[e] = sum_q eta_q dx_q grad b(x_q)``, the
-    bubbles' coupling ``A_bn`` (3 x 3 S, row-major) into ``X[9 ptr[e]:9 ptr[e + 1]]``, the
-    inverse of their 3 x 3 block into ``Ainv[e]`` and its determinant into ``det[e]``
-    (not positive: the coupling is zero and ``Ainv[e]`` is left as it was)."""
+def _tet_blocks(ptr, nq, w, gb, Wsum, gsum, Ainv, det):
+    """Per tetrahedron e: the summed weight ``Wsum[e]``, the bubble's weighted gradient
+    ``gsum[e] = sum_q eta_q dx_q grad b(x_q)``, the inverse of the bubbles' 3 x 3 block
+    into ``Ainv[e]`` and its determinant into ``det[e]`` (not positive: ``Ainv[e]`` is
+    left as it was, zero, and the bubble drops out). The bubbles' coupling ``A_bn`` is
+    not made: :class:`~skfem_nem.models.coupling_tet.TetCoupling` computes with it from
+    these and the stencil gradients."""
     ne = ptr.shape[0] - 1
     for e in prange(ne):
-        s0 = ptr[e]
-        S = ptr[e + 1] - s0
         W = 0.0
         g = np.zeros(3)
         M = np.zeros((3, 3))
@@ -76,11 +77,7 @@ def _tet_blocks(ptr, G, nq, w, gb, Wsum, gsum, X, Ainv, det):
              - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
              + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
         det[e] = d
-        o = 9 * s0
-        if not d > 0.0:
-            # a flat tetrahedron (zero weights): its bubble drops out, no coupling
-            for t in range(9 * S):
-                X[o + t] = 0.0
+        if not d > 0.0:     # a flat tetrahedron (zero weights): its bubble drops out
             continue
         for a in range(3):
             for b in range(3):     # the cofactor inverse of the symmetric block
@@ -90,12 +87,6 @@ def _tet_blocks(ptr, G, nq, w, gb, Wsum, gsum, X, Ainv, det):
             for b in range(a + 1, 3):
                 m = 0.5 * (Ainv[e, a, b] + Ainv[e, b, a])
                 Ainv[e, a, b] = Ainv[e, b, a] = m
-        for i in range(S):
-            Gi = G[3 * (s0 + i):3 * (s0 + i) + 3]
-            dot = Gi[0] * g[0] + Gi[1] * g[1] + Gi[2] * g[2]
-            for c in range(3):
-                for dd in range(3):
-                    X[o + c * 3 * S + 3 * i + dd] = (dot if c == dd else 0.0) + Gi[c] * g[dd]
 
 
 @njit(cache=True, parallel=True)
@@ -197,8 +188,6 @@ def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
     _nodal(ubasis)
     ptr = ubasis.stencil_ptr
     ne, nq = ubasis.dx.shape
-    n_st = int(ptr[-1])
-    X = np.empty(9 * n_st)
     Wsum, gsum, det = np.empty(ne), np.empty((ne, 3)), np.empty(ne)
     Ainv = np.zeros((ne, 3, 3))
     w = np.ascontiguousarray(eta * ubasis.dx)
@@ -207,7 +196,7 @@ def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
     # iterations of a step share them)
     G = np.ascontiguousarray(stencil_gradients(ubasis, parallel)).reshape(-1)
     (_tet_blocks if parallel else _tet_blocks_serial)(
-        ptr, G, nq, w, _bubble_gradient(bbasis), Wsum, gsum, X, Ainv, det)
+        ptr, nq, w, _bubble_gradient(bbasis), Wsum, gsum, Ainv, det)
     # flat tetrahedra (Qhull's, of co-spherical or co-planar nodes) carry no weight and
     # no bubble; any other singular block is an error
     bad = ~(det > 0) & (Wsum > 0)
@@ -215,7 +204,8 @@ def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
         raise ValueError(f"degenerate tetrahedron {int(np.flatnonzero(bad)[0])}: its bubble "
                          f"block is singular ({int(bad.sum())} tetrahedra)")
     A = _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel)
-    return CondensedViscous(A, *_bubble_matrices(ubasis, bbasis, X, Ainv), None)
+    coupling = TetCoupling(ptr, ubasis.stencil_nodes, G, gsum, Ainv, ubasis.N, parallel)
+    return CondensedViscous(A, _bubble_inverse(bbasis, Ainv), coupling, None)
 
 
 def _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel) -> sp.csr_matrix:
@@ -235,41 +225,16 @@ def _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel) -> sp.csr_matrix:
     return sp.csr_matrix((data, indices, indptr), shape=(ubasis.N, ubasis.N))
 
 
-def _bubble_matrices(ubasis, bbasis, X, Ainv) -> tuple:
-    """``(A_bb^-1, A_bb^-1 A_bn)`` as sparse matrices on the bubble dofs; the second is
-    written in place by :func:`_inverse_times_coupling`, without ``A_bn`` or a product
-    (their index arrays took nine times the entries' memory, the peak of the assembly)."""
-    ptr, sten = ubasis.stencil_ptr, ubasis.stencil_nodes
-    ne = ptr.size - 1
+def _bubble_inverse(bbasis, Ainv) -> sp.csr_matrix:
+    """``A_bb^-1`` as a sparse matrix on the bubble dofs (three per tetrahedron)."""
+    ne = Ainv.shape[0]
     bd = np.asarray(bbasis.element_dofs)                     # (3, ne)
-    Ainv_m = sp.csr_matrix((Ainv.ravel(), (np.repeat(bd.T, 3, axis=1).ravel(),
-                                           np.tile(bd.T, (1, 3)).ravel())),
-                           shape=(bbasis.N, bbasis.N))
-    nnz = 9 * int(ptr[-1])
-    idt = index_dtype(ubasis.N, nnz)
-    indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
-    _inverse_times_coupling(ptr, sten, X, Ainv, indices, data)
-    indptr = np.zeros(3 * ne + 1, dtype=idt)
-    indptr[1:] = np.cumsum(np.repeat(3 * np.diff(ptr), 3))
     if bbasis.N != 3 * ne or not np.array_equal(bd.T.ravel(), np.arange(3 * ne)):
         raise ValueError("the bubble basis must number its dofs 3 e + c (tetrahedron e, "
                          "component c), as ElementVector(ElementTetBubble()) does")
-    return Ainv_m, sp.csr_matrix((data, indices, indptr), shape=(3 * ne, ubasis.N))
-
-
-@njit(cache=True, parallel=True)
-def _inverse_times_coupling(ptr, sten, X, Ainv, indices, data):
-    """Rows (e, c) of ``A_bb,e^-1 A_bn,e`` in CSR order: tetrahedron e's three rows of
-    3 S entries each, columns ``3 sten + d`` (``X`` holds ``A_bn,e`` row-major)."""
-    for e in prange(ptr.shape[0] - 1):
-        s0 = ptr[e]
-        S3 = 3 * (ptr[e + 1] - s0)
-        o = 9 * s0
-        for c in range(3):
-            for k in range(S3):
-                indices[o + c * S3 + k] = 3 * sten[s0 + k // 3] + k % 3
-                data[o + c * S3 + k] = (Ainv[e, c, 0] * X[o + k] + Ainv[e, c, 1] * X[o + S3 + k]
-                                        + Ainv[e, c, 2] * X[o + 2 * S3 + k])
+    return sp.csr_matrix((Ainv.ravel(), (np.repeat(bd.T, 3, axis=1).ravel(),
+                                         np.tile(bd.T, (1, 3)).ravel())),
+                         shape=(bbasis.N, bbasis.N))
 
 
 def divergence_tet(ubasis, pbasis) -> sp.csr_matrix:
@@ -305,8 +270,11 @@ class TetDivergence:
     def __init__(self, Bn: sp.csr_matrix, Bb: sp.csr_matrix, pbasis):
         Bn = sp.csr_matrix(Bn)
         Bn.sum_duplicates()
-        self.Bn = tuple(np.asarray(a, dtype=np.int64) for a in (Bn.indptr, Bn.indices)) + (
-            np.asarray(Bn.data, dtype=float),)
+        # columns in 32 bits where the velocity dofs allow (at 100,000 nodes this block and
+        # the condensed one's kept pattern hold some 5e7 entries each: 0.4 GB less)
+        self.col_dtype = index_dtype(Bn.shape[1], 0)
+        self.Bn = (np.asarray(Bn.indptr, dtype=np.int64),
+                   np.asarray(Bn.indices, dtype=self.col_dtype), np.asarray(Bn.data, dtype=float))
         self.shape = Bn.shape
         pd = np.asarray(pbasis.element_dofs)                   # (4, ne) pressure dofs
         ne = pd.shape[1]
@@ -321,34 +289,35 @@ class TetDivergence:
         same columns per tetrahedron) condensed out, CSR with sorted rows; each row sums
         its ``Bn`` entries and its tetrahedra's terms (:func:`_divergence_rows`). The
         pattern is found on the first call and kept: it depends on the stencils alone."""
-        M = cv.AiAbn
-        args = (*self.Bn, *self.incidence, self.local,
-                np.asarray(M.indptr, dtype=np.int64), np.asarray(M.indices, dtype=np.int64),
-                M.data, self.shape[1])
+        ptr_s, sten = cv.AiAbn.row_weights()[:2]
+        args = (*self.Bn, *self.incidence, self.local, *cv.AiAbn.row_weights(), self.shape[1])
         kernel = (_divergence_rows if self.shape[0] >= PARALLEL_MIN
                   else _divergence_rows_serial)
         if self.pattern is None:
             ptr, (idx, val) = count_then_fill(
                 _divergence_rows, _divergence_rows_serial, self.shape[0], args,
-                lambda nnz: (np.empty(nnz, np.int64), np.empty(nnz)))
-            self.pattern = (ptr, idx, M.indptr.copy(), M.indices.copy())
+                lambda nnz: (np.empty(nnz, self.col_dtype), np.empty(nnz)))
+            self.pattern = (ptr, idx, ptr_s, sten)      # (the basis' stencils: not copied)
         else:
-            ptr, idx, m_ptr, m_idx = self.pattern
-            if not (np.array_equal(m_ptr, M.indptr) and np.array_equal(m_idx, M.indices)):
+            ptr, idx, ptr0, sten0 = self.pattern
+            if not (np.array_equal(ptr0, ptr_s) and np.array_equal(sten0, sten)):
                 raise ValueError("TetDivergence.condensed: the bubbles' coupling has another "
                                  "pattern than the stencils it was first given")
             val = np.empty(idx.size)
             kernel(*args, np.empty(self.shape[0], np.int64), ptr, idx, val, 2)
         idt = index_dtype(self.shape[1], int(ptr[-1]))
-        return sp.csr_matrix((val, idx.astype(idt), ptr.astype(idt)), shape=self.shape)
+        return sp.csr_matrix((val, idx.astype(idt, copy=False), ptr.astype(idt)),
+                             shape=self.shape)
 
 
 @njit(cache=True, parallel=True)
-def _divergence_rows(bn_ptr, bn_idx, bn_val, inc_ptr, inc_e, inc_k, local, m_ptr, m_idx,
-                     m_val, nu, count, ptr, out_idx, out_val, fill):
+def _divergence_rows(bn_ptr, bn_idx, bn_val, inc_ptr, inc_e, inc_k, local, s_ptr, sten, G,
+                     g, Q, nu, count, ptr, out_idx, out_val, fill):
     """Row r of ``B_n - B_b A_bb^-1 A_bn``: r's ``Bn`` entries, less ``sum_c
     Bb[r, 3 e + c] (A_bb^-1 A_bn)[3 e + c, :]`` for each tetrahedron e around r (r its
-    vertex k), summed in a dense row and cleared for the next. ``fill``: 0 counts the
+    vertex k; :func:`~skfem_nem.models.coupling_tet.add_weighted_rows` from the stencils
+    ``s_ptr``, ``sten``, their gradients ``G``, the bubbles' ``g`` and ``Q``), summed in
+    a dense row and cleared for the next. ``fill``: 0 counts the
     row's columns into ``count[r]`` (listed when first met), 1 writes them sorted with
     their values at ``ptr[r]``, 2 writes the values of the columns already there."""
     npr = count.shape[0]
@@ -367,14 +336,14 @@ def _divergence_rows(bn_ptr, bn_idx, bn_val, inc_ptr, inc_e, inc_k, local, m_ptr
                 dense[j] += bn_val[t]
             for t in range(inc_ptr[r], inc_ptr[r + 1]):
                 e, k = inc_e[t], inc_k[t]
-                o0, o1, o2 = m_ptr[3 * e], m_ptr[3 * e + 1], m_ptr[3 * e + 2]
-                w0, w1, w2 = local[e, k, 0], local[e, k, 1], local[e, k, 2]
-                for q in range(o1 - o0):
-                    j = m_idx[o0 + q]
-                    if fill < 2 and not met[j]:
-                        met[j], cols[m] = True, j
-                        m += 1
-                    dense[j] -= w0 * m_val[o0 + q] + w1 * m_val[o1 + q] + w2 * m_val[o2 + q]
+                for s in range(s_ptr[e], s_ptr[e + 1] if fill < 2 else s_ptr[e]):
+                    for d in range(3):
+                        j = 3 * sten[s] + d
+                        if not met[j]:
+                            met[j], cols[m] = True, j
+                            m += 1
+                add_weighted_rows(e, local[e, k, 0], local[e, k, 1], local[e, k, 2], s_ptr,
+                                  sten, G, g, Q, dense, -1.0)
             if fill == 0:
                 count[r] = m
             elif fill == 1:

@@ -59,7 +59,7 @@ import scipy.sparse.linalg as spla
 
 from ..basis import NaturalNeighbourBasis
 from .krylov import FGMRES_RESTART, MINRES_TOL_FACTOR, dot, fgmres, norm, restarted_minres
-from .stokes_amg import rigid_modes, velocity_components, viscous_amg
+from .stokes_amg import ViscousAMG, rigid_modes, velocity_components, viscous_amg
 from .stokes_cache import REBUILD_GROWTH, REBUILD_SLACK, StokesCache
 from .stokes_factors import ComponentFactors, ViscousFactor
 from .stokes_two_level import ViscousTwoLevel
@@ -596,7 +596,10 @@ def solve_fgmres(problem: SaddlePointProblem, tol: float, maxiter: int, info: di
                            f"residual {res:.3e} > tol {tol:.1e} (raise maxiter, loosen tol, "
                            f"or use solver='schur', which factorises the viscous block)")
     cache.record(x, its, rebuilt)
-    return _split(problem, x, its, ml.matvec if owned else None)
+    out = _split(problem, x, its, ml.matvec if owned else None)
+    if isinstance(ml, ViscousAMG):  # (the next solve refreshes them: not kept meanwhile)
+        ml.release_values()
+    return out
 
 
 def solve_petsc(problem: SaddlePointProblem, tol: float, maxiter: int,

@@ -112,7 +112,15 @@ class SymmetricRows:
         _gather(values, self.source, self.data)
         _gather(values, self.diagonal_source, self.diagonal)
 
+    def release_values(self) -> None:
+        """Let go of the values until the next :meth:`refresh` (the triangle's pattern
+        stays); products raise ``RuntimeError`` meanwhile."""
+        self.data = self.diagonal = None
+
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        if self.data is None:
+            raise RuntimeError("SymmetricRows: its values were let go (release_values); "
+                               "refresh it first")
         x = np.ascontiguousarray(x, dtype=np.float64)
         if x.shape != (self.shape[1],):
             raise ValueError(f"SymmetricRows @ x needs x of shape ({self.shape[1]},), "

@@ -305,3 +305,16 @@ def test_removal_keeps_integrals_and_refuses_corners():
         lm.remove_nodes([10 ** 6])
     assert all(np.array_equal(a, b) for a, b in zip(state, (lm.nodes, lm.mesh.t,
                                                               lm.ip_fields["t"])))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 6), st.integers(1, 40), st.integers(0, 10**6))
+def test_tet_edges_are_each_edge_once_in_order(m, n, seed):
+    """The edges by integer keys are ``np.unique``'s rows: each once, lower node first,
+    in lexicographic order, in the tetrahedra's index type."""
+    rng = np.random.default_rng(seed)
+    t = rng.integers(0, n, size=(m, 4)).astype([np.int32, np.int64][seed % 2])
+    e = np.concatenate([t[:, [i, j]] for i in range(4) for j in range(i + 1, 4)])
+    ref = np.unique(np.sort(e, axis=1), axis=0)
+    got = tet_edges(t)
+    assert got.dtype == t.dtype and got.shape == ref.shape and np.array_equal(got, ref)

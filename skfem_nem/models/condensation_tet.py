@@ -289,8 +289,9 @@ class TetDivergence:
         same columns per tetrahedron) condensed out, CSR with sorted rows; each row sums
         its ``Bn`` entries and its tetrahedra's terms (:func:`_divergence_rows`). The
         pattern is found on the first call and kept: it depends on the stencils alone."""
-        ptr_s, sten = cv.AiAbn.row_weights()[:2]
-        args = (*self.Bn, *self.incidence, self.local, *cv.AiAbn.row_weights(), self.shape[1])
+        weights = cv.AiAbn.row_weights()
+        ptr_s, sten = weights[:2]
+        args = (*self.Bn, *self.incidence, self.local, *weights, self.shape[1])
         kernel = (_divergence_rows if self.shape[0] >= PARALLEL_MIN
                   else _divergence_rows_serial)
         if self.pattern is None:

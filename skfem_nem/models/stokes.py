@@ -113,8 +113,8 @@ from .condensation_tet import (TetDivergence, condensed_viscous_tet, divergence_
 from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
 from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_columns,
                            outline_flux, wall_dofs, walls_fix_pressure)
-from .stokes_solvers import (SOLVERS, SaddlePointProblem, SaddlePointSolution, StokesCache,
-                             check_solver)
+from .saddle_problem import SaddlePointProblem, SaddlePointSolution
+from .stokes_solvers import SOLVERS, StokesCache, check_solver
 
 __all__ = ["StokesSpaces", "StokesSolution", "StokesCache", "stokes_spaces", "solve_stokes",
            "outline_flux",

@@ -139,3 +139,112 @@ def test_the_3d_multigrid_on_blocks_is_the_one_on_entries():
     blocks.refresh(sps.csr_matrix(2.0 * A))
     assert np.allclose(blocks.matvec(b), 2.0 * (A @ b), rtol=1e-12,
                        atol=1e-12 * abs(A @ b).max())
+
+
+def _from_blocks(A):
+    """The blocks of a CSR matrix ``A`` on all unknowns of its nodes, made directly."""
+    S = BlockSymmetricRows(A, np.arange(A.shape[0]))
+    return BlockSymmetricRows.from_blocks(S.indptr, S.indices, S.data.copy(),
+                                          np.arange(A.shape[0]))
+
+
+@settings(max_examples=30, deadline=None)
+@given(nodes=st.integers(1, 30), density=st.floats(0.0, 0.3), seed=st.integers(0, 10_000),
+       fixed=st.integers(0, 20))
+def test_blocks_made_directly_restrict_expand_and_scale(nodes, density, seed, fixed):
+    """A matrix of blocks made directly (as the 3D viscous block is assembled): its product,
+    diagonal and CSR on all unknowns and on the free ones are the matrix's, its chosen rows
+    are the rows, and scaled in place it is ``scaled_block``'s upper triangle bit for bit."""
+    from skfem_nem.models.stokes_amg import scaled_block, unit_scale
+    A, _ = _block_field(nodes, density, seed, 0)
+    B = _from_blocks(A)
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal(A.shape[0])
+    assert np.allclose(B @ x, A @ x, rtol=1e-13, atol=1e-13 * (abs(A) @ abs(x)).max())
+    full = B.tocsr()
+    assert full.has_sorted_indices and (full != A).nnz == 0
+    rows = np.flatnonzero(rng.random(A.shape[0]) < 0.3)
+    assert (B.tocsr(rows) != A[rows]).nnz == 0
+    free = np.sort(rng.choice(A.shape[0], A.shape[0] - min(fixed, A.shape[0] - 1),
+                              replace=False))
+    R = B.restricted(free)
+    Af = sps.csr_matrix(A[free][:, free])
+    assert (R.tocsr() != Af).nnz == 0 and np.array_equal(R.diagonal(), Af.diagonal())
+    assert np.allclose(R @ x[:free.size], Af @ x[:free.size], rtol=1e-13,
+                       atol=1e-13 * (abs(Af) @ abs(x[:free.size])).max())
+    s = unit_scale(Af)
+    C = R.copy()
+    C.scale(s)
+    assert np.array_equal(R.data, B.data)               # (a copy was scaled)
+    want = scaled_block(Af, s).toarray()
+    got = C.tocsr().toarray()
+    assert np.array_equal(np.triu(got), np.triu(want))
+    assert np.allclose(got, want, rtol=1e-15, atol=0)
+
+
+def test_blocks_made_directly_name_bad_input():
+    A, _ = _block_field(5, 0.3, 1, 0)
+    B = _from_blocks(A)
+    with pytest.raises(ValueError, match="blocks need .* values, got"):
+        BlockSymmetricRows.from_blocks(B.indptr, B.indices, B.data[:-1], np.arange(15))
+    with pytest.raises(ValueError, match="position 15 is past the 15 components of 5 nodes"):
+        BlockSymmetricRows.from_blocks(B.indptr, B.indices, B.data, np.arange(1, 16))
+    with pytest.raises(ValueError, match="must be among the matrix's own"):
+        B.restricted(np.arange(1, 16)).restricted(np.array([0]))
+    with pytest.raises(ValueError, match="rows must be among the unknowns"):
+        B.restricted(np.arange(1, 15)).tocsr(rows=np.array([0]))
+    with pytest.raises(ValueError, match="on other unknowns"):
+        B.restricted(np.arange(1, 15)).refresh(B)
+    B.release_values()
+    for call in (B.diagonal, B.tocsr, B.copy, lambda: B.scale(np.ones(15))):
+        with pytest.raises(RuntimeError, match="values were let go"):
+            call()
+
+
+def test_the_multigrid_of_blocks_made_directly_is_the_one_of_their_csr():
+    """``ViscousAMG`` of a block of 3 x 3 blocks (the 3D plate's, as assembled) cycles as
+    the one of its CSR to rounding; made and refreshed over the blocks' own values it scales
+    them in place and multiplies through them; a refresh that renews the coarse levels
+    still gives a cycle that reduces the residual."""
+    m = MeshTet().refined(3)
+    basis = Basis(m, ElementVector(ElementTetP1()))
+
+    @BilinearForm
+    def viscous(u, v, w):
+        return 2.0 * (1.0 + w.x[0]) * ddot(sym_grad(u), sym_grad(v))
+
+    K = sps.csr_matrix(viscous.assemble(basis))
+    K.sort_indices()
+    free = basis.complement_dofs(basis.get_dofs(lambda x: x[0] == 0.0))
+    A = sps.csr_matrix(K[free][:, free])
+    pos = node_positions(basis, free)
+    modes = np.zeros((free.size, 3))
+    modes[np.arange(free.size), pos % 3] = 1.0
+    blocks = _from_blocks(K).restricted(free)
+    kept = blocks.copy()
+    entries = ViscousAMG(A, modes, positions=pos)
+    over = ViscousAMG(blocks, modes, overwrite=True)
+    assert over.exact is blocks and over.ml.levels[0].A is None
+    assert not np.array_equal(blocks.data, kept.data)          # scaled in place
+    b = np.random.default_rng(4).standard_normal(free.size)
+    assert np.allclose(over.matvec(b), A @ b, rtol=1e-12, atol=1e-12 * abs(A @ b).max())
+    assert np.linalg.norm(over.cg(b, 4) - entries.cg(b, 4)) <= 1e-5 * np.linalg.norm(
+        entries.cg(b, 4))
+    assert over.same_pattern(kept) and not over.same_pattern(A)
+    twice = kept.copy()
+    twice.data *= 2.0
+    over.release_values()
+    over.refresh(twice, coarse=False, overwrite=True)
+    assert np.allclose(over.matvec(b), 2.0 * (A @ b), rtol=1e-12,
+                       atol=1e-12 * abs(A @ b).max())
+    ramp = kept.copy()
+    ramp.scale(np.linspace(1.0, 3.0, free.size))
+    over.refresh(ramp.copy(), coarse=True)
+    entries.refresh(ramp.tocsr(), coarse=True)
+    assert over.ml.levels[0].A is None
+    for k in range(1, over.n_levels):      # the coarse levels made from the same block
+        assert abs(over.ml.levels[k].A - entries.ml.levels[k].A).max() <= 1e-12 * abs(
+            entries.ml.levels[k].A).max()
+    x, y = over.cycle(b), entries.cycle(b)
+    assert np.linalg.norm(x - y) <= 1e-10 * np.linalg.norm(y)
+    assert np.linalg.norm(ramp.tocsr() @ x - b) < 0.6 * np.linalg.norm(b)

@@ -132,3 +132,30 @@ def test_the_tetrahedra_bubbles_coupling_is_an_operator_of_its_entries():
         M @ u[:-1]
     with pytest.raises(ValueError, match=rf"TetCoupling.T @ y needs y of shape \({M.shape[0]},"):
         M.T @ u
+
+
+def test_the_tetrahedra_block_as_upper_blocks_is_the_csr_block_bit_for_bit():
+    """``condensed_viscous_tet(..., blocks=True)`` makes the nodes' upper 3 x 3 blocks only
+    (half the entries), each value as the CSR block's, bit for bit: expanded again it is
+    the CSR block with its pattern, on all threads and on one."""
+    import skfem_nem.models.condensation_tet as ct
+    from skfem_nem.geometry.nodesets3d import box_nodes_3d
+    from skfem_nem.models.block_rows import BlockSymmetricRows
+    spaces = stokes_spaces(delaunay_mesh(box_nodes_3d(300, seed=2)))
+    ne, nq = spaces.ubasis.dx.shape
+    eta = np.exp(np.random.default_rng(2).standard_normal((ne, nq)))
+    csr = ct.condensed_viscous_tet(spaces.ubasis, spaces.bbasis, eta).A
+    up = ct.condensed_viscous_tet(spaces.ubasis, spaces.bbasis, eta, blocks=True).A
+    assert isinstance(up, BlockSymmetricRows) and up.shape == csr.shape
+    assert up.nnz < 0.6 * csr.nnz
+    again = up.tocsr()
+    assert np.array_equal(again.indptr, csr.indptr)
+    assert np.array_equal(again.indices, csr.indices)
+    assert np.array_equal(again.data, csr.data)
+    G = np.ascontiguousarray(ct.stencil_gradients(spaces.ubasis, False)).reshape(-1)
+    Wsum, gsum, det = np.empty(ne), np.empty((ne, 3)), np.empty(ne)
+    Ainv = np.zeros((ne, 3, 3))
+    ct._tet_blocks_serial(spaces.ubasis.stencil_ptr, nq, np.ascontiguousarray(
+        eta * spaces.ubasis.dx), ct._bubble_gradient(spaces.bbasis), Wsum, gsum, Ainv, det)
+    serial = ct._summed_tet(spaces.ubasis, G, Wsum, gsum, Ainv, False, True)
+    assert np.array_equal(serial.data, up.data)

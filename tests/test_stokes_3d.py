@@ -459,3 +459,30 @@ def test_an_assembled_block_is_reduced_and_scaled_over_its_own_arrays(spaces, mo
     assert (given.A != before).nnz == 0
     assert np.abs(own.u - theirs.u).max() < 1e-8 * np.abs(theirs.u).max()
     assert own.residual < 1e-10 and abs(own.residual - theirs.residual) < 1e-12
+
+
+def test_the_viscous_block_as_blocks_solves_as_the_csr_block(spaces, monkeypatch):
+    """``solve_stokes`` assembles the 3D viscous block as its nodes' upper blocks for
+    ``"fgmres"`` and ``"auto"`` (``"auto"`` converts it where it factorises): the same
+    velocity, pressure and reactions as from the CSR block, to rounding; other spaces
+    refuse ``viscous_blocks=True`` by name."""
+    import skfem_nem.models.stokes as stokes
+    from skfem_nem.models.block_rows import BlockSymmetricRows
+    assert isinstance(assemble_stokes(spaces, 1.0, viscous_blocks=True).A, BlockSymmetricRows)
+    f = _down(lambda x: 1.0 + x[0])
+    runs = {}
+    for blocks in (True, False):
+        monkeypatch.setattr(stokes, "takes_viscous_blocks", lambda s, b=blocks: b)
+        runs[blocks] = [solve_stokes(spaces, 1.0, f, solver=name, tol=1e-9)
+                        for name in ("fgmres", "auto")]
+    for with_blocks, with_csr in zip(runs[True], runs[False]):
+        for a, b in ((with_blocks.u, with_csr.u), (with_blocks.p, with_csr.p),
+                     (with_blocks.info["reaction"], with_csr.info["reaction"])):
+            assert np.abs(a - b).max() <= 1e-7 * np.abs(b).max()
+    assert runs[True][1].info["solver"] == "schur"     # (converted to CSR)
+    monkeypatch.undo()
+    from skfem import MeshTri
+    with pytest.raises(ValueError, match="viscous_blocks=True needs the natural-neighbour "
+                                         "velocity on tetrahedra, got method 'nem' in 2D"):
+        assemble_stokes(stokes_spaces(delaunay_mesh(MeshTri().refined(2).p.T)), 1.0,
+                        viscous_blocks=True)

@@ -47,6 +47,13 @@ def node_positions(ubasis, free: np.ndarray):
     return position if (np.diff(position) > 0).all() else None
 
 
+def _check_increasing(position: np.ndarray) -> None:
+    """``ValueError`` unless the positions are >= 0 and increase."""
+    if position.size and (position[0] < 0 or (np.diff(position) <= 0).any()):
+        raise ValueError("BlockSymmetricRows: the positions must be >= 0 and increase "
+                         "with the rows")
+
+
 class BlockSymmetricRows:
     """The symmetric matrix ``A`` (CSR, square, on the unknowns placed by ``position``;
     only its upper triangle is read) as the 3x3 blocks of its nodes' upper triangle, for
@@ -57,6 +64,11 @@ class BlockSymmetricRows:
 
     ``values``: ``numpy.float32`` or ``numpy.float64``; the products sum in double
     precision either way.
+
+    Made from the blocks themselves (:meth:`from_blocks`, as the 3D condensed viscous
+    block is assembled), it is the block for the whole solve: restricted to the free
+    unknowns (:meth:`restricted`), its diagonal, its rows as CSR (:meth:`tocsr`, for the
+    multigrid's set-up and the reactions) and scaled in place (:meth:`scale`).
     """
 
     def __init__(self, A: sp.spmatrix, position: np.ndarray, values=np.float64):
@@ -65,37 +77,131 @@ class BlockSymmetricRows:
         if A.shape[0] != A.shape[1] or position.shape != (A.shape[0],):
             raise ValueError(f"BlockSymmetricRows needs a square matrix and a position per "
                              f"row, got shape {A.shape} and {position.shape} positions")
-        if position.size and (position[0] < 0 or (np.diff(position) <= 0).any()):
-            raise ValueError("BlockSymmetricRows: the positions must be >= 0 and increase "
-                             "with the rows")
+        _check_increasing(position)
         self.values = np.dtype(values)
         if self.values not in (np.float32, np.float64):
             raise ValueError(f"BlockSymmetricRows keeps float32 or float64 values, "
                              f"got {values!r}")
-        self.shape, self.dtype, self.position = A.shape, np.dtype(np.float64), position
         self.n_nodes = int(position[-1]) // WIDTH + 1 if position.size else 0
-        self.node_rows = np.searchsorted(position // WIDTH,
-                                         np.arange(self.n_nodes + 1)).astype(np.int64)
+        node_rows = np.searchsorted(position // WIDTH,
+                                    np.arange(self.n_nodes + 1)).astype(np.int64)
         self.source_indptr = A.indptr.copy()
         self._checked = None        # a weak reference to the index array last found fitting
         counts = np.zeros(self.n_nodes + 1, dtype=np.int64)
-        _node_neighbours(A.indptr, A.indices, position, self.node_rows, counts,
+        _node_neighbours(A.indptr, A.indices, position, node_rows, counts,
                          counts[:0].astype(np.uint32), counts)
         self.indptr = np.cumsum(counts)
         self.indices = np.empty(self.indptr[-1], dtype=np.uint32)
-        _node_neighbours(A.indptr, A.indices, position, self.node_rows, self.indptr,
+        _node_neighbours(A.indptr, A.indices, position, node_rows, self.indptr,
                          self.indices, counts[:0])
+        self._place(position)
+        self.buffers = np.zeros((self.bounds.size - 1, WIDTH * self.n_nodes))
+        self.data = None
+        self.refresh(A)
+
+    @classmethod
+    def from_blocks(cls, indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
+                    position: np.ndarray) -> "BlockSymmetricRows":
+        """The matrix of the blocks ``data`` (nine values a block, row-major: component of
+        the row, then of the column) of nodes ``indices[indptr[i]:indptr[i + 1]]`` (sorted,
+        each >= i) of each node i, on the unknowns at ``position`` (increasing); the
+        arrays are taken, not copied."""
+        position = np.asarray(position, dtype=np.int64)
+        _check_increasing(position)
+        if data.size != WIDTH * WIDTH * indices.size or indptr[-1] != indices.size:
+            raise ValueError(f"BlockSymmetricRows.from_blocks: {indices.size} blocks need "
+                             f"{WIDTH * WIDTH * indices.size} values, got {data.size}")
+        self = object.__new__(cls)
+        self.indptr, self.indices, self.data = indptr, indices, data
+        self.values = np.dtype(data.dtype)
+        self.n_nodes = indptr.size - 1
+        self._place(position)
+        self.source_indptr, self._checked = None, None
+        self.buffers = np.zeros((self.bounds.size - 1, WIDTH * self.n_nodes))
+        return self
+
+    def _place(self, position: np.ndarray) -> None:
+        """The unknowns at ``position`` (increasing, within the nodes' components)."""
+        if position.size and position[-1] >= WIDTH * self.n_nodes:
+            raise ValueError(f"BlockSymmetricRows: position {int(position[-1])} is past the "
+                             f"{WIDTH * self.n_nodes} components of {self.n_nodes} nodes")
+        self.position = position
+        self.shape, self.dtype = (position.size, position.size), np.dtype(np.float64)
+        self.node_rows = np.searchsorted(position // WIDTH,
+                                         np.arange(self.n_nodes + 1)).astype(np.int64)
         chunks = max(1, min(numba.get_num_threads(), self.n_nodes))
         self.bounds = np.searchsorted(self.indptr, np.linspace(0, self.indptr[-1],
                                                                chunks + 1)).astype(np.int64)
         self.bounds[0], self.bounds[-1] = 0, self.n_nodes
-        self.buffers = np.zeros((chunks, WIDTH * self.n_nodes))
-        self.data = None
-        self.refresh(A)
 
-    def twin(self, A: sp.spmatrix, values=np.float64) -> "BlockSymmetricRows":
-        """The matrix ``A``, whose entries fit this one's blocks, with values in
-        ``values``: the blocks' indices are shared, not found again."""
+    def restricted(self, position: np.ndarray) -> "BlockSymmetricRows":
+        """The same blocks (shared, not copied) on the unknowns at ``position`` (a subset
+        of this one's, increasing): ``A[free][:, free]`` for the free unknowns."""
+        position = np.asarray(position, dtype=np.int64)
+        if not np.isin(position, self.position).all():
+            raise ValueError("BlockSymmetricRows.restricted: the positions must be among "
+                             "the matrix's own")
+        other = object.__new__(BlockSymmetricRows)
+        other.__dict__.update(self.__dict__)
+        other._place(position)
+        other.source_indptr, other._checked = None, None
+        other.buffers = np.zeros_like(self.buffers)
+        return other
+
+    def copy(self) -> "BlockSymmetricRows":
+        """The same blocks (shared) with a copy of the values."""
+        other = object.__new__(BlockSymmetricRows)
+        other.__dict__.update(self.__dict__)
+        other.data, other.buffers = self._values().copy(), np.zeros_like(self.buffers)
+        return other
+
+    def diagonal(self) -> np.ndarray:
+        """The diagonal entries of the unknowns."""
+        out = np.zeros(self.shape[0])
+        _block_diagonal(self.indptr, self.indices, self._values(), self.position, out)
+        return out
+
+    def tocsr(self, rows: np.ndarray = None) -> sp.csr_matrix:
+        """The whole symmetric matrix on the unknowns as CSR in double precision; with
+        ``rows`` (positions among the unknowns', increasing) those rows only, over all
+        columns. Columns are sorted; every value of a block is an entry (zeros too)."""
+        col_of = np.full(WIDTH * self.n_nodes, -1, dtype=np.int64)
+        col_of[self.position] = np.arange(self.shape[0])
+        row_pos = self.position if rows is None else np.asarray(rows, dtype=np.int64)
+        if not (col_of[row_pos] >= 0).all():
+            raise ValueError("BlockSymmetricRows.tocsr: the rows must be among the unknowns")
+        owner = np.repeat(np.arange(self.n_nodes, dtype=np.int32), np.diff(self.indptr))
+        tptr, tblock = _transposed_blocks(self.indptr, self.indices, owner, self.n_nodes)
+        comps = np.bincount(self.position // WIDTH, minlength=self.n_nodes).astype(np.int64)
+        counts = _row_counts(self.indptr, self.indices, owner, tptr, tblock, comps, row_pos)
+        nnz = int(counts.sum())
+        idt = np.int32 if max(nnz, self.shape[0]) < np.iinfo(np.int32).max else np.int64
+        indptr = np.zeros(row_pos.size + 1, dtype=idt)
+        np.cumsum(counts, out=indptr[1:])
+        indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
+        _expand_rows(self.indptr, self.indices, self._values(), owner, tptr, tblock, col_of,
+                     row_pos, indptr, indices, data)
+        return sp.csr_matrix((data, indices, indptr), shape=(row_pos.size, self.shape[0]))
+
+    def scale(self, s: np.ndarray) -> None:
+        """``diag(s) A diag(s)`` in place, ``s`` one factor an unknown (the unknowns not
+        placed keep theirs): each value ``(a_ij s_j) s_i``, as
+        :func:`~skfem_nem.models.stokes_amg.scaled_block` computes a CSR row's, and each
+        diagonal block mirrored from its upper part."""
+        full = np.ones(WIDTH * self.n_nodes)
+        full[self.position] = s
+        _scale_blocks(self.indptr, self.indices, self._values(), full)
+
+    def _values(self) -> np.ndarray:
+        if self.data is None:
+            raise RuntimeError("BlockSymmetricRows: its values were let go "
+                               "(release_values); refresh it first")
+        return self.data
+
+    def twin(self, A, values=np.float64) -> "BlockSymmetricRows":
+        """The matrix ``A`` (CSR whose entries fit this one's blocks, or a
+        :class:`BlockSymmetricRows` of them) with values in ``values``: the blocks' indices
+        are shared, not found again."""
         if not self.same_pattern(A):
             raise ValueError("BlockSymmetricRows.twin needs a matrix that fits the same "
                              "blocks")
@@ -111,10 +217,14 @@ class BlockSymmetricRows:
         """Values kept: nine a block (fixed components and absent entries as zeros)."""
         return int(self.indptr[-1]) * WIDTH * WIDTH
 
-    def same_pattern(self, A: sp.spmatrix) -> bool:
+    def same_pattern(self, A) -> bool:
         """True if ``A`` is a CSR matrix with the same row pointers whose upper entries all
-        fall into this one's blocks, so that :meth:`refresh` takes them."""
+        fall into this one's blocks, or a :class:`BlockSymmetricRows` of the same blocks
+        and unknowns, so that :meth:`refresh` takes its values."""
+        if isinstance(A, BlockSymmetricRows):
+            return self.same_blocks(A) and np.array_equal(A.position, self.position)
         if not (sp.issparse(A) and A.format == "csr" and A.shape == self.shape
+                and self.source_indptr is not None
                 and np.array_equal(A.indptr, self.source_indptr)):
             return False
         if self._checked is not None and self._checked() is A.indices:
@@ -124,9 +234,26 @@ class BlockSymmetricRows:
         self._checked = weakref.ref(A.indices) if fits else None
         return fits
 
-    def refresh(self, A: sp.spmatrix) -> None:
-        """Take the values of ``A``; a matrix whose entries do not fit the blocks is taken
-        as if new."""
+    def same_blocks(self, other: "BlockSymmetricRows") -> bool:
+        """True if ``other`` keeps the blocks of the same node pairs."""
+        return (other.indptr is self.indptr and other.indices is self.indices) or (
+            np.array_equal(other.indptr, self.indptr)
+            and np.array_equal(other.indices, self.indices))
+
+    def refresh(self, A) -> None:
+        """Take the values of ``A`` (CSR, or a :class:`BlockSymmetricRows` on the same
+        unknowns, whose values are shared where they have this one's precision); a matrix
+        of other blocks is taken as if new."""
+        if isinstance(A, BlockSymmetricRows):
+            if not np.array_equal(A.position, self.position):
+                raise ValueError("BlockSymmetricRows.refresh: the matrix is on other "
+                                 "unknowns")
+            if not self.same_blocks(A):
+                self.indptr, self.indices, self.bounds = A.indptr, A.indices, A.bounds
+                self.node_rows, self.source_indptr, self._checked = A.node_rows, None, None
+            self.data = None
+            self.data = A._values().astype(self.values, copy=False)
+            return
         if not self.same_pattern(A):
             self.__init__(A, self.position, self.values)
             return
@@ -142,9 +269,7 @@ class BlockSymmetricRows:
         self.data = None
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
-        if self.data is None:
-            raise RuntimeError("BlockSymmetricRows: its values were let go "
-                               "(release_values); refresh it first")
+        data = self._values()
         x = np.asarray(x, dtype=np.float64)
         if x.shape != (self.shape[1],):
             raise ValueError(f"BlockSymmetricRows @ x needs x of shape ({self.shape[1]},), "
@@ -152,7 +277,7 @@ class BlockSymmetricRows:
         full = np.zeros(WIDTH * self.n_nodes)
         full[self.position] = x
         out = np.empty_like(full)
-        _block_product(self.indptr, self.indices, self.data, full, self.bounds,
+        _block_product(self.indptr, self.indices, data, full, self.bounds,
                        self.buffers, out)
         return out[self.position]
 
@@ -276,3 +401,92 @@ def _block_product(bptr, bind, data, x, bounds, buffers, y):
             if i >= 3 * bounds[t]:
                 acc += buffers[t, i]
         y[i] = acc
+
+
+@njit(cache=True, parallel=True)
+def _block_diagonal(bptr, bind, data, position, out):
+    """The diagonal entry of each unknown at ``position`` (zero without a diagonal
+    block)."""
+    for r in prange(position.size):
+        i, a = position[r] // WIDTH, position[r] % WIDTH
+        if bptr[i + 1] > bptr[i] and bind[bptr[i]] == i:
+            out[r] = data[9 * bptr[i] + (WIDTH + 1) * a]
+
+
+@njit(cache=True, parallel=True)
+def _scale_blocks(bptr, bind, data, s):
+    """``data`` of block (i, j), entry (a, b), times ``s[3 j + b]`` then ``s[3 i + a]``;
+    each diagonal block's lower part then mirrored from its upper one."""
+    for i in prange(bptr.size - 1):
+        for k in range(bptr[i], bptr[i + 1]):
+            j = bind[k]
+            for a in range(WIDTH):
+                si = s[WIDTH * i + a]
+                for b in range(WIDTH):
+                    q = 9 * k + WIDTH * a + b
+                    data[q] = data[q] * s[WIDTH * j + b] * si
+        if bptr[i + 1] > bptr[i] and bind[bptr[i]] == i:
+            q = 9 * bptr[i]
+            data[q + 3], data[q + 6], data[q + 7] = data[q + 1], data[q + 2], data[q + 5]
+
+
+@njit(cache=True)
+def _transposed_blocks(bptr, bind, owner, n):
+    """For each node j, the blocks (i, j) with i < j, in increasing i: ``tblock[tptr[j]:
+    tptr[j + 1]]`` (a counting sort of the blocks by column node)."""
+    tptr = np.zeros(n + 1, np.int64)
+    for k in range(bind.size):
+        if bind[k] != owner[k]:
+            tptr[bind[k] + 1] += 1
+    for j in range(n):
+        tptr[j + 1] += tptr[j]
+    fill = tptr[:-1].copy()
+    tblock = np.empty(tptr[n], np.int64)
+    for k in range(bind.size):
+        j = bind[k]
+        if j != owner[k]:
+            tblock[fill[j]] = k
+            fill[j] += 1
+    return tptr, tblock
+
+
+@njit(cache=True, parallel=True)
+def _row_counts(bptr, bind, owner, tptr, tblock, comps, row_pos):
+    """Entries of each CSR row ``row_pos`` (its node's blocks, each with its column
+    node's ``comps`` unknowns)."""
+    counts = np.zeros(row_pos.size, np.int64)
+    for r in prange(row_pos.size):
+        i = row_pos[r] // WIDTH
+        c = 0
+        for t in range(tptr[i], tptr[i + 1]):
+            c += comps[owner[tblock[t]]]
+        for k in range(bptr[i], bptr[i + 1]):
+            c += comps[bind[k]]
+        counts[r] = c
+    return counts
+
+
+@njit(cache=True, parallel=True)
+def _expand_rows(bptr, bind, data, owner, tptr, tblock, col_of, row_pos, indptr, indices,
+                 out):
+    """CSR rows ``row_pos`` of the symmetric matrix: the transposed blocks of the nodes
+    below (entry (b, a) of block (i, j)) and then the node's own blocks, columns
+    ascending, those of unknowns not placed (``col_of`` -1) left out."""
+    for r in prange(row_pos.size):
+        i, a = row_pos[r] // WIDTH, row_pos[r] % WIDTH
+        o = indptr[r]
+        for t in range(tptr[i], tptr[i + 1]):
+            k = tblock[t]
+            for b in range(WIDTH):
+                c = col_of[WIDTH * owner[k] + b]
+                if c >= 0:
+                    indices[o] = c
+                    out[o] = data[9 * k + WIDTH * b + a]
+                    o += 1
+        for k in range(bptr[i], bptr[i + 1]):
+            for b in range(WIDTH):
+                c = col_of[WIDTH * bind[k] + b]
+                if c >= 0:
+                    indices[o] = c
+                    out[o] = data[9 * k + WIDTH * a + b]
+                    o += 1

@@ -39,6 +39,7 @@ from ..basis.summation import (basis_row_order, blocks, incidence, node_pattern,
                                stencil_gradients)
 from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
+from .block_rows import BlockSymmetricRows
 from .condensation import CondensedViscous
 from .coupling_tet import TetCoupling, add_weighted_rows
 
@@ -91,33 +92,62 @@ def _tet_blocks(ptr, nq, w, gb, Wsum, gsum, Ainv, det):
 
 @njit(cache=True, parallel=True)
 def _condensed_rows_tet(ptr, sten, G, Wsum, g, Ainv, inc_ptr, inc_e, inc_l, cptr, cols, n3,
-                        order, nblocks, indices_out, data_out):
+                        order, nblocks, klo, ubptr, indices_out, data_out):
     """The condensed viscous block row by row: node v's three rows hold its couplings
     with the nodes ``cols[cptr[v]:cptr[v + 1]]`` (dofs ``3 node + c``, CSR order); each
     tetrahedron around v adds the row of its condensed element matrix that belongs to
     v, computed where it is added (:func:`_add_row_tet`). Rows are taken in ``order``
-    (:func:`~skfem_nem.basis.summation.row_order`)."""
+    (:func:`~skfem_nem.basis.summation.row_order`). With ``klo`` not empty, only the
+    couplings with nodes from ``cols[cptr[v] + klo[v]]`` on (those >= v) are made, as
+    3 x 3 blocks from ``9 ubptr[v]`` (:func:`_upper_pattern`), and ``indices_out`` is not
+    written."""
     n = cptr.shape[0] - 1
+    upper = klo.size > 0
     for blk in prange(nblocks):
         pos = np.full(n3, -1, np.int64)
         for i in range(blk * n // nblocks, (blk + 1) * n // nblocks):
             v = order[i]
             nv = cptr[v + 1] - cptr[v]
-            base = 9 * cptr[v]
+            lo = klo[v] if upper else 0
+            base = 9 * ubptr[v] if upper else 9 * cptr[v]
+            kstride, cvstride = (9, 3) if upper else (3, 3 * nv)
             for k in range(nv):
-                pos[cols[cptr[v] + k]] = k
-                for cv in range(3):
-                    for cu in range(3):
-                        o = base + (cv * nv + k) * 3 + cu
-                        indices_out[o] = 3 * cols[cptr[v] + k] + cu
-                        data_out[o] = 0.0
+                pos[cols[cptr[v] + k]] = k - lo if k >= lo else -1
+            data_out[base:base + 9 * (nv - lo)] = 0.0
+            if not upper:
+                for k in range(nv):
+                    for cv in range(3):
+                        for cu in range(3):
+                            indices_out[base + (cv * nv + k) * 3 + cu] = \
+                                3 * cols[cptr[v] + k] + cu
             for t in range(inc_ptr[v], inc_ptr[v + 1]):
-                _add_row_tet(inc_e[t], inc_l[t], ptr, sten, G, Wsum, g, Ainv, pos, base, nv,
-                             data_out)
+                _add_row_tet(inc_e[t], inc_l[t], ptr, sten, G, Wsum, g, Ainv, pos, base,
+                             kstride, cvstride, data_out)
+
+
+@njit(cache=True)
+def _upper_pattern(cptr, cols):
+    """Each node's first coupling with a node >= itself (``klo``), and the 3 x 3 blocks of
+    those couplings: node v's from ``ubptr[v]``, their nodes ``bind``."""
+    n = cptr.shape[0] - 1
+    klo = np.zeros(n, np.int64)
+    ubptr = np.zeros(n + 1, np.int64)
+    for v in range(n):
+        k = 0
+        while k < cptr[v + 1] - cptr[v] and cols[cptr[v] + k] < v:
+            k += 1
+        klo[v] = k
+        ubptr[v + 1] = ubptr[v] + cptr[v + 1] - cptr[v] - k
+    bind = np.empty(ubptr[n], np.uint32)
+    for v in range(n):
+        for k in range(ubptr[v + 1] - ubptr[v]):
+            bind[ubptr[v] + k] = cols[cptr[v] + klo[v] + k]
+    return klo, ubptr, bind
 
 
 @njit(cache=True, inline="always")
-def _add_row_tet(e, j, ptr, sten, G, Wsum, g, Ainv, pos, base, nv, data_out):
+def _add_row_tet(e, j, ptr, sten, G, Wsum, g, Ainv, pos, base, kstride, cvstride,
+                 data_out):
     """Add row j (three components) of tetrahedron e's condensed element matrix:
     ``W (delta G_i . G_j + G_i[cv] G_j[cu]) - (A_bn^T A_bb^-1 A_bn)[(j, cv), (i, cu)]``.
 
@@ -138,6 +168,8 @@ def _add_row_tet(e, j, ptr, sten, G, Wsum, g, Ainv, pos, base, nv, data_out):
           Q[1, 0] * gj[0] + Q[1, 1] * gj[1] + Q[1, 2] * gj[2],
           Q[2, 0] * gj[0] + Q[2, 1] * gj[1] + Q[2, 2] * gj[2])
     for i in range(S):
+        if pos[sten[s0 + i]] < 0:
+            continue        # (a block below the diagonal, not made)
         gi = G[3 * (s0 + i):3 * (s0 + i) + 3]
         pi = gi[0] * gb[0] + gi[1] * gb[1] + gi[2] * gb[2]
         qi = (Q[0, 0] * gi[0] + Q[0, 1] * gi[1] + Q[0, 2] * gi[2],
@@ -149,13 +181,13 @@ def _add_row_tet(e, j, ptr, sten, G, Wsum, g, Ainv, pos, base, nv, data_out):
               + Q[0, 2] * ((gi[0] * gj[2]) + (gi[2] * gj[0]))
               + Q[1, 2] * ((gi[1] * gj[2]) + (gi[2] * gj[1])))
         pp = pi * pj
-        d = base + pos[sten[s0 + i]] * 3
+        d = base + pos[sten[s0 + i]] * kstride
         for cv in range(3):
             for cu in range(3):
                 k = W * ((dot if cu == cv else 0.0) + gi[cv] * gj[cu])
                 corr = (pp * Q[cv, cu] + (((pj * qi[cv]) * gb[cu]) + ((pi * qj[cu]) * gb[cv]))
                         + sq * (gb[cv] * gb[cu]))
-                data_out[d + cv * nv * 3 + cu] += k - corr
+                data_out[d + cv * cvstride + cu] += k - corr
 
 
 _tet_blocks_serial = serial_twin(_tet_blocks)
@@ -178,13 +210,16 @@ def _nodal(ubasis) -> None:
                          "basis on tetrahedra (dofs 3 node + c, one smoothing cell each)")
 
 
-def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
+def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray,
+                          blocks: bool = False) -> CondensedViscous:
     """The viscous block ``2 eta eps(u) : eps(v)`` of the smoothed natural-neighbour
     velocity ``ubasis`` on tetrahedra with the bubbles of ``bbasis`` (a vector
     :class:`~skfem_nem.models.stokes_bases.ElementTetBubble` basis on the same quadrature)
     condensed out, for the viscosity ``eta`` (ne, nq) at the quadrature points; exactly
-    symmetric. Raises ``ValueError`` naming the first tetrahedron whose bubble block is
-    singular."""
+    symmetric. ``blocks``: the block as its nodes' upper 3 x 3 blocks
+    (:class:`~skfem_nem.models.block_rows.BlockSymmetricRows`; half the entries made, the
+    same values bit for bit), else CSR. Raises ``ValueError`` naming the first tetrahedron
+    whose bubble block is singular."""
     _nodal(ubasis)
     ptr = ubasis.stencil_ptr
     ne, nq = ubasis.dx.shape
@@ -203,21 +238,28 @@ def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
     if bad.any():
         raise ValueError(f"degenerate tetrahedron {int(np.flatnonzero(bad)[0])}: its bubble "
                          f"block is singular ({int(bad.sum())} tetrahedra)")
-    A = _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel)
+    A = _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel, blocks)
     coupling = TetCoupling(ptr, ubasis.stencil_nodes, G, gsum, Ainv, ubasis.N, parallel)
     return CondensedViscous(A, _bubble_inverse(bbasis, Ainv), coupling, None)
 
 
-def _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel) -> sp.csr_matrix:
-    """The condensed block from :func:`_condensed_rows_tet`, CSR over the stencils' pattern."""
+def _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel, upper=False):
+    """The condensed block from :func:`_condensed_rows_tet`, CSR over the stencils' pattern,
+    or (``upper``) as its nodes' upper blocks."""
     inc_ptr, inc_e, inc_l, cptr, cols = node_pattern(ubasis, parallel)
     n = cptr.shape[0] - 1
+    rows = (ubasis.stencil_ptr, ubasis.stencil_nodes, G, Wsum, gsum, Ainv, inc_ptr, inc_e,
+            inc_l, cptr, cols, n, basis_row_order(ubasis), blocks(n))
+    kernel = _condensed_rows_tet if parallel else _condensed_rows_tet_serial
     nnz = 9 * int(cptr[-1])
     idt = index_dtype(ubasis.N, nnz)
+    if upper:
+        klo, ubptr, bind = _upper_pattern(cptr, cols)
+        data = np.empty(9 * int(ubptr[-1]))
+        kernel(*rows, klo, ubptr, np.empty(0, dtype=idt), data)
+        return BlockSymmetricRows.from_blocks(ubptr, bind, data, np.arange(3 * n))
     indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
-    (_condensed_rows_tet if parallel else _condensed_rows_tet_serial)(
-        ubasis.stencil_ptr, ubasis.stencil_nodes, G, Wsum, gsum, Ainv, inc_ptr, inc_e, inc_l,
-        cptr, cols, n, basis_row_order(ubasis), blocks(n), indices, data)
+    kernel(*rows, np.empty(0, dtype=np.int64), cptr, indices, data)
     nv = np.diff(cptr)
     indptr = np.empty(3 * n + 1, dtype=idt)
     indptr[:-1] = (9 * cptr[:-1, None] + 3 * nv[:, None] * np.arange(3)[None]).ravel()

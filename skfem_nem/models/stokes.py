@@ -108,6 +108,7 @@ from skfem import BilinearForm, LinearForm
 from skfem.helpers import ddot, div, dot, grad, sym_grad
 
 from .condensation import condensed_divergence, condensed_viscous
+from .block_rows import BlockSymmetricRows
 from .condensation_tet import (TetDivergence, condensed_viscous_tet, divergence_tet,
                                loads_tet)
 from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
@@ -119,7 +120,8 @@ from .stokes_solvers import SOLVERS, StokesCache, check_solver
 __all__ = ["StokesSpaces", "StokesSolution", "StokesCache", "stokes_spaces", "solve_stokes",
            "outline_flux",
            "boundary_flux",
-           "assemble_stokes", "inf_sup_constant", "quadrature_values", "wall_dofs"]
+           "assemble_stokes", "inf_sup_constant", "quadrature_values", "takes_viscous_blocks",
+           "wall_dofs"]
 
 Field = Union[float, np.ndarray, Callable]
 
@@ -260,7 +262,7 @@ def _stabilisation(spaces: StokesSpaces, inv_eta: np.ndarray) -> sp.csr_matrix:
 class StokesSystem:
     """The assembled blocks of the discrete Stokes problem."""
 
-    A: sp.csr_matrix        # (nu, nu) viscous block
+    A: sp.csr_matrix        # (nu, nu) viscous block (or its nodes' 3 x 3 blocks: viscous_blocks)
     B: sp.csr_matrix        # (np, nu) -(div u, q)
     S: sp.csr_matrix        # (np, np) pressure stabilisation (zero for Taylor-Hood)
     Mp: sp.csr_matrix       # (np, np) pressure mass weighted by 1 / eta
@@ -310,7 +312,7 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
 
 
 def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
-                    tau0: Optional[Field] = None) -> StokesSystem:
+                    tau0: Optional[Field] = None, viscous_blocks: bool = False) -> StokesSystem:
     """Assemble the Stokes blocks.
 
     Parameters
@@ -324,7 +326,15 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     tau0
         Optional known stress (dim, dim, ne, nq) (or callable) moved to the right
         side: the load gains ``-(tau0, eps(v))``.
+    viscous_blocks
+        The viscous block of the natural-neighbour velocity on tetrahedra as its nodes'
+        upper 3 x 3 blocks (:class:`~skfem_nem.models.block_rows.BlockSymmetricRows`: half
+        the entries made, the same values), which solver ``"fgmres"`` reads as they are;
+        ``ValueError`` for other spaces.
     """
+    if viscous_blocks and not takes_viscous_blocks(spaces):
+        raise ValueError(f"viscous_blocks=True needs the natural-neighbour velocity on "
+                         f"tetrahedra, got method {spaces.method!r} in {spaces.dim}D")
     d = spaces.dim
     e = quadrature_values(spaces, eta, "viscosity eta", positive=True)
     fv = quadrature_values(spaces, f, "body force f", shape=(d,))
@@ -352,7 +362,7 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     # static condensation of the bubbles, triangle by triangle (models.condensation)
     bb, Bb = spaces.bbasis, cache["Bb"]                      # Bb (np, nb)
     if spaces.dim == 3:  # by sparse products (models.condensation_tet)
-        cv = condensed_viscous_tet(ub, bb, e)
+        cv = condensed_viscous_tet(ub, bb, e, blocks=viscous_blocks)
         B = cache["tet_divergence"].condensed(cv)
     else:
         cv = condensed_viscous(ub, bb, e)
@@ -364,6 +374,12 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     g = -(Bb @ (cv.Ainv @ fb))
     return StokesSystem(cv.A, B, 0.5 * (S + S.T), Mp, m, b, e, g,
                         (cv.Ainv, cv.AiAbn, Bb, fb))
+
+
+def takes_viscous_blocks(spaces: StokesSpaces) -> bool:
+    """True for the natural-neighbour velocity on tetrahedra, whose viscous block can be
+    assembled as its nodes' 3 x 3 blocks (``assemble_stokes(..., viscous_blocks=True)``)."""
+    return spaces.dim == 3 and spaces.bbasis is not None and spaces.method == "nem"
 
 
 def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
@@ -464,7 +480,10 @@ def _system(spaces: StokesSpaces, solver: str, system: Optional[StokesSystem], e
         return system, None, 0
     part, share = _distributed(spaces, solver)
     n = spaces.mesh.nelements if part.elements is None else int(part.elements.size)
-    return assemble_stokes(part, eta, f, tau0), share, n
+    # (the solvers that factorise or hand the block on take it as CSR: "auto" converts
+    # where it chooses one of them)
+    blocks = solver in ("auto", "fgmres") and takes_viscous_blocks(spaces)
+    return assemble_stokes(part, eta, f, tau0, viscous_blocks=blocks), share, n
 
 
 def _distributed(spaces: StokesSpaces, solver: str):
@@ -534,7 +553,8 @@ def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndar
     fixed_dof = np.zeros(nu, dtype=bool)
     fixed_dof[D] = True
     free = np.flatnonzero(~fixed_dof)
-    Afull = sys_.A.tocsr()
+    blocks = isinstance(sys_.A, BlockSymmetricRows)
+    Afull = sys_.A if blocks else sys_.A.tocsr()
     Bfull, g0, mvec, Sb, dp = _with_constraints(sys_, Afull, constraints, nu, share)
     mass = sys_.Mp.diagonal().sum()
     if share is not None:  # the pressure integrals whole, summed once for every use
@@ -545,9 +565,10 @@ def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndar
     fixed = np.zeros(nu)
     fixed[D] = uD[D]
     f = (sys_.f - Afull @ fixed)[free] if fixed.any() else sys_.f[free]
-    A_fixed = Afull[D]      # (before an own block is written over)
+    A_fixed = Afull.tocsr(rows=D) if blocks else Afull[D]   # (before an own block changes)
     problem = SaddlePointProblem(
-        A=free_columns(Afull, free, rows=True, overwrite=own and Afull is sys_.A),
+        A=Afull.restricted(free) if blocks else
+        free_columns(Afull, free, rows=True, overwrite=own and Afull is sys_.A),
         B=free_columns(Bfull, free), S=Sb, f=f, g=g0 - Bfull @ fixed, m=mvec,
         dp=dp, mean_weight=c, pressure_mean=pressure_mean, ubasis=spaces.ubasis, free=free,
         total=None if share is None else share.total, owned=own)

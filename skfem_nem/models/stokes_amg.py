@@ -122,8 +122,8 @@ def viscous_amg(problem, overwrite: bool = False):
         from .stokes_two_level import ViscousTwoLevel
         return ViscousTwoLevel(problem.A, problem.ubasis, problem.free)
     three_d = problem.ubasis.mesh.dim() == 3
-    positions = node_positions(problem.ubasis, problem.free) \
-        if three_d and FINE_BLOCKS_3D else None
+    positions = node_positions(problem.ubasis, problem.free) if three_d and FINE_BLOCKS_3D \
+        and not isinstance(problem.A, BlockSymmetricRows) else None
     return ViscousAMG(problem.A, rigid_modes(problem.ubasis, problem.free),
                       k_cycles=three_d and K_CYCLE_3D, overwrite=overwrite,
                       positions=positions,
@@ -152,7 +152,10 @@ class ViscousAMG:
 
     def __init__(self, A: sp.spmatrix, modes: np.ndarray, k_cycles: bool = False,
                  overwrite: bool = False, positions: Optional[np.ndarray] = None, **options):
-        """``k_cycles``: :meth:`cg` cycles with :func:`k_cycle` below the finest level
+        """``A``: the viscous block, CSR, or the 3D condensed block as its nodes' 3 x 3
+        blocks (:class:`~skfem_nem.models.block_rows.BlockSymmetricRows`, expanded to CSR
+        for the set-up alone; with ``overwrite`` it is scaled in place and becomes the
+        finest level). ``k_cycles``: :meth:`cg` cycles with :func:`k_cycle` below the finest level
         (:data:`K_CYCLE_3D`), else V-cycles. ``overwrite``: the scaled block is written
         over the values of ``A`` (a CSR matrix in double precision), which holds it
         afterwards: no second copy of the block while the hierarchy is made (at 100,000
@@ -168,19 +171,38 @@ class ViscousAMG:
         import pyamg
         self.k_cycles = bool(k_cycles)
         self.scale = unit_scale(A)
-        scaled = scaled_block(_own_csr(A, overwrite), self.scale, overwrite=overwrite)
+        blocks = isinstance(A, BlockSymmetricRows)
+        # (a block of 3 x 3 blocks is expanded for the set-up alone: the CSR is its own)
+        scaled = scaled_block(A.tocsr(), self.scale, overwrite=True) if blocks else \
+            scaled_block(_own_csr(A, overwrite), self.scale, overwrite=overwrite)
         with seeded_global_random():
             self.ml = pyamg.smoothed_aggregation_solver(
                 scaled, B=modes / self.scale[:, None], symmetry="symmetric",
                 strength=AMG_STRENGTH, max_coarse=AMG_MAX_COARSE,
                 presmoother=[None, AMG_SMOOTHER], postsmoother=[None, AMG_SMOOTHER],
                 coarse_solver=AMG_COARSE_SOLVER, **options)
-        self.fine = SymmetricRows(scaled, FINE_VALUES) if positions is None else \
-            BlockSymmetricRows(scaled, positions, FINE_VALUES)
-        self.exact = self.fine.twin(scaled)
-        self._let_go_finest()
+        if blocks:
+            del scaled
+            self._let_go_finest()
+            self.fine, self.exact = self._scaled_blocks(A, overwrite, None)
+        else:
+            self.fine = SymmetricRows(scaled, FINE_VALUES) if positions is None else \
+                BlockSymmetricRows(scaled, positions, FINE_VALUES)
+            self.exact = self.fine.twin(scaled)
+            self._let_go_finest()
         self.coefficients = self._chebyshev()
         self._coarse_scale = self.scale     # the scaling the coarse levels were made with
+
+    def _scaled_blocks(self, A: BlockSymmetricRows, overwrite: bool, fine):
+        """The finest level from a block of 3 x 3 blocks: the block scaled by
+        :attr:`scale` (in place with ``overwrite``, else a copy) and its values in
+        :data:`FINE_VALUES` (into ``fine``, or a new twin where None)."""
+        exact = A if overwrite else A.copy()
+        exact.scale(self.scale)
+        if fine is None:
+            return exact.twin(exact, FINE_VALUES), exact
+        fine.refresh(exact)
+        return fine, exact
 
     @property
     def n_levels(self) -> int:
@@ -190,7 +212,8 @@ class ViscousAMG:
     def same_pattern(self, A: sp.spmatrix) -> bool:
         """True if ``A`` has the pattern of the block this hierarchy was built for, so
         that :meth:`refresh` may take its values."""
-        return self.fine.same_pattern(sp.csr_matrix(A))
+        return self.fine.same_pattern(A if isinstance(A, BlockSymmetricRows) else
+                                      sp.csr_matrix(A))
 
     def refresh(self, A: sp.spmatrix, coarse: Optional[bool] = None,
                 overwrite: bool = False) -> None:
@@ -205,7 +228,9 @@ class ViscousAMG:
         keep the Galerkin products of an earlier block); None: the finest alone while
         the block's diagonal stays within :data:`COARSE_KEPT` of the one the coarse
         levels were made from. ``overwrite``: as in the constructor."""
-        A = _own_csr(A, overwrite)      # (checked before the hierarchy is touched)
+        blocks = isinstance(A, BlockSymmetricRows)
+        if not blocks:
+            A = _own_csr(A, overwrite)  # (checked before the hierarchy is touched)
         scale = unit_scale(A)
         if coarse is None:
             coarse = 2.0 * float(np.abs(np.log(scale / self._coarse_scale)).max()) > \
@@ -216,12 +241,17 @@ class ViscousAMG:
             levels[0].R = levels[0].P.T.tocsr()
         self.exact = None                   # (the old values go before the new are made)
         self.scale = scale
-        levels[0].A = scaled_block(A, scale, overwrite=overwrite)
+        if not blocks or coarse or len(levels) == 1:
+            levels[0].A = scaled_block(A.tocsr(), scale, overwrite=True) if blocks else \
+                scaled_block(A, scale, overwrite=overwrite)
         if coarse:
             self._galerkin()
             self._coarse_scale = scale
-        self.fine.refresh(levels[0].A)
-        self.exact = self.fine.twin(levels[0].A)
+        if blocks:
+            self.fine, self.exact = self._scaled_blocks(A, overwrite, self.fine)
+        else:
+            self.fine.refresh(levels[0].A)
+            self.exact = self.fine.twin(levels[0].A)
         self._let_go_finest()
         self.coefficients = self._chebyshev()
 

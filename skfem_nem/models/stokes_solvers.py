@@ -58,6 +58,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..basis import NaturalNeighbourBasis
+from .block_rows import BlockSymmetricRows
 from .krylov import FGMRES_RESTART, MINRES_TOL_FACTOR, dot, fgmres, norm, restarted_minres
 from .saddle_problem import SaddlePointProblem, SaddlePointSolution, saddle_matvec
 from .stokes_amg import ViscousAMG, rigid_modes, velocity_components, viscous_amg
@@ -573,6 +574,8 @@ def solve_auto(problem: SaddlePointProblem, tol: float, maxiter: int, info: dict
     """Solves with the solver :func:`auto_solver` chooses, named in ``info["solver"]``."""
     name = auto_solver(problem, cache is not None)
     info["solver"] = name
+    if name != "fgmres" and isinstance(problem.A, BlockSymmetricRows):
+        problem.A = problem.A.tocsr()       # (the others factorise it or hand it on)
     return SOLVERS[name](problem, tol, maxiter, info,
                          **({} if cache is None else {"cache": cache}))
 

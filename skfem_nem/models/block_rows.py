@@ -183,6 +183,31 @@ class BlockSymmetricRows:
                      row_pos, indptr, indices, data)
         return sp.csr_matrix((data, indices, indptr), shape=(row_pos.size, self.shape[0]))
 
+    def strong(self, theta: float) -> sp.csr_matrix:
+        """The strong couplings of the unknowns, as pyamg's symmetric strength of
+        connection keeps them from the CSR matrix: each diagonal entry, and ``a_ij`` where
+        ``a_ij^2 >= theta^2 |a_ii| |a_jj|``. The pattern is what aggregation reads; the
+        values are ones (single precision)."""
+        col_of = np.full(WIDTH * self.n_nodes, -1, dtype=np.int64)
+        col_of[self.position] = np.arange(self.shape[0])
+        diag = np.zeros(WIDTH * self.n_nodes)
+        diag[self.position] = np.abs(self.diagonal())
+        owner = np.repeat(np.arange(self.n_nodes, dtype=np.int32), np.diff(self.indptr))
+        tptr, tblock = _transposed_blocks(self.indptr, self.indices, owner, self.n_nodes)
+        data = self._values()
+        args = (self.indptr, self.indices, data, owner, tptr, tblock, col_of, self.position,
+                diag, float(theta) * float(theta))
+        counts = np.zeros(self.shape[0], dtype=np.int64)
+        _strong_rows(*args, counts, counts[:0], counts[:0])
+        nnz = int(counts.sum())
+        idt = np.int32 if max(nnz, self.shape[0]) < np.iinfo(np.int32).max else np.int64
+        indptr = np.zeros(self.shape[0] + 1, dtype=idt)
+        np.cumsum(counts, out=indptr[1:])
+        indices = np.empty(nnz, dtype=idt)
+        _strong_rows(*args, counts[:0], indptr, indices)
+        return sp.csr_matrix((np.ones(nnz, dtype=np.float32), indices, indptr),
+                             shape=self.shape)
+
     def scale(self, s: np.ndarray) -> None:
         """``diag(s) A diag(s)`` in place, ``s`` one factor an unknown (the unknowns not
         placed keep theirs): each value ``(a_ij s_j) s_i``, as
@@ -490,3 +515,35 @@ def _expand_rows(bptr, bind, data, owner, tptr, tblock, col_of, row_pos, indptr,
                     indices[o] = c
                     out[o] = data[9 * k + WIDTH * a + b]
                     o += 1
+
+
+@njit(cache=True, parallel=True)
+def _strong_rows(bptr, bind, data, owner, tptr, tblock, col_of, row_pos, diag, theta2,
+                 counts, indptr, indices):
+    """The strong entries of rows ``row_pos`` (:meth:`BlockSymmetricRows.strong`; ``diag``
+    the absolute diagonal by position): their number into ``counts`` where it is not
+    empty, else their columns into ``indices`` from ``indptr``. Walks the rows as
+    :func:`_expand_rows` does."""
+    for r in prange(row_pos.size):
+        i, a = row_pos[r] // WIDTH, row_pos[r] % WIDTH
+        eps = theta2 * diag[row_pos[r]]
+        o = indptr[r] if counts.size == 0 else 0
+        for t in range(tptr[i], tptr[i + 1]):
+            k = tblock[t]
+            for b in range(WIDTH):
+                p = WIDTH * owner[k] + b
+                v = data[9 * k + WIDTH * b + a]
+                if col_of[p] >= 0 and v * v >= eps * diag[p]:
+                    if counts.size == 0:
+                        indices[o] = col_of[p]
+                    o += 1
+        for k in range(bptr[i], bptr[i + 1]):
+            for b in range(WIDTH):
+                p = WIDTH * bind[k] + b
+                v = data[9 * k + WIDTH * a + b]
+                if col_of[p] >= 0 and (p == row_pos[r] or v * v >= eps * diag[p]):
+                    if counts.size == 0:
+                        indices[o] = col_of[p]
+                    o += 1
+        if counts.size:
+            counts[r] = o

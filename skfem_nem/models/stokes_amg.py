@@ -19,6 +19,7 @@ from numba import njit, prange
 
 from ..basis.rigid_modes import rigid_modes, velocity_components
 from ..basis.two_level import level_step, v_cycle
+from .amg_blocks import galerkin_of_blocks, hierarchy_of_blocks, plain_aggregation
 from .block_rows import BlockSymmetricRows, node_positions
 from .krylov import cg_steps, dot, largest_eigenvalue, norm
 from .symmetric_rows import SymmetricRows
@@ -168,30 +169,49 @@ class ViscousAMG:
         ``smoothed_aggregation_solver`` (for the 3D block the prolongator smoothing
         ``smooth``, :data:`AMG_SMOOTH_3D`, and ``improve_candidates``,
         :data:`AMG_IMPROVE_3D`)."""
-        import pyamg
         self.k_cycles = bool(k_cycles)
         self.scale = unit_scale(A)
-        blocks = isinstance(A, BlockSymmetricRows)
-        # (a block of 3 x 3 blocks is expanded for the set-up alone: the CSR is its own)
-        scaled = scaled_block(A.tocsr(), self.scale, overwrite=True) if blocks else \
-            scaled_block(_own_csr(A, overwrite), self.scale, overwrite=overwrite)
+        # a block of 3 x 3 blocks makes its first level itself (amg_blocks) where that level
+        # is pyamg's plain aggregation (the 3D block's: AMG_SMOOTH_3D, AMG_IMPROVE_3D) and
+        # the hierarchy more than its coarsest level
+        self._blocks = (isinstance(A, BlockSymmetricRows) and A.shape[0] > AMG_MAX_COARSE
+                        and plain_aggregation(options))
+        if self._blocks:
+            self._set_up_blocks(A, modes, overwrite, options)
+        else:
+            if isinstance(A, BlockSymmetricRows):
+                A, overwrite = A.tocsr(), True      # (a CSR of its own)
+            self._set_up_csr(A, modes, overwrite, positions, options)
+        self.coefficients = self._chebyshev()
+        self._coarse_scale = self.scale     # the scaling the coarse levels were made with
+
+    def _set_up_csr(self, A, modes, overwrite, positions, options) -> None:
+        """The hierarchy by pyamg from the CSR block, and the finest level's products."""
+        import pyamg
+        scaled = scaled_block(_own_csr(A, overwrite), self.scale, overwrite=overwrite)
         with seeded_global_random():
             self.ml = pyamg.smoothed_aggregation_solver(
                 scaled, B=modes / self.scale[:, None], symmetry="symmetric",
                 strength=AMG_STRENGTH, max_coarse=AMG_MAX_COARSE,
                 presmoother=[None, AMG_SMOOTHER], postsmoother=[None, AMG_SMOOTHER],
                 coarse_solver=AMG_COARSE_SOLVER, **options)
-        if blocks:
-            del scaled
-            self._let_go_finest()
-            self.fine, self.exact = self._scaled_blocks(A, overwrite, None)
-        else:
-            self.fine = SymmetricRows(scaled, FINE_VALUES) if positions is None else \
-                BlockSymmetricRows(scaled, positions, FINE_VALUES)
-            self.exact = self.fine.twin(scaled)
-            self._let_go_finest()
-        self.coefficients = self._chebyshev()
-        self._coarse_scale = self.scale     # the scaling the coarse levels were made with
+        self.fine = SymmetricRows(scaled, FINE_VALUES) if positions is None else \
+            BlockSymmetricRows(scaled, positions, FINE_VALUES)
+        self.exact = self.fine.twin(scaled)
+        self._let_go_finest()
+
+    def _set_up_blocks(self, A: BlockSymmetricRows, modes, overwrite, options) -> None:
+        """The hierarchy from the block's 3 x 3 blocks
+        (:func:`~skfem_nem.models.amg_blocks.hierarchy_of_blocks`), which are scaled (in
+        place with ``overwrite``) and are the finest level."""
+        self.fine, self.exact = None, A if overwrite else A.copy()
+        self.exact.scale(self.scale)
+        with seeded_global_random():
+            self.ml = hierarchy_of_blocks(
+                self.exact, modes / self.scale[:, None], AMG_STRENGTH, AMG_COARSE_SOLVER,
+                max_coarse=AMG_MAX_COARSE, presmoother=AMG_SMOOTHER,
+                postsmoother=AMG_SMOOTHER, **options)
+        self.fine = self.exact.twin(self.exact, FINE_VALUES)
 
     def _scaled_blocks(self, A: BlockSymmetricRows, overwrite: bool, fine):
         """The finest level from a block of 3 x 3 blocks: the block scaled by
@@ -228,8 +248,11 @@ class ViscousAMG:
         keep the Galerkin products of an earlier block); None: the finest alone while
         the block's diagonal stays within :data:`COARSE_KEPT` of the one the coarse
         levels were made from. ``overwrite``: as in the constructor."""
-        blocks = isinstance(A, BlockSymmetricRows)
-        if not blocks:
+        if isinstance(A, BlockSymmetricRows) and not self._blocks:
+            A, overwrite = A.tocsr(), True          # (a CSR of its own)
+        elif self._blocks and not isinstance(A, BlockSymmetricRows):
+            A, overwrite = BlockSymmetricRows(sp.csr_matrix(A), self.exact_position), True
+        elif not self._blocks:
             A = _own_csr(A, overwrite)  # (checked before the hierarchy is touched)
         scale = unit_scale(A)
         if coarse is None:
@@ -241,19 +264,25 @@ class ViscousAMG:
             levels[0].R = levels[0].P.T.tocsr()
         self.exact = None                   # (the old values go before the new are made)
         self.scale = scale
-        if not blocks or coarse or len(levels) == 1:
-            levels[0].A = scaled_block(A.tocsr(), scale, overwrite=True) if blocks else \
-                scaled_block(A, scale, overwrite=overwrite)
-        if coarse:
-            self._galerkin()
-            self._coarse_scale = scale
-        if blocks:
+        if self._blocks:
             self.fine, self.exact = self._scaled_blocks(A, overwrite, self.fine)
+            if coarse:
+                self._galerkin(first=galerkin_of_blocks(self.exact, levels[0].P))
+                self._coarse_scale = scale
         else:
+            levels[0].A = scaled_block(A, scale, overwrite=overwrite)
+            if coarse:
+                self._galerkin()
+                self._coarse_scale = scale
             self.fine.refresh(levels[0].A)
             self.exact = self.fine.twin(levels[0].A)
         self._let_go_finest()
         self.coefficients = self._chebyshev()
+
+    @property
+    def exact_position(self) -> np.ndarray:
+        """The unknowns' places in the 3D field (a hierarchy made from blocks)."""
+        return self.fine.position
 
     def _let_go_finest(self) -> None:
         """Drop the finest level's CSR matrix once its triangles (:attr:`fine`,
@@ -284,13 +313,14 @@ class ViscousAMG:
                                "(release_values); refresh the hierarchy first")
         return F
 
-    def _galerkin(self) -> None:
-        """The coarse matrices from the finest, their smoothers and the coarse solve."""
+    def _galerkin(self, first=None) -> None:
+        """The coarse matrices from the finest (the first of them ``first`` where given),
+        their smoothers and the coarse solve."""
         import pyamg
         from pyamg.relaxation.smoothing import change_smoothers
         levels = self.ml.levels
-        for fine, coarse in zip(levels[:-1], levels[1:]):
-            Ac = fine.R @ fine.A @ fine.P
+        for k, (fine, coarse) in enumerate(zip(levels[:-1], levels[1:])):
+            Ac = first if k == 0 and first is not None else fine.R @ fine.A @ fine.P
             coarse.A = Ac.tobsr(blocksize=coarse.A.blocksize) if sp.issparse(coarse.A) and \
                 coarse.A.format == "bsr" else sp.csr_matrix(Ac)
         with seeded_global_random():

@@ -278,6 +278,9 @@ def test_smoothed_values_at_a_chosen_rule(mesh, basis):
     box1 = sibson_coordinates(mesh.p.T, x, gradient=True, undefined="nan")[0]
     assert abs(box1 - b4.values_matrix).max() < 1e-12
     assert abs(laplace.assemble(b4) - laplace.assemble(basis)).max() < 1e-11
+    # the points' rows alone are kept, not the face rows the gradients were made from
+    ptr, idx, val = b4.cell_rows.V
+    assert ptr[0] == 0 and idx.size == val.size == ptr[-1]
     # on triangles the smoothing cells fix the points: a rule is refused
     tri = delaunay_mesh(np.random.default_rng(0).random((30, 2)))
     with pytest.raises(ValueError, match="intorder chooses a Gauss rule"):

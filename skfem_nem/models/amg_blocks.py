@@ -47,8 +47,7 @@ def galerkin_of_blocks(A: BlockSymmetricRows, P) -> sp.bsr_array:
     per_row = max(1.0, 2.0 * A.nnz / max(n, 1))
     step = max(1, int(GALERKIN_SLICE / per_row))
     out = None
-    for r0 in range(0, n, step):
-        rows = A.tocsr(rows=A.position[r0:r0 + step])
+    for r0, rows in zip(range(0, n, step), A.row_slices(step)):
         part = sp.csr_matrix(P[r0:r0 + step].T @ (rows @ P))
         out = part if out is None else out + part
     out = sp.bsr_array(out, blocksize=(width, width))

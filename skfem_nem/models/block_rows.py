@@ -165,48 +165,56 @@ class BlockSymmetricRows:
         """The whole symmetric matrix on the unknowns as CSR in double precision; with
         ``rows`` (positions among the unknowns', increasing) those rows only, over all
         columns. Columns are sorted; every value of a block is an entry (zeros too)."""
-        col_of = np.full(WIDTH * self.n_nodes, -1, dtype=np.int64)
-        col_of[self.position] = np.arange(self.shape[0])
         row_pos = self.position if rows is None else np.asarray(rows, dtype=np.int64)
-        if not (col_of[row_pos] >= 0).all():
-            raise ValueError("BlockSymmetricRows.tocsr: the rows must be among the unknowns")
-        owner = np.repeat(np.arange(self.n_nodes, dtype=np.int32), np.diff(self.indptr))
-        tptr, tblock = _transposed_blocks(self.indptr, self.indices, owner, self.n_nodes)
-        comps = np.bincount(self.position // WIDTH, minlength=self.n_nodes).astype(np.int64)
-        counts = _row_counts(self.indptr, self.indices, owner, tptr, tblock, comps, row_pos)
-        nnz = int(counts.sum())
-        idt = np.int32 if max(nnz, self.shape[0]) < np.iinfo(np.int32).max else np.int64
-        indptr = np.zeros(row_pos.size + 1, dtype=idt)
-        np.cumsum(counts, out=indptr[1:])
-        indices, data = np.empty(nnz, dtype=idt), np.empty(nnz)
-        _expand_rows(self.indptr, self.indices, self._values(), owner, tptr, tblock, col_of,
-                     row_pos, indptr, indices, data)
-        return sp.csr_matrix((data, indices, indptr), shape=(row_pos.size, self.shape[0]))
+        return self._walk(self._expansion(), row_pos)
+
+    def row_slices(self, step: int):
+        """The rows of the unknowns as CSR (:meth:`tocsr`), ``step`` rows at a time, the
+        blocks' transposed pattern found once for all of them."""
+        ex = self._expansion()
+        for r0 in range(0, self.shape[0], step):
+            yield self._walk(ex, self.position[r0:r0 + step])
 
     def strong(self, theta: float) -> sp.csr_matrix:
         """The strong couplings of the unknowns, as pyamg's symmetric strength of
         connection keeps them from the CSR matrix: each diagonal entry, and ``a_ij`` where
         ``a_ij^2 >= theta^2 |a_ii| |a_jj|``. The pattern is what aggregation reads; the
         values are ones (single precision)."""
-        col_of = np.full(WIDTH * self.n_nodes, -1, dtype=np.int64)
-        col_of[self.position] = np.arange(self.shape[0])
         diag = np.zeros(WIDTH * self.n_nodes)
         diag[self.position] = np.abs(self.diagonal())
+        C = self._walk(self._expansion(), self.position, float(theta) ** 2, diag)
+        C.data = np.ones(C.nnz, dtype=np.float32)
+        return C
+
+    def _expansion(self) -> tuple:
+        """What walking the rows needs: each position's column (-1: not an unknown), each
+        block's row node and, for each node, the blocks of the nodes below it."""
+        col_of = np.full(WIDTH * self.n_nodes, -1, dtype=np.int64)
+        col_of[self.position] = np.arange(self.shape[0])
         owner = np.repeat(np.arange(self.n_nodes, dtype=np.int32), np.diff(self.indptr))
-        tptr, tblock = _transposed_blocks(self.indptr, self.indices, owner, self.n_nodes)
-        data = self._values()
-        args = (self.indptr, self.indices, data, owner, tptr, tblock, col_of, self.position,
-                diag, float(theta) * float(theta))
-        counts = np.zeros(self.shape[0], dtype=np.int64)
-        _strong_rows(*args, counts, counts[:0], counts[:0])
+        return (col_of, owner) + _transposed_blocks(self.indptr, self.indices, owner,
+                                                    self.n_nodes)
+
+    def _walk(self, ex: tuple, row_pos: np.ndarray, theta2: float = 0.0,
+              diag: np.ndarray = None) -> sp.csr_matrix:
+        """CSR rows ``row_pos`` of the symmetric matrix, all its entries (``theta2`` 0) or
+        the strong ones (``diag``: the absolute diagonal by position); values where all are
+        kept, else none (zeros)."""
+        col_of, owner, tptr, tblock = ex
+        if not (col_of[row_pos] >= 0).all():
+            raise ValueError("BlockSymmetricRows.tocsr: the rows must be among the unknowns")
+        args = (self.indptr, self.indices, self._values(), owner, tptr, tblock, col_of,
+                row_pos, np.zeros(0) if diag is None else diag, theta2)
+        counts = np.zeros(row_pos.size, dtype=np.int64)
+        _walk_rows(*args, counts, counts[:0], counts[:0], np.zeros(0))
         nnz = int(counts.sum())
         idt = np.int32 if max(nnz, self.shape[0]) < np.iinfo(np.int32).max else np.int64
-        indptr = np.zeros(self.shape[0] + 1, dtype=idt)
+        indptr = np.zeros(row_pos.size + 1, dtype=idt)
         np.cumsum(counts, out=indptr[1:])
         indices = np.empty(nnz, dtype=idt)
-        _strong_rows(*args, counts[:0], indptr, indices)
-        return sp.csr_matrix((np.ones(nnz, dtype=np.float32), indices, indptr),
-                             shape=self.shape)
+        data = np.empty(nnz) if theta2 == 0.0 else np.zeros(nnz)
+        _walk_rows(*args, counts[:0], indptr, indices, data if theta2 == 0.0 else data[:0])
+        return sp.csr_matrix((data, indices, indptr), shape=(row_pos.size, self.shape[0]))
 
     def scale(self, s: np.ndarray) -> None:
         """``diag(s) A diag(s)`` in place, ``s`` one factor an unknown (the unknowns not
@@ -475,75 +483,43 @@ def _transposed_blocks(bptr, bind, owner, n):
     return tptr, tblock
 
 
-@njit(cache=True, parallel=True)
-def _row_counts(bptr, bind, owner, tptr, tblock, comps, row_pos):
-    """Entries of each CSR row ``row_pos`` (its node's blocks, each with its column
-    node's ``comps`` unknowns)."""
-    counts = np.zeros(row_pos.size, np.int64)
-    for r in prange(row_pos.size):
-        i = row_pos[r] // WIDTH
-        c = 0
-        for t in range(tptr[i], tptr[i + 1]):
-            c += comps[owner[tblock[t]]]
-        for k in range(bptr[i], bptr[i + 1]):
-            c += comps[bind[k]]
-        counts[r] = c
-    return counts
+@njit(cache=True, inline="always")
+def _kept(c, v, p, row, eps, diag, theta2):
+    """Entry ``v`` at position ``p`` (column ``c``) of the row at position ``row`` is
+    kept: an unknown's, and all are kept (``theta2`` 0), or the diagonal, or strong."""
+    return c >= 0 and (theta2 == 0.0 or p == row or v * v >= eps * diag[p])
 
 
 @njit(cache=True, parallel=True)
-def _expand_rows(bptr, bind, data, owner, tptr, tblock, col_of, row_pos, indptr, indices,
-                 out):
+def _walk_rows(bptr, bind, data, owner, tptr, tblock, col_of, row_pos, diag, theta2,
+               counts, indptr, indices, out):
     """CSR rows ``row_pos`` of the symmetric matrix: the transposed blocks of the nodes
-    below (entry (b, a) of block (i, j)) and then the node's own blocks, columns
-    ascending, those of unknowns not placed (``col_of`` -1) left out."""
+    below (entry (b, a) of block (i, j)), then the node's own blocks, columns ascending;
+    the entries :func:`_kept`. Their number into ``counts`` where it is not empty, else
+    their columns into ``indices`` from ``indptr`` (and values into ``out``, not empty).
+    The two loops differ only in which block entry they read."""
     for r in prange(row_pos.size):
-        i, a = row_pos[r] // WIDTH, row_pos[r] % WIDTH
-        o = indptr[r]
-        for t in range(tptr[i], tptr[i + 1]):
-            k = tblock[t]
-            for b in range(WIDTH):
-                c = col_of[WIDTH * owner[k] + b]
-                if c >= 0:
-                    indices[o] = c
-                    out[o] = data[9 * k + WIDTH * b + a]
-                    o += 1
-        for k in range(bptr[i], bptr[i + 1]):
-            for b in range(WIDTH):
-                c = col_of[WIDTH * bind[k] + b]
-                if c >= 0:
-                    indices[o] = c
-                    out[o] = data[9 * k + WIDTH * a + b]
-                    o += 1
-
-
-@njit(cache=True, parallel=True)
-def _strong_rows(bptr, bind, data, owner, tptr, tblock, col_of, row_pos, diag, theta2,
-                 counts, indptr, indices):
-    """The strong entries of rows ``row_pos`` (:meth:`BlockSymmetricRows.strong`; ``diag``
-    the absolute diagonal by position): their number into ``counts`` where it is not
-    empty, else their columns into ``indices`` from ``indptr``. Walks the rows as
-    :func:`_expand_rows` does."""
-    for r in prange(row_pos.size):
-        i, a = row_pos[r] // WIDTH, row_pos[r] % WIDTH
-        eps = theta2 * diag[row_pos[r]]
+        i, a, row = row_pos[r] // WIDTH, row_pos[r] % WIDTH, row_pos[r]
+        eps = theta2 * diag[row] if theta2 != 0.0 else 0.0
         o = indptr[r] if counts.size == 0 else 0
         for t in range(tptr[i], tptr[i + 1]):
             k = tblock[t]
             for b in range(WIDTH):
-                p = WIDTH * owner[k] + b
-                v = data[9 * k + WIDTH * b + a]
-                if col_of[p] >= 0 and v * v >= eps * diag[p]:
+                p, v = WIDTH * owner[k] + b, data[9 * k + WIDTH * b + a]
+                if _kept(col_of[p], v, p, row, eps, diag, theta2):
                     if counts.size == 0:
                         indices[o] = col_of[p]
+                        if out.size:
+                            out[o] = v
                     o += 1
         for k in range(bptr[i], bptr[i + 1]):
             for b in range(WIDTH):
-                p = WIDTH * bind[k] + b
-                v = data[9 * k + WIDTH * a + b]
-                if col_of[p] >= 0 and (p == row_pos[r] or v * v >= eps * diag[p]):
+                p, v = WIDTH * bind[k] + b, data[9 * k + WIDTH * a + b]
+                if _kept(col_of[p], v, p, row, eps, diag, theta2):
                     if counts.size == 0:
                         indices[o] = col_of[p]
+                        if out.size:
+                            out[o] = v
                     o += 1
         if counts.size:
             counts[r] = o

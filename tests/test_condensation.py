@@ -18,7 +18,7 @@ def _spaces(n, seed, **kw):
 
 def _reference(spaces, eta):
     """The condensation by global sparse products of scikit-fem assemblies."""
-    ub, bb = spaces.ubasis, spaces.bbasis
+    ub, bb = spaces.ubasis, spaces.bubbles.vector_basis()
     A = viscous.assemble(ub, eta=eta).tocsr()
     Abb = viscous.assemble(bb, eta=eta).toarray()
     Abn = viscous.assemble(ub, bb, eta=eta).tocsr()
@@ -40,15 +40,15 @@ def _relative(X, Y):
 def test_condensed_block_is_the_global_products_and_exactly_symmetric(seed, npoints):
     spaces = _spaces(120, seed, npoints=npoints)
     eta = np.exp(np.random.default_rng(seed).normal(0.0, 2.0, spaces.ubasis.dx.shape))
-    cv = condensed_viscous(spaces.ubasis, spaces.bbasis, eta)
+    cv = condensed_viscous(spaces.ubasis, spaces.bubbles, eta)
     A, Ainv, AiAbn = _reference(spaces, eta)
     assert _relative(cv.A, A) < 1e-13
     assert _relative(cv.Ainv, Ainv) < 1e-13
     assert _relative(cv.AiAbn, AiAbn) < 1e-13
     assert (cv.A != cv.A.T).nnz == 0                    # bitwise, not to rounding
     assert cv.A.has_canonical_format
-    B = condensed_divergence(spaces.ubasis, spaces.pbasis, spaces.bbasis, cv)
-    Bb = weak_divergence.assemble(spaces.bbasis, spaces.pbasis).tocsr()
+    B = condensed_divergence(spaces.ubasis, spaces.pbasis, spaces.bubbles, cv)
+    Bb = weak_divergence.assemble(spaces.bubbles.vector_basis(), spaces.pbasis).tocsr()
     Bref = weak_divergence.assemble(spaces.ubasis, spaces.pbasis).tocsr() - Bb @ AiAbn
     assert _relative(B, Bref) < 1e-13 and B.has_canonical_format
 
@@ -58,16 +58,16 @@ def test_condensation_on_part_of_the_triangles_adds_up():
     eta = np.exp(np.random.default_rng(3).normal(0.0, 1.0, spaces.ubasis.dx.shape))
     ne = spaces.mesh.nelements
     parts = [np.arange(0, ne, 2), np.arange(1, ne, 2)]
-    whole = condensed_viscous(spaces.ubasis, spaces.bbasis, eta)
+    whole = condensed_viscous(spaces.ubasis, spaces.bubbles, eta)
     A = AiAbn = B = 0
     for idx in parts:
         sub = spaces.restricted(idx)
-        cv = condensed_viscous(sub.ubasis, sub.bbasis, eta[idx])
+        cv = condensed_viscous(sub.ubasis, sub.bubbles, eta[idx])
         A, AiAbn = A + cv.A, AiAbn + cv.AiAbn
-        B = B + condensed_divergence(sub.ubasis, sub.pbasis, sub.bbasis, cv)
+        B = B + condensed_divergence(sub.ubasis, sub.pbasis, sub.bubbles, cv)
     assert _relative(A, whole.A) < 1e-13
     assert _relative(AiAbn, whole.AiAbn) < 1e-14
-    wholeB = condensed_divergence(spaces.ubasis, spaces.pbasis, spaces.bbasis, whole)
+    wholeB = condensed_divergence(spaces.ubasis, spaces.pbasis, spaces.bubbles, whole)
     assert _relative(B, wholeB) < 1e-13
 
 
@@ -77,7 +77,7 @@ def test_a_singular_bubble_block_is_named():
     eta[7] = 0.0
     with pytest.raises(ValueError, match="degenerate triangle 7: its bubble block is "
                                          r"singular \(1 triangle"):
-        condensed_viscous(spaces.ubasis, spaces.bbasis, eta)
+        condensed_viscous(spaces.ubasis, spaces.bubbles, eta)
 
 
 def test_condensed_tet_divergence_is_the_sparse_product():
@@ -95,7 +95,7 @@ def test_condensed_tet_divergence_is_the_sparse_product():
     ne, nq = spaces.ubasis.dx.shape
     rng = np.random.default_rng(0)
     for _ in range(2):
-        cv = condensed_viscous_tet(spaces.ubasis, spaces.bbasis,
+        cv = condensed_viscous_tet(spaces.ubasis, spaces.bubbles,
                                    np.exp(rng.standard_normal((ne, nq))))
         ref = (Bn - cache["Bb"] @ cv.AiAbn.tocsr()).tocsr()
         got = td.condensed(cv)
@@ -117,7 +117,7 @@ def test_the_tetrahedra_bubbles_coupling_is_an_operator_of_its_entries():
     spaces = stokes_spaces(delaunay_mesh(box_nodes_3d(300, seed=2)))
     ne, nq = spaces.ubasis.dx.shape
     rng = np.random.default_rng(1)
-    M = condensed_viscous_tet(spaces.ubasis, spaces.bbasis,
+    M = condensed_viscous_tet(spaces.ubasis, spaces.bubbles,
                               np.exp(rng.standard_normal((ne, nq)))).AiAbn
     assert isinstance(M, TetCoupling) and M.shape == (3 * ne, spaces.ubasis.N)
     C = M.tocsr()
@@ -144,8 +144,8 @@ def test_the_tetrahedra_block_as_upper_blocks_is_the_csr_block_bit_for_bit():
     spaces = stokes_spaces(delaunay_mesh(box_nodes_3d(300, seed=2)))
     ne, nq = spaces.ubasis.dx.shape
     eta = np.exp(np.random.default_rng(2).standard_normal((ne, nq)))
-    csr = ct.condensed_viscous_tet(spaces.ubasis, spaces.bbasis, eta).A
-    up = ct.condensed_viscous_tet(spaces.ubasis, spaces.bbasis, eta, blocks=True).A
+    csr = ct.condensed_viscous_tet(spaces.ubasis, spaces.bubbles, eta).A
+    up = ct.condensed_viscous_tet(spaces.ubasis, spaces.bubbles, eta, blocks=True).A
     assert isinstance(up, BlockSymmetricRows) and up.shape == csr.shape
     assert up.nnz < 0.6 * csr.nnz
     again = up.tocsr()
@@ -156,6 +156,6 @@ def test_the_tetrahedra_block_as_upper_blocks_is_the_csr_block_bit_for_bit():
     Wsum, gsum, det = np.empty(ne), np.empty((ne, 3)), np.empty(ne)
     Ainv = np.zeros((ne, 3, 3))
     ct._tet_blocks_serial(spaces.ubasis.stencil_ptr, nq, np.ascontiguousarray(
-        eta * spaces.ubasis.dx), ct._bubble_gradient(spaces.bbasis), Wsum, gsum, Ainv, det)
+        eta * spaces.ubasis.dx), spaces.bubbles.gradient(), Wsum, gsum, Ainv, det)
     serial = ct._summed_tet(spaces.ubasis, G, Wsum, gsum, Ainv, False, True)
     assert np.array_equal(serial.data, up.data)

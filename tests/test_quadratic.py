@@ -144,7 +144,7 @@ def test_two_layer_poiseuille_exact(ratio):
     pts, seg = layered_nodes(250, 0)
     mesh = delaunay_mesh(pts, segments={"interface": seg})
     spaces = stokes_spaces(mesh, "nem2")
-    assert spaces.bbasis is None and not spaces.stabilised
+    assert spaces.bubbles is None and not spaces.stabilised
     dofs = spaces.ubasis.get_dofs()
     ux, uy = dofs.all("u^1"), dofs.all("u^2")
     y = spaces.ubasis.doflocs[1]

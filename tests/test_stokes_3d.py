@@ -62,7 +62,7 @@ def test_manufactured_solution_is_one():
 def test_spaces_on_tetrahedra(mesh, spaces):
     n = mesh.p.shape[1]
     assert spaces.dim == 3 and spaces.n_velocity == 3 * n and spaces.n_pressure == n
-    assert spaces.bbasis.N == 3 * mesh.nelements
+    assert spaces.bubbles.N == 3 * mesh.nelements
     mini = stokes_spaces(mesh, "mini")
     th = stokes_spaces(mesh, "taylor-hood")
     assert mini.n_pressure == th.n_pressure == n
@@ -331,12 +331,13 @@ def test_condensation_kernels_match_scikit_fem_assembly(spaces):
     def visc(u, v, w):
         return 2.0 * w["eta"] * ddot(sym_grad(u), sym_grad(v))
 
-    ub, bb = spaces.ubasis, spaces.bbasis
+    ub, bb = spaces.ubasis, spaces.bubbles
     eta = quadrature_values(spaces, lambda x: np.exp(3 * x[0] * x[1] + x[2]), "eta")
     cv = condensed_viscous_tet(ub, bb, eta)
     Ann = visc.assemble(ub, eta=eta).toarray()
-    Abn = visc.assemble(ub, bb, eta=eta).toarray()
-    Abb = visc.assemble(bb, eta=eta).toarray()
+    vb = bb.vector_basis()
+    Abn = visc.assemble(ub, vb, eta=eta).toarray()
+    Abb = visc.assemble(vb, eta=eta).toarray()
     AiAbn = np.linalg.solve(Abb, Abn)
     A = Ann - Abn.T @ AiAbn
     assert np.abs(cv.A.toarray() - A).max() < 1e-11 * np.abs(A).max()

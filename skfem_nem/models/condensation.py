@@ -1,7 +1,7 @@
 """Static condensation of the Stokes bubbles, triangle by triangle, inside the assembly.
 
 The natural-neighbour velocity of method ``"nem"`` carries one cubic bubble per triangle
-and component (:class:`~skfem_nem.models.stokes_bases.ElementTriBubble`). A bubble lives
+and component (:class:`~skfem_nem.models.bubbles.ElementTriBubble`). A bubble lives
 in one triangle, so eliminating it changes only that triangle's element matrix: the
 viscous block of triangle e becomes ``A_e - A_bn,e^T A_bb,e^-1 A_bn,e``, where ``A_bn,e``
 (2 x 2 S_e) couples its two bubbles to its S_e stencil functions and ``A_bb,e`` is their
@@ -33,7 +33,6 @@ from ..basis.assembly import parallel_kernels, stencil_position
 from ..basis.summation import basis_row_order, blocks, incidence, node_pattern, stencil_union
 from ..coordinates.batch import index_dtype
 from ..jit import serial_twin
-from .stokes_bases import ElementTriBubble
 
 __all__ = ["CondensedViscous", "condensed_viscous", "condensed_divergence"]
 
@@ -223,18 +222,6 @@ class CondensedViscous:
         self.local = local
 
 
-def _bubble_gradient(bbasis) -> np.ndarray:
-    """(2, ne, nq) gradient of the scalar bubble at the quadrature points."""
-    return np.ascontiguousarray(np.asarray(bbasis.basis[0][0].grad)[0])
-
-
-def _bubble_integral(bbasis) -> np.ndarray:
-    """(ne,) the quadrature's integral of each triangle's bubble (its values at the
-    reference points, as scikit-fem's assembly takes them)."""
-    phi = ElementTriBubble().lbasis(bbasis.quadrature[0], 0)[0]
-    return (bbasis.dx * phi[None]).sum(axis=1)
-
-
 def _rows_csr(rows: np.ndarray, indptr: np.ndarray, cols: np.ndarray, data: np.ndarray,
               shape: tuple) -> sp.csr_matrix:
     """CSR matrix of the given rows, in the order ``rows`` (a permutation of a subset)."""
@@ -253,10 +240,10 @@ def _interleaved(ubasis) -> np.ndarray:
     return nodal
 
 
-def condensed_viscous(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
+def condensed_viscous(ubasis, bubbles, eta: np.ndarray) -> CondensedViscous:
     """The viscous block ``2 eta eps(u) : eps(v)`` of the natural-neighbour velocity
-    ``ubasis`` with the bubbles of ``bbasis`` (a vector :class:`ElementTriBubble` basis
-    on the same triangles and quadrature) condensed out, for the viscosity ``eta``
+    ``ubasis`` with the ``bubbles`` (:class:`~skfem_nem.models.bubbles.Bubbles` on the
+    same triangles and quadrature) condensed out, for the viscosity ``eta``
     (ne, nq) at the quadrature points. Raises ``ValueError`` naming the first triangle
     whose bubble block is singular."""
     nodal = _interleaved(ubasis)
@@ -273,19 +260,19 @@ def condensed_viscous(ubasis, bbasis, eta: np.ndarray) -> CondensedViscous:
     parallel = parallel_kernels(ubasis)
     (_bubbles if parallel else _bubbles_serial)(
         ptr, sten, Phi.indptr, Phi.indices, ubasis.gradient_entries, nq, w,
-        _bubble_gradient(bbasis), nodal, offg, Gl, off2, X, AiAbn, cols, Ainv, det)
+        bubbles.gradient(), nodal, offg, Gl, off2, X, AiAbn, cols, Ainv, det)
     bad = ~(det > 0)
     if bad.any():
         raise ValueError(f"degenerate triangle {int(np.flatnonzero(bad)[0])}: its bubble "
                          f"block is singular ({int(bad.sum())} triangle(s))")
     A = _summed(ubasis, nodal, nq, w, offg, Gl, off2, X, Ainv, parallel)
-    bd = bbasis.element_dofs                       # (2, ne): the bubbles of triangle e
+    bd = bubbles.element_dofs                      # (2, ne): the bubbles of triangle e
     indptr = np.zeros(2 * ne + 1, dtype=np.int64)
     np.cumsum(np.repeat(2 * S, 2), out=indptr[1:])
-    AiAbn_m = _rows_csr(bd.T.ravel(), indptr, cols, AiAbn, (bbasis.N, ubasis.N))
+    AiAbn_m = _rows_csr(bd.T.ravel(), indptr, cols, AiAbn, (bubbles.N, ubasis.N))
     r2 = np.repeat(bd.T, 2, axis=1).ravel()
     c2 = np.tile(bd.T, (1, 2)).ravel()
-    Ainv_m = sp.csr_matrix((Ainv.ravel(), (r2, c2)), shape=(bbasis.N, bbasis.N))
+    Ainv_m = sp.csr_matrix((Ainv.ravel(), (r2, c2)), shape=(bubbles.N, bubbles.N))
     return CondensedViscous(A, Ainv_m, AiAbn_m, (off2, AiAbn))
 
 
@@ -306,7 +293,7 @@ def _summed(ubasis, nodal, nq, w, offg, Gl, off2, X, Ainv, parallel) -> sp.csr_m
     return sp.csr_matrix((data, indices, indptr), shape=(ubasis.N, ubasis.N))
 
 
-def _divergence_data(ubasis, pbasis, bbasis, parallel: bool) -> tuple:
+def _divergence_data(ubasis, pbasis, bubbles, parallel: bool) -> tuple:
     """What the divergence block needs that no coefficient changes, once per spaces (kept
     with ``pbasis``): the pressure nodes' triangles and the union of their stencils
     (``(inc_ptr, inc_e, inc_l, cptr, cols)``), the P1 gradients (3, 2, ne) and the
@@ -320,19 +307,19 @@ def _divergence_data(ubasis, pbasis, bbasis, parallel: bool) -> tuple:
                                   pbasis.N, parallel)
         gl = np.ascontiguousarray(np.stack([np.asarray(pbasis.basis[k][0].grad)[:, :, 0]
                                             for k in range(3)]))
-        data = pbasis.__dict__["_divergence_data"] = (pat, gl, _bubble_integral(bbasis))
+        data = pbasis.__dict__["_divergence_data"] = (pat, gl, bubbles.integral())
     return data
 
 
-def condensed_divergence(ubasis, pbasis, bbasis, cv: CondensedViscous) -> sp.csr_matrix:
+def condensed_divergence(ubasis, pbasis, bubbles, cv: CondensedViscous) -> sp.csr_matrix:
     """The divergence block ``(u, grad q)`` of the natural-neighbour velocity ``ubasis``
-    and the P1 pressure ``pbasis``, with the bubbles of ``bbasis`` condensed out as in
+    and the P1 pressure ``pbasis``, with the ``bubbles`` condensed out as in
     ``cv`` (:func:`condensed_viscous`): ``B - B_b A_bb^-1 A_bn``, (np, nu) CSR over the
     union of the stencils of each pressure node's triangles."""
     nodal = _interleaved(ubasis)
     nq, npres = ubasis.dx.shape[1], pbasis.N
     parallel = parallel_kernels(ubasis)
-    (inc_ptr, inc_e, inc_l, cptr, cols), gl, psi = _divergence_data(ubasis, pbasis, bbasis,
+    (inc_ptr, inc_e, inc_l, cptr, cols), gl, psi = _divergence_data(ubasis, pbasis, bubbles,
                                                                     parallel)
     nnz = 2 * int(cptr[-1])
     idt = index_dtype(ubasis.N, nnz)

@@ -1,7 +1,7 @@
 """Static condensation of the Stokes bubbles on tetrahedra, inside the assembly.
 
 The 3D natural-neighbour velocity of method ``"nem"`` carries one quartic bubble per
-tetrahedron and component (:class:`~skfem_nem.models.stokes_bases.ElementTetBubble`).
+tetrahedron and component (:class:`~skfem_nem.models.bubbles.ElementTetBubble`).
 Each bubble lives in one tetrahedron, so eliminating it changes that tetrahedron's element
 matrix only:
 
@@ -194,11 +194,6 @@ _tet_blocks_serial = serial_twin(_tet_blocks)
 _condensed_rows_tet_serial = serial_twin(_condensed_rows_tet)
 
 
-def _bubble_gradient(bbasis) -> np.ndarray:
-    """(3, ne, nq) gradient of the scalar bubble at the quadrature points."""
-    return np.ascontiguousarray(np.asarray(bbasis.basis[0][0].grad)[0])
-
-
 def _nodal(ubasis) -> None:
     """``ValueError`` unless the velocity dofs are ``3 node + c`` with constant
     gradients per tetrahedron (the smoothed vector natural-neighbour basis)."""
@@ -210,11 +205,11 @@ def _nodal(ubasis) -> None:
                          "basis on tetrahedra (dofs 3 node + c, one smoothing cell each)")
 
 
-def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray,
+def condensed_viscous_tet(ubasis, bubbles, eta: np.ndarray,
                           blocks: bool = False) -> CondensedViscous:
     """The viscous block ``2 eta eps(u) : eps(v)`` of the smoothed natural-neighbour
-    velocity ``ubasis`` on tetrahedra with the bubbles of ``bbasis`` (a vector
-    :class:`~skfem_nem.models.stokes_bases.ElementTetBubble` basis on the same quadrature)
+    velocity ``ubasis`` on tetrahedra with the ``bubbles``
+    (:class:`~skfem_nem.models.bubbles.Bubbles` on the same quadrature)
     condensed out, for the viscosity ``eta`` (ne, nq) at the quadrature points; exactly
     symmetric. ``blocks``: the block as its nodes' upper 3 x 3 blocks
     (:class:`~skfem_nem.models.block_rows.BlockSymmetricRows`; half the entries made, the
@@ -231,7 +226,7 @@ def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray,
     # iterations of a step share them)
     G = np.ascontiguousarray(stencil_gradients(ubasis, parallel)).reshape(-1)
     (_tet_blocks if parallel else _tet_blocks_serial)(
-        ptr, nq, w, _bubble_gradient(bbasis), Wsum, gsum, Ainv, det)
+        ptr, nq, w, bubbles.gradient(), Wsum, gsum, Ainv, det)
     # flat tetrahedra (Qhull's, of co-spherical or co-planar nodes) carry no weight and
     # no bubble; any other singular block is an error
     bad = ~(det > 0) & (Wsum > 0)
@@ -240,7 +235,7 @@ def condensed_viscous_tet(ubasis, bbasis, eta: np.ndarray,
                          f"block is singular ({int(bad.sum())} tetrahedra)")
     A = _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel, blocks)
     coupling = TetCoupling(ptr, ubasis.stencil_nodes, G, gsum, Ainv, ubasis.N, parallel)
-    return CondensedViscous(A, _bubble_inverse(bbasis, Ainv), coupling, None)
+    return CondensedViscous(A, _bubble_inverse(bubbles, Ainv), coupling, None)
 
 
 def _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel, upper=False):
@@ -267,16 +262,16 @@ def _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel, upper=False):
     return sp.csr_matrix((data, indices, indptr), shape=(ubasis.N, ubasis.N))
 
 
-def _bubble_inverse(bbasis, Ainv) -> sp.csr_matrix:
+def _bubble_inverse(bubbles, Ainv) -> sp.csr_matrix:
     """``A_bb^-1`` as a sparse matrix on the bubble dofs (three per tetrahedron)."""
     ne = Ainv.shape[0]
-    bd = np.asarray(bbasis.element_dofs)                     # (3, ne)
-    if bbasis.N != 3 * ne or not np.array_equal(bd.T.ravel(), np.arange(3 * ne)):
-        raise ValueError("the bubble basis must number its dofs 3 e + c (tetrahedron e, "
-                         "component c), as ElementVector(ElementTetBubble()) does")
+    bd = bubbles.element_dofs                                # (3, ne)
+    if bubbles.N != 3 * ne:
+        raise ValueError(f"the bubbles must be those of all {ne} tetrahedra, got "
+                         f"{bubbles.N // 3}")
     return sp.csr_matrix((Ainv.ravel(), (np.repeat(bd.T, 3, axis=1).ravel(),
                                          np.tile(bd.T, (1, 3)).ravel())),
-                         shape=(bbasis.N, bbasis.N))
+                         shape=(bubbles.N, bubbles.N))
 
 
 def divergence_tet(ubasis, pbasis) -> sp.csr_matrix:

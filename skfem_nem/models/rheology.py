@@ -316,9 +316,9 @@ def velocity_gradient(spaces: StokesSpaces, sol: StokesSolution) -> np.ndarray:
     including the condensed bubbles where the space has them."""
     G = np.asarray(spaces.ubasis.interpolate(sol.u).grad)
     ub = sol.info.get("bubble") if isinstance(sol.info, dict) else None
-    bb = getattr(spaces, "bbasis", None)
+    bb = getattr(spaces, "bubbles", None)
     if ub is not None and bb is not None:
-        G = G + np.asarray(bb.interpolate(ub).grad)
+        G = G + bb.gradient_of(ub)
     return G
 
 

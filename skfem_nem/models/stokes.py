@@ -111,7 +111,7 @@ from .condensation import condensed_divergence, condensed_viscous
 from .block_rows import BlockSymmetricRows
 from .condensation_tet import (TetDivergence, condensed_viscous_tet, divergence_tet,
                                loads_tet)
-from .stokes_bases import ElementTriBubble, StokesSpaces, stokes_spaces  # noqa: F401
+from .stokes_bases import StokesSpaces, stokes_spaces  # noqa: F401
 from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_columns,
                            outline_flux, wall_dofs, walls_fix_pressure)
 from .saddle_problem import SaddlePointProblem, SaddlePointSolution
@@ -294,7 +294,7 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
     cache = spaces.__dict__.setdefault("_cache", {})
     if "m" in cache:
         return cache
-    ub, pb, bb = spaces.ubasis, spaces.pbasis, spaces.bbasis
+    ub, pb, bb = spaces.ubasis, spaces.pbasis, spaces.bubbles
     bform = divergence_form(spaces)
     if bform is weak_divergence:
         cache["flux"] = boundary_flux(spaces)
@@ -304,7 +304,7 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
         B = divergence_tet(ub, pb) if nem3 else bform.assemble(ub, pb).tocsr()
         cache["B"] = (B - cache["flux"]).tocsr() if "flux" in cache else B
     else:
-        cache["Bb"] = bform.assemble(bb, pb).tocsr()
+        cache["Bb"] = bb.bilinear(bform, pb)
         if nem3:  # the natural-neighbour part and the bubbles' blocks, for the condensation
             cache["tet_divergence"] = TetDivergence(divergence_tet(ub, pb), cache["Bb"], pb)
     cache["m"] = _unit.assemble(pb)
@@ -348,26 +348,28 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         return b
 
     cache = _blocks_once(spaces)
-    nem3 = spaces.dim == 3 and spaces.bbasis is not None and spaces.method == "nem"
+    nem3 = spaces.dim == 3 and spaces.bubbles is not None and spaces.method == "nem"
     b = loads_tet(ub, fv, t) if nem3 else loads(ub)
     inv = 1.0 / e
     Mp = weighted_mass.assemble(pb, c=inv).tocsr()
     m = cache["m"]
     g = np.zeros(pb.N)
     S = _stabilisation(spaces, inv) if spaces.stabilised else sp.csr_matrix((pb.N, pb.N))
-    if spaces.bbasis is None:
+    if spaces.bubbles is None:
         A = viscous.assemble(ub, eta=e).tocsr()
         return StokesSystem(0.5 * (A + A.T), cache["B"], 0.5 * (S + S.T), Mp, m, b, e, g,
                             None)
     # static condensation of the bubbles, triangle by triangle (models.condensation)
-    bb, Bb = spaces.bbasis, cache["Bb"]                      # Bb (np, nb)
+    bb, Bb = spaces.bubbles, cache["Bb"]                     # Bb (np, nb)
     if spaces.dim == 3:  # by sparse products (models.condensation_tet)
         cv = condensed_viscous_tet(ub, bb, e, blocks=viscous_blocks)
         B = cache["tet_divergence"].condensed(cv)
     else:
         cv = condensed_viscous(ub, bb, e)
         B = condensed_divergence(ub, pb, bb, cv)
-    fb = loads(bb)
+    fb = bb.linear(body_force, f=fv)
+    if t is not None:
+        fb = fb + bb.linear(stress_load, tau=t)
     B = (B - cache["flux"]).tocsr()
     S = (Bb @ cv.Ainv @ Bb.T).tocsr()
     b = b - cv.AiAbn.T @ fb
@@ -379,7 +381,7 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
 def takes_viscous_blocks(spaces: StokesSpaces) -> bool:
     """True for the natural-neighbour velocity on tetrahedra, whose viscous block can be
     assembled as its nodes' 3 x 3 blocks (``assemble_stokes(..., viscous_blocks=True)``)."""
-    return spaces.dim == 3 and spaces.bbasis is not None and spaces.method == "nem"
+    return spaces.dim == 3 and spaces.bubbles is not None and spaces.method == "nem"
 
 
 def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
@@ -435,7 +437,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         vector (mean zero if fixed so), iteration count and relative
         residual; ``info["reaction"]`` (nu,) the forces the constrained dofs
         exert on the fluid (zero elsewhere), ``info["fixed"]`` those dofs,
-        ``info["bubble"]`` the condensed bubble dofs (``spaces.bbasis``), and
+        ``info["bubble"]`` the condensed bubble dofs (``spaces.bubbles``), and
         ``info["assembled_triangles"]`` the triangles this process assembled
         (all of them; with ``solver="petsc"`` on several MPI ranks its strip; 0 for a
         given ``system``); ``info["assembly_seconds"]``, ``info["solver_seconds"]``.
@@ -626,8 +628,8 @@ def inf_sup_constant(spaces: StokesSpaces, stabilised: Optional[bool] = None,
     A = h1.assemble(ub)[free][:, free]
     bform = divergence_form(spaces)
     B = bform.assemble(ub, pb)[:, free]
-    if spaces.bbasis is not None:  # bubbles vanish on the walls: all free
-        bb = spaces.bbasis
+    if spaces.bubbles is not None:  # bubbles vanish on the walls: all free
+        bb = spaces.bubbles.vector_basis()
         Hbn = h1.assemble(ub, bb)[:, free]
         A = sp.bmat([[A, Hbn.T], [Hbn, h1.assemble(bb)]])
         B = sp.hstack([B, bform.assemble(bb, pb)])

@@ -8,7 +8,7 @@ scikit-fem's MINI), with one quadrature, and the same spaces restricted to a sub
 the triangles for a distributed assembly (:meth:`StokesSpaces.restricted`).
 
 The same methods on a Delaunay ``MeshTet`` (3D) take the tetrahedron's elements: its
-quartic bubble :class:`ElementTetBubble`, P1 and P0 pressures, P2 for Taylor-Hood and
+quartic bubble (:mod:`skfem_nem.models.bubbles`), P1 and P0 pressures, P2 for Taylor-Hood and
 ``ElementTetMini``; the natural-neighbour velocity is then the smoothed Box 1 basis, one
 smoothing cell per tetrahedron (:class:`~skfem_nem.NaturalNeighbourBasis`).
 """
@@ -19,64 +19,24 @@ from typing import Optional
 
 import numpy as np
 from skfem import Basis, MeshTet, MeshTri
-from skfem.element import (ElementH1, ElementTetMini, ElementTetP0, ElementTetP1,
-                           ElementTetP2, ElementTriMini, ElementTriP0, ElementTriP1,
-                           ElementTriP2, ElementVector)
-from skfem.refdom import RefTet, RefTri
+from skfem.element import (ElementTetMini, ElementTetP0, ElementTetP1, ElementTetP2,
+                           ElementTriMini, ElementTriP0, ElementTriP1, ElementTriP2,
+                           ElementVector)
+from skfem.refdom import RefTet
 
 from ..basis import (ElementNaturalNeighbour, ElementNaturalNeighbour2, NaturalNeighbourBasis,
                      gauss_rule)
+from .bubbles import Bubbles
 
-__all__ = ["ElementTriBubble", "ElementTetBubble", "StokesSpaces", "stokes_spaces"]
-
-
-class ElementTriBubble(ElementH1):
-    """The cubic bubble ``27 x y (1 - x - y)`` alone: one interior dof per
-    triangle (the enrichment of the MINI element)."""
-
-    interior_dofs = 1
-    dim = 2
-    maxdeg = 3
-    dofnames = ["b"]
-    doflocs = np.array([[1.0 / 3.0, 1.0 / 3.0]])
-    refdom = RefTri
-
-    def lbasis(self, X, i):
-        x, y = X
-        if i != 0:
-            self._index_error()
-        phi = 27.0 * x * y * (1.0 - x - y)
-        dphi = 27.0 * np.array([y * (1.0 - x - y) - x * y, x * (1.0 - x - y) - x * y])
-        return phi, dphi
-
-
-class ElementTetBubble(ElementH1):
-    """The quartic bubble ``256 x y z (1 - x - y - z)`` alone: one interior dof per
-    tetrahedron (the enrichment of the 3D MINI element)."""
-
-    interior_dofs = 1
-    dim = 3
-    maxdeg = 4
-    dofnames = ["b"]
-    doflocs = np.array([[0.25, 0.25, 0.25]])
-    refdom = RefTet
-
-    def lbasis(self, X, i):
-        x, y, z = X
-        if i != 0:
-            self._index_error()
-        s = 1.0 - x - y - z
-        phi = 256.0 * x * y * z * s
-        dphi = 256.0 * np.array([y * z * (s - x), x * z * (s - y), x * y * (s - z)])
-        return phi, dphi
+__all__ = ["StokesSpaces", "stokes_spaces"]
 
 
 # the elements of each method on triangles and on tetrahedra
 _ELEMENTS = {
-    "tri": {"bubble": ElementTriBubble, "p1": ElementTriP1, "p0": ElementTriP0,
-            "p2": ElementTriP2, "mini": ElementTriMini},
-    "tet": {"bubble": ElementTetBubble, "p1": ElementTetP1, "p0": ElementTetP0,
-            "p2": ElementTetP2, "mini": ElementTetMini},
+    "tri": {"p1": ElementTriP1, "p0": ElementTriP0, "p2": ElementTriP2,
+            "mini": ElementTriMini},
+    "tet": {"p1": ElementTetP1, "p0": ElementTetP0, "p2": ElementTetP2,
+            "mini": ElementTetMini},
 }
 
 # Gauss orders on tetrahedra: Taylor-Hood's forms (P2 gradients times P2 gradients,
@@ -96,7 +56,8 @@ class StokesSpaces:
     ubasis: object
     pbasis: Basis
     p0basis: Basis
-    bbasis: Optional[Basis] = None
+    # the condensed bubbles of method "nem" (models.bubbles), else None
+    bubbles: Optional[Bubbles] = None
     # the triangles these bases integrate over (None: all), see restricted()
     elements: Optional[np.ndarray] = None
 
@@ -139,16 +100,19 @@ class StokesSpaces:
         if self.elements is not None:
             raise ValueError("these spaces are already restricted: restrict the whole ones")
         quad = self.pbasis.quadrature
+        tet = isinstance(self.mesh, MeshTet)
 
         def sub(basis):
-            if basis is None:
-                return None
-            if isinstance(basis, NaturalNeighbourBasis):
-                return basis.with_elements(elements)
-            return Basis(self.mesh, basis.elem, quadrature=quad, elements=elements)
+            if basis is None or isinstance(basis, NaturalNeighbourBasis):
+                return None if basis is None else basis.with_elements(elements)
+            out = basis.restricted(elements) if isinstance(basis, Bubbles) else \
+                Basis(self.mesh, basis.elem, quadrature=quad, elements=elements)
+            if tet:
+                _zero_flat_gradients(out.basis if isinstance(out, Bubbles) else out)
+            return out
 
         return StokesSpaces(self.mesh, self.method, sub(self.ubasis), sub(self.pbasis),
-                            sub(self.p0basis), sub(self.bbasis), elements)
+                            sub(self.p0basis), sub(self.bubbles), elements)
 
 
 def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optional[int] = None,
@@ -211,7 +175,7 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
                                    intorder=BUBBLE_ORDER if smoothed else None)
         quad = ub.quadrature
         if method == "nem":
-            bb = Basis(mesh, ElementVector(el["bubble"](), mesh.dim()), quadrature=quad)
+            bb = Bubbles(mesh, quad)
     else:
         if integration not in (None, "gauss"):
             raise ValueError(f"integration={integration!r} is an option of the "
@@ -227,7 +191,7 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
     pb = Basis(mesh, el["p1"](), quadrature=quad)
     p0 = Basis(mesh, el["p0"](), quadrature=quad)
     if tet:
-        for b in (ub, pb, p0, bb):
+        for b in (ub, pb, p0, None if bb is None else bb.basis):
             _zero_flat_gradients(b)
     return StokesSpaces(mesh, method, ub, pb, p0, bb)
 

@@ -111,6 +111,7 @@ from .condensation import condensed_divergence, condensed_viscous
 from .block_rows import BlockSymmetricRows
 from .condensation_tet import (TetDivergence, condensed_viscous_tet, divergence_tet,
                                loads_tet)
+from .pressure_tet import bubble_stabilisation_tet, weighted_mass_tet
 from .stokes_bases import StokesSpaces, stokes_spaces  # noqa: F401
 from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_columns,
                            outline_flux, wall_dofs, walls_fix_pressure)
@@ -351,7 +352,8 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     nem3 = spaces.dim == 3 and spaces.bubbles is not None and spaces.method == "nem"
     b = loads_tet(ub, fv, t) if nem3 else loads(ub)
     inv = 1.0 / e
-    Mp = weighted_mass.assemble(pb, c=inv).tocsr()
+    # (on tetrahedra from 4 x 4 blocks: models.pressure_tet)
+    Mp = weighted_mass_tet(pb, inv) if d == 3 else weighted_mass.assemble(pb, c=inv).tocsr()
     m = cache["m"]
     g = np.zeros(pb.N)
     S = _stabilisation(spaces, inv) if spaces.stabilised else sp.csr_matrix((pb.N, pb.N))
@@ -363,15 +365,17 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     bb, Bb = spaces.bubbles, cache["Bb"]                     # Bb (np, nb)
     if spaces.dim == 3:  # by sparse products (models.condensation_tet)
         cv = condensed_viscous_tet(ub, bb, e, blocks=viscous_blocks)
-        B = cache["tet_divergence"].condensed(cv)
+        div = cache["tet_divergence"]
+        B = div.condensed(cv)
+        S = bubble_stabilisation_tet(pb, div.local, cv.AiAbn.Q)
     else:
         cv = condensed_viscous(ub, bb, e)
         B = condensed_divergence(ub, pb, bb, cv)
+        S = (Bb @ cv.Ainv @ Bb.T).tocsr()
     fb = bb.linear(body_force, f=fv)
     if t is not None:
         fb = fb + bb.linear(stress_load, tau=t)
     B = (B - cache["flux"]).tocsr()
-    S = (Bb @ cv.Ainv @ Bb.T).tocsr()
     b = b - cv.AiAbn.T @ fb
     g = -(Bb @ (cv.Ainv @ fb))
     return StokesSystem(cv.A, B, 0.5 * (S + S.T), Mp, m, b, e, g,

@@ -440,6 +440,8 @@ def test_level_surface_of_a_linear_field_is_its_plane():
     (["--depth", "3"], "--depth is not a parameter of the 2D plate"),
     (["--dim", "3", "--plate-y", "1.9"], "plate_y / plate_width"),
     (["--dim", "3", "--solver", "petsc"], "solver must be one of"),
+    (["--dim", "3", "--first-solve-tol", "1"],
+     "first_solve_tol must be 0 (solver_tol's) or a number in (0, 1), got 1"),
 ])
 def test_user_errors_are_one_line(args, words, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:

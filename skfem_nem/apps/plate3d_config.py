@@ -100,6 +100,9 @@ class Plate3DConfig:
     solver_tol: float = 0.0
     #: Picard tolerance of the plastic iterations (relative velocity change)
     picard_tol: float = 1e-3
+    #: relative residual of a step's first Stokes solve, whose iterate only starts the
+    #: Picard iterations (``vep_step``'s ``first_tol``); 0: solver_tol's
+    first_solve_tol: float = 1e-3
     #: remap of the stress history on flips: "conservative" or "average"
     remap: str = "conservative"
     #: solve each step a second time on the nodes moved half a step (two solves a step, the
@@ -154,6 +157,10 @@ class Plate3DConfig:
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 1):
             raise ValueError(f"solver_tol must be 0 (from picard_tol) or a number in (0, 1), "
                              f"got {v!r}")
+        v = self.first_solve_tol
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 1):
+            raise ValueError(f"first_solve_tol must be 0 (solver_tol's) or a number in "
+                             f"(0, 1), got {v!r}")
         if not isinstance(self.midpoint, bool):
             raise ValueError(f"midpoint must be true or false, got {self.midpoint!r}")
         if self.viscosity_mean not in VISCOSITY_MEANS:
@@ -213,6 +220,8 @@ HELP_3D = {
     "output_interval": "time between VTU outputs",
     "solver_tol": "relative residual of each Stokes solve (0: a thousandth of picard_tol)",
     "picard_tol": "Picard tolerance of the plastic iterations",
+    "first_solve_tol": "relative residual of a step's first Stokes solve, which only starts "
+                       "the Picard iterations (0: solver_tol's)",
     "remap": 'remap of the stress history on flips: "conservative" or "average"',
     "midpoint": "solve each step again on the nodes moved half a step (two solves a step, "
                 "the first to a looser Picard tolerance; --no-midpoint: one)",

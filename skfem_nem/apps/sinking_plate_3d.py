@@ -296,6 +296,7 @@ class SinkingPlate3D:
         r = vep_step(spaces, mat, to_quadrature(f["stress"]), dt, f=force,
                      plastic_strain=to_quadrature(f["plastic_strain"]), tol=tol,
                      solver=c.solver, cache=self._cache, linear_tol=c.solver_tol or None,
+                     first_tol=c.first_solve_tol or None,
                      on_iterate=on_iterate, **guesses)
         v = r.solution.velocity_at_nodes()
         stable = self._stable_dt(v)

@@ -382,7 +382,7 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
              min_viscosity: Optional[float] = None, u_guess: Optional[np.ndarray] = None,
              constraints=None, eta_guess: Optional[np.ndarray] = None,
              solver: str = "auto", cache: Optional[StokesCache] = None,
-             linear_tol: Optional[float] = None,
+             linear_tol: Optional[float] = None, first_tol: Optional[float] = None,
              on_iterate: Optional[Callable[[StokesSolution], None]] = None) -> VEPStep:
     """One visco-elasto-plastic time step (see the module docstring).
 
@@ -412,6 +412,12 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
         falls below ``tol``; each Stokes solve at the relative residual ``linear_tol``,
         default ``PICARD_LINEAR_FACTOR * tol`` (at least ``LINEAR_TOL``), or
         ``LINEAR_TOL`` for a step without iterations (``docs/stokes.md``).
+    first_tol
+        Relative residual of the first Stokes solve of a step with Picard iterations,
+        looser than ``linear_tol`` for an iterative solver: the first iterate only sets
+        the viscosity and the spin the second solve starts from, and is never the one
+        accepted (where it would end the iterations, one more solve follows at
+        ``linear_tol``). None (default): the first solve at ``linear_tol`` too.
     min_viscosity
         Lower bound of the effective plastic viscosity (Pa s); default
         ``1e-8`` times the smallest visco-elastic viscosity.
@@ -432,7 +438,8 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     Raises
     ------
     ValueError
-        For a bad ``dt``, ``solver``, ``cache`` or ``linear_tol`` (in (0, 1)), a stress of
+        For a bad ``dt``, ``solver``, ``cache``, ``linear_tol`` or ``first_tol`` (in
+        (0, 1)), a stress of
         the wrong shape, or a non-finite old or new stress (naming the element).
     RuntimeError
         If the Picard iterations do not converge in ``maxiter`` iterations
@@ -447,9 +454,11 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     G = None if u is None else np.asarray(spaces.ubasis.interpolate(u).grad)
     eta_eff = st.start_viscosity(eta_guess)
     walls = (prescribed, free_slip, no_slip, pressure_mean)
+    if first_tol is not None:
+        _check_fraction("first_tol", first_tol)
     pic = _picard(spaces, st, u, G, eta_eff, walls, constraints, tol, maxiter,
                   dict(solver=solver, cache=cache, tol=_linear_tol(linear_tol, tol, st)),
-                  on_iterate)
+                  on_iterate, first_tol if st.iterate else None)
     return _vep_result(st, pic)
 
 
@@ -458,10 +467,14 @@ def _linear_tol(linear_tol, tol: float, st: _StepSetup) -> float:
     ``ValueError`` unless a given one is a number in (0, 1)."""
     if linear_tol is None:
         return max(LINEAR_TOL, PICARD_LINEAR_FACTOR * tol) if st.iterate else LINEAR_TOL
-    if not (isinstance(linear_tol, (int, float)) and not isinstance(linear_tol, bool)
-            and 0 < linear_tol < 1):
-        raise ValueError(f"linear_tol must be a number in (0, 1), got {linear_tol!r}")
+    _check_fraction("linear_tol", linear_tol)
     return float(linear_tol)
+
+
+def _check_fraction(name: str, v) -> None:
+    """``ValueError`` naming ``name`` unless ``v`` is a number in (0, 1)."""
+    if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < 1):
+        raise ValueError(f"{name} must be a number in (0, 1), got {v!r}")
 
 
 @dataclass
@@ -574,18 +587,22 @@ def _plastic_viscosity(st: _StepSetup, eps: np.ndarray, rotated: np.ndarray) -> 
 
 def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
             G: Optional[np.ndarray], eta_eff: np.ndarray, walls: tuple, constraints,
-            tol: float, maxiter: int, solve: dict, on_iterate=None) -> _PicardResult:
+            tol: float, maxiter: int, solve: dict, on_iterate=None,
+            first_tol: Optional[float] = None) -> _PicardResult:
     """Stokes solves with the viscosity and rotated stress of the previous
     iterate until the relative velocity change is below ``tol``; ``solve``:
-    the solver keywords of :func:`solve_stokes_bc`; ``on_iterate``: see :func:`vep_step`."""
+    the solver keywords of :func:`solve_stokes_bc`; ``on_iterate``, ``first_tol``: see
+    :func:`vep_step`."""
     history = []
     seconds = {"assembly": 0.0, "solver": 0.0}
     res, weight, du_last = np.inf, 1.0, None
     rotated = st.rotated(G)    # once per iterate: the load and the viscosity share it
+    floor = solve["tol"]
     for it in range(1, maxiter + 1):
         tau0 = (eta_eff * st.chi)[None, None] * rotated
+        linear = first_tol if it == 1 and first_tol is not None else floor
         sol = solve_stokes_bc(spaces, eta_eff, st.load, tau0, *walls, constraints=constraints,
-                              **solve)
+                              **dict(solve, tol=linear))
         for part in seconds:
             seconds[part] += sol.info[f"{part}_seconds"]
         if on_iterate is not None:
@@ -604,7 +621,8 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
         history.append(res)
         u, du_last = sol.u, du
         d_eta = float(np.abs(np.log(eta_new / eta_eff)).max())
-        if res <= tol * weight and (d_eta <= VISCOSITY_SETTLED or it > 1):
+        resolved = linear <= floor      # (a loose first solve: one more, not accepted)
+        if res <= tol * weight and (d_eta <= VISCOSITY_SETTLED or it > 1) and resolved:
             eta_eff = eta_new
             break
         eta_eff = eta_eff ** (1.0 - weight) * eta_new ** weight

@@ -407,17 +407,12 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     rotation
         ``"jaumann"``, ``"exact"`` (see :func:`rotate_stress`) or ``"none"``; the spin is
         the current Picard iterate's (``u_guess``'s for the first solve, else zero).
-    tol, maxiter, linear_tol
+    tol, maxiter, linear_tol, first_tol
         Picard iterations stop when the relative change of the velocity (max norm)
         falls below ``tol``; each Stokes solve at the relative residual ``linear_tol``,
         default ``PICARD_LINEAR_FACTOR * tol`` (at least ``LINEAR_TOL``), or
-        ``LINEAR_TOL`` for a step without iterations (``docs/stokes.md``).
-    first_tol
-        Relative residual of the first Stokes solve of a step with Picard iterations,
-        looser than ``linear_tol`` for an iterative solver: the first iterate only sets
-        the viscosity and the spin the second solve starts from, and is never the one
-        accepted (where it would end the iterations, one more solve follows at
-        ``linear_tol``). None (default): the first solve at ``linear_tol`` too.
+        ``LINEAR_TOL`` for a step without iterations (``docs/stokes.md``); the first solve
+        at ``first_tol`` if given (never the iterate accepted: ``docs/rheology.md``).
     min_viscosity
         Lower bound of the effective plastic viscosity (Pa s); default
         ``1e-8`` times the smallest visco-elastic viscosity.
@@ -439,11 +434,9 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     ------
     ValueError
         For a bad ``dt``, ``solver``, ``cache``, ``linear_tol`` or ``first_tol`` (in
-        (0, 1)), a stress of
-        the wrong shape, or a non-finite old or new stress (naming the element).
+        (0, 1)), a stress of the wrong shape, or a non-finite stress (naming the element).
     RuntimeError
-        If the Picard iterations do not converge in ``maxiter`` iterations
-        (naming the count and the last residual).
+        If the Picard iterations do not converge in ``maxiter`` (naming both numbers).
     """
     check_solver(solver, cache)
     if cache is None and solver in CACHED_SOLVERS:
@@ -454,11 +447,9 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     G = None if u is None else np.asarray(spaces.ubasis.interpolate(u).grad)
     eta_eff = st.start_viscosity(eta_guess)
     walls = (prescribed, free_slip, no_slip, pressure_mean)
-    if first_tol is not None:
-        _check_fraction("first_tol", first_tol)
+    floor, first = _linear_tol(linear_tol, tol, st), _first_tol(first_tol, st)
     pic = _picard(spaces, st, u, G, eta_eff, walls, constraints, tol, maxiter,
-                  dict(solver=solver, cache=cache, tol=_linear_tol(linear_tol, tol, st)),
-                  on_iterate, first_tol if st.iterate else None)
+                  dict(solver=solver, cache=cache, tol=floor), on_iterate, first)
     return _vep_result(st, pic)
 
 
@@ -469,6 +460,15 @@ def _linear_tol(linear_tol, tol: float, st: _StepSetup) -> float:
         return max(LINEAR_TOL, PICARD_LINEAR_FACTOR * tol) if st.iterate else LINEAR_TOL
     _check_fraction("linear_tol", linear_tol)
     return float(linear_tol)
+
+
+def _first_tol(first_tol, st: _StepSetup) -> Optional[float]:
+    """The first solve's relative residual where the step iterates (see :func:`vep_step`);
+    ``ValueError`` unless a given one is a number in (0, 1)."""
+    if first_tol is None:
+        return None
+    _check_fraction("first_tol", first_tol)
+    return float(first_tol) if st.iterate else None
 
 
 def _check_fraction(name: str, v) -> None:

@@ -225,15 +225,18 @@ def _cell_products(c_ptr, c_idx, c_grad, u, out):
 
 
 @njit(cache=True)
-def _transposed_products(cell_of, c_ptr, c_idx, c_grad, y, out):
-    """``out[d, j] += c_grad[d, k] y[d, r]`` for point r's cell's entries k (column j), the
-    points in order: the transposed product with the gradients at the points, adding in the
-    order a CSR matrix of them would (serial: that order is the point order)."""
-    for r in range(cell_of.shape[0]):
-        c = cell_of[r]
+def _transposed_products(c_ptr, c_idx, c_grad, Y, out):
+    """``out[m, c_idx[k]] += sum_d c_grad[d, k] Y[m, d, c]`` over cell c's entries k: the
+    transposed products of the cells' gradient rows with the fields ``Y`` (m, dim, cells),
+    all m fields in one pass over the rows (serial: the scatter into ``out``)."""
+    for c in range(c_ptr.shape[0] - 1):
         for k in range(c_ptr[c], c_ptr[c + 1]):
-            for d in range(c_grad.shape[0]):
-                out[d, c_idx[k]] += c_grad[d, k] * y[d, r]
+            j = c_idx[k]
+            for m in range(Y.shape[0]):
+                s = 0.0
+                for d in range(c_grad.shape[0]):
+                    s += c_grad[d, k] * Y[m, d, c]
+                out[m, j] += s
 
 
 class CellRows:
@@ -282,12 +285,17 @@ class CellRows:
         _cell_products(self.c_ptr, self.c_idx, self.c_grad, np.ascontiguousarray(u, float), g)
         return g[:, self.cell_of]
 
-    def transposed_gradients(self, y):
-        """(dim, functions): ``sum_r grad phi_j(x_r) y[d, r]`` for the (dim, points) ``y``:
-        the joined rows' transposed products, summed in the same order."""
-        out = np.zeros((self.c_grad.shape[0], self.shape[1]))
-        _transposed_products(self.cell_of, self.c_ptr, self.c_idx, self.c_grad,
-                             np.ascontiguousarray(y, float), out)
+    def cell_sums(self, y: np.ndarray) -> np.ndarray:
+        """(cells,) the sums of the points' values ``y`` (points,) over each cell's points."""
+        return np.bincount(self.cell_of, weights=y, minlength=self.c_ptr.shape[0] - 1)
+
+    def transposed_gradients(self, Y: np.ndarray) -> np.ndarray:
+        """(m, functions): ``sum_r sum_d d_d phi_j(x_r) y[m, d, r]`` from the fields'
+        sums over each cell's points ``Y`` (m, dim, cells; :meth:`cell_sums`): the points of
+        a cell share its gradient row, so one pass over the cells' rows serves all m."""
+        out = np.zeros((Y.shape[0], self.shape[1]))
+        _transposed_products(self.c_ptr, self.c_idx, self.c_grad,
+                             np.ascontiguousarray(Y, float), out)
         return out
 
     def joined(self):

@@ -414,13 +414,15 @@ def loads_tet(ubasis, f: np.ndarray, tau=None) -> np.ndarray:
     if tau is None:
         return b.ravel()
     rows = ubasis.cell_rows
+    if rows is not None:  # the gradients are their cells': the stress summed over each cell
+        Y = np.empty((3, 3, rows.c_ptr.shape[0] - 1))
+        for c in range(3):
+            for d in range(c, 3):
+                Y[c, d] = Y[d, c] = rows.cell_sums(0.5 * (tau[c, d] + tau[d, c]).ravel() * dx)
+        b -= rows.transposed_gradients(Y).T
+        return b.ravel()
     for c in range(3):
         y = np.stack([0.5 * (tau[c, d] + tau[d, c]).ravel() * dx for d in range(3)])
-        if rows is not None:    # the gradients are their cells': no joined rows made
-            t = rows.transposed_gradients(y)
-            for d in range(3):
-                b[:, c] -= t[d]
-            continue
         grads = ubasis.gradient_entries                      # (3, nnz of Phi)
         for d in range(3):
             Gd = sp.csr_matrix((grads[d], Phi.indices, Phi.indptr), shape=Phi.shape)

@@ -85,6 +85,10 @@ def test_bad_input_is_named():
         b.gradient_of(np.zeros(b.N + 1))
     with pytest.raises(ValueError, match="coefficient 'f' must be a number or have the"):
         b.linear(body_force, f=np.zeros((2, 5)))
+    ne = b.dx.shape[0]
+    with pytest.raises(ValueError, match=rf"blocks must have shape \({ne}, 2, 2\), got "
+                                         rf"\({ne}, 3, 3\)"):
+        b.block_diagonal(np.zeros((ne, 3, 3)))
 
 
 def test_the_docstring_example_runs():

@@ -143,6 +143,17 @@ class Bubbles:
         g = self.gradient()
         return np.stack([x[self.element_dofs[c]][None, :, None] * g for c in range(self.dim)])
 
+    def block_diagonal(self, blocks: np.ndarray) -> sp.csr_matrix:
+        """(N, N) CSR of one (dim, dim) block per integrated cell, ``blocks`` (ne, dim,
+        dim), on that cell's bubbles (e.g. the inverse of the bubbles' block)."""
+        d, bd = self.dim, self.element_dofs.T                  # (ne, dim)
+        if blocks.shape != (bd.shape[0], d, d):
+            raise ValueError(f"blocks must have shape ({bd.shape[0]}, {d}, {d}), got "
+                             f"{blocks.shape}")
+        return sp.csr_matrix((blocks.ravel(), (np.repeat(bd, d, axis=1).ravel(),
+                                               np.tile(bd, (1, d)).ravel())),
+                             shape=(self.N, self.N))
+
     def vector_basis(self) -> Basis:
         """scikit-fem's basis of the vector bubble on the same cells and points (its
         arrays for all components: for small meshes, e.g. an inf-sup eigenproblem)."""

@@ -270,10 +270,7 @@ def condensed_viscous(ubasis, bubbles, eta: np.ndarray) -> CondensedViscous:
     indptr = np.zeros(2 * ne + 1, dtype=np.int64)
     np.cumsum(np.repeat(2 * S, 2), out=indptr[1:])
     AiAbn_m = _rows_csr(bd.T.ravel(), indptr, cols, AiAbn, (bubbles.N, ubasis.N))
-    r2 = np.repeat(bd.T, 2, axis=1).ravel()
-    c2 = np.tile(bd.T, (1, 2)).ravel()
-    Ainv_m = sp.csr_matrix((Ainv.ravel(), (r2, c2)), shape=(bubbles.N, bubbles.N))
-    return CondensedViscous(A, Ainv_m, AiAbn_m, (off2, AiAbn))
+    return CondensedViscous(A, bubbles.block_diagonal(Ainv), AiAbn_m, (off2, AiAbn))
 
 
 def _summed(ubasis, nodal, nq, w, offg, Gl, off2, X, Ainv, parallel) -> sp.csr_matrix:

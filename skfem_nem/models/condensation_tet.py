@@ -235,7 +235,7 @@ def condensed_viscous_tet(ubasis, bubbles, eta: np.ndarray,
                          f"block is singular ({int(bad.sum())} tetrahedra)")
     A = _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel, blocks)
     coupling = TetCoupling(ptr, ubasis.stencil_nodes, G, gsum, Ainv, ubasis.N, parallel)
-    return CondensedViscous(A, _bubble_inverse(bubbles, Ainv), coupling, None)
+    return CondensedViscous(A, bubbles.block_diagonal(Ainv), coupling, None)
 
 
 def _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel, upper=False):
@@ -260,18 +260,6 @@ def _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel, upper=False):
     indptr[:-1] = (9 * cptr[:-1, None] + 3 * nv[:, None] * np.arange(3)[None]).ravel()
     indptr[-1] = nnz
     return sp.csr_matrix((data, indices, indptr), shape=(ubasis.N, ubasis.N))
-
-
-def _bubble_inverse(bubbles, Ainv) -> sp.csr_matrix:
-    """``A_bb^-1`` as a sparse matrix on the bubble dofs (three per tetrahedron)."""
-    ne = Ainv.shape[0]
-    bd = bubbles.element_dofs                                # (3, ne)
-    if bubbles.N != 3 * ne:
-        raise ValueError(f"the bubbles must be those of all {ne} tetrahedra, got "
-                         f"{bubbles.N // 3}")
-    return sp.csr_matrix((Ainv.ravel(), (np.repeat(bd.T, 3, axis=1).ravel(),
-                                         np.tile(bd.T, (1, 3)).ravel())),
-                         shape=(bubbles.N, bubbles.N))
 
 
 def divergence_tet(ubasis, pbasis) -> sp.csr_matrix:

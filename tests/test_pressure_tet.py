@@ -44,3 +44,21 @@ def test_blocks_of_another_shape_are_named():
     with pytest.raises(ValueError, match=rf"local must have shape \({ne}, 4, 4\), got "
                                          rf"\({ne}, 3, 3\)"):
         tet_blocks_summed(spaces.pbasis, np.zeros((ne, 3, 3)))
+
+
+def test_the_kept_pattern_sums_each_new_set_of_blocks():
+    """The second and later calls on one basis read the kept pattern: each must still be
+    scipy's sum of the blocks, in canonical CSR form."""
+    import scipy.sparse as sp
+    spaces = stokes_spaces(delaunay_mesh(cube_nodes(50, seed=6)))
+    pb = spaces.pbasis
+    dofs = np.asarray(pb.element_dofs).T
+    rows, cols = np.repeat(dofs, 4, axis=1).ravel(), np.tile(dofs, (1, 4)).ravel()
+    rng = np.random.default_rng(6)
+    for _ in range(3):
+        local = rng.normal(size=(dofs.shape[0], 4, 4))
+        S = tet_blocks_summed(pb, local)
+        ref = sp.csr_matrix((local.ravel(), (rows, cols)), shape=(pb.N, pb.N))
+        assert S.has_canonical_format and S.nnz == ref.nnz
+        assert np.array_equal(S.indptr, ref.indptr) and np.array_equal(S.indices, ref.indices)
+        assert _relative(S, ref) < 1e-15

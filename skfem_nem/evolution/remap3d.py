@@ -26,6 +26,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from ..geometry.entities import unique_ints
+
 __all__ = ["REMAP_RULES", "cell_points", "cell_volumes", "check_ip_fields", "remap_fields",
            "to_quadrature", "from_quadrature", "match_rows"]
 
@@ -110,7 +112,9 @@ def remap_fields(p, old_t, new_t, fields, rule):
         raise ValueError(f"remap must be one of {REMAP_RULES}, got {rule!r}")
     kept, src = match_rows(old_t, new_t)
     made = np.flatnonzero(~kept)
-    gone = np.setdiff1d(np.arange(old_t.shape[0]), src[kept])
+    unmatched = np.ones(old_t.shape[0], bool)
+    unmatched[src[kept]] = False
+    gone = np.flatnonzero(unmatched)
     # slot in the old tet of each new tet's vertex (kept rows)
     slot = np.argmax(old_t[src][:, None, :] == new_t[:, :, None], axis=2)
     label = _regions(p.shape[0], np.concatenate([old_t[gone], new_t[made]]))
@@ -140,7 +144,7 @@ def _region_values(tn, ln, vn, to, lo, vo, fo, rule):
     np.add.at(reg_sum, reg_o, flat * w[:, None])
     reg_vol = np.bincount(reg_o, weights=w, minlength=nreg)[:, None]
     vals = (reg_sum / np.where(reg_vol > 0, reg_vol, 1.0))[reg_n]
-    uniq, inv = np.unique(pair_o, return_inverse=True)
+    uniq, inv = unique_ints(pair_o, return_inverse=True)
     if uniq.size:
         sums = np.zeros((uniq.size, flat.shape[1]))
         np.add.at(sums, inv, flat)

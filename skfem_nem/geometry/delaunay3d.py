@@ -19,6 +19,7 @@ from numba import njit
 
 from .delaunay3d_build import DUPLICATE, FLAT, add_points, build
 from .delaunay3d_repair import COINCIDENT, LOST, remove_points, repair, working
+from .entities import unique_ints
 from .nodesets import morton_order
 from .predicates3d import orient3d_sign
 
@@ -199,7 +200,7 @@ class Delaunay3D:
         S = self.simplices.astype(np.int64)
         pairs = np.array([(i, j) for i in range(4) for j in range(4) if i != j])
         a, b = S[:, pairs[:, 0]].ravel(), S[:, pairs[:, 1]].ravel()
-        key = np.unique(a * self.npoints + b)
+        key = unique_ints(a * self.npoints + b)
         indptr = np.searchsorted(key // self.npoints, np.arange(self.npoints + 1))
         return indptr.astype(np.int32), (key % self.npoints).astype(np.int32)
 

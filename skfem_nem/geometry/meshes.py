@@ -25,6 +25,7 @@ from skfem import MeshTet, MeshTri
 from .constrained import check_segments, flood_regions, pair_keys
 from .delaunay3d import Delaunay3D
 from .delaunay_nd import delaunay_of
+from .entities import prime_facets
 from .predicates import orient2d
 from .triangulation import Triangulation, unused_nodes, validate_nodes
 
@@ -172,9 +173,7 @@ def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
     if len(shape) == 2 and shape[1] == 3:
         p = validate_nodes(points, dim=3, name="points")
         tri = delaunay_of(p)
-        mesh = MeshTet(np.ascontiguousarray(p.T),
-                       np.ascontiguousarray(tri.simplices.T, dtype=np.int64))
-        return _cache(mesh, tri)
+        return _cache(_tet_mesh(p, tri.simplices), tri)
     tri = Triangulation(points)
     return MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T))
 
@@ -187,12 +186,20 @@ def triangulation_mesh(tri: Triangulation | Delaunay3D) -> MeshTri | MeshTet:
     :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D` the ``MeshTet`` of its
     tetrahedra (same order), which a moving 3D mesh repairs instead of rebuilding."""
     if isinstance(tri, Delaunay3D):
-        mesh = MeshTet(np.ascontiguousarray(tri.points.T),
-                       np.ascontiguousarray(tri.simplices.T, dtype=np.int64))
-        return _cache(mesh, tri)
+        return _cache(_tet_mesh(tri.points, tri.simplices), tri)
     mesh = MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T),
                    sort_t=False)
     return _cache(mesh, tri)
+
+
+def _tet_mesh(p: np.ndarray, simplices: np.ndarray) -> MeshTet:
+    """The ``MeshTet`` of nodes ``p`` (n, 3) and tetrahedra ``simplices`` (m, 4), its
+    facets found at once by keys (:func:`~.entities.prime_facets`): every natural-neighbour
+    basis on it needs them (the smoothing cells), and scikit-fem's own search was the
+    slowest part of a 3D basis's set-up."""
+    mesh = MeshTet(np.ascontiguousarray(p.T), np.ascontiguousarray(simplices.T, dtype=np.int64))
+    prime_facets(mesh)
+    return mesh
 
 
 def _named(segments, n):

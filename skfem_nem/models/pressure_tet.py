@@ -13,8 +13,12 @@ of the blocks into CSR.
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import scipy.sparse as sp
+
+from ..geometry.entities import unique_ints
 
 __all__ = ["tet_blocks_summed", "weighted_mass_tet", "bubble_stabilisation_tet"]
 
@@ -22,15 +26,37 @@ __all__ = ["tet_blocks_summed", "weighted_mass_tet", "bubble_stabilisation_tet"]
 def tet_blocks_summed(pbasis, local: np.ndarray) -> sp.csr_matrix:
     """(np, np) CSR sum of the blocks ``local`` (ne, 4, 4) of the P1 pressure ``pbasis``'s
     tetrahedra (``local[e, i, j]`` at row ``element_dofs[i, e]``, column
-    ``element_dofs[j, e]``)."""
-    dofs = np.asarray(pbasis.element_dofs)                    # (4, ne)
-    ne = dofs.shape[1]
+    ``element_dofs[j, e]``). The pattern and each block entry's place in it are found once
+    a basis (:func:`_pattern`); a call then sums the entries into their places."""
+    ne = np.shape(pbasis.element_dofs)[1]
     if local.shape != (ne, 4, 4):
         raise ValueError(f"local must have shape ({ne}, 4, 4), got {local.shape}")
-    idx = dofs.T.astype(np.int32 if pbasis.N < 2 ** 31 else np.int64)
-    rows = np.repeat(idx, 4, axis=1).ravel()
-    cols = np.tile(idx, (1, 4)).ravel()
-    return sp.csr_matrix((local.ravel(), (rows, cols)), shape=(pbasis.N, pbasis.N))
+    indptr, indices, place = _pattern(pbasis)
+    data = np.bincount(place, weights=local.ravel(), minlength=indices.size)
+    return sp.csr_matrix((data, indices, indptr), shape=(pbasis.N, pbasis.N))
+
+
+# the CSR pattern of each pressure basis and the place of each of its block entries, kept
+# while the basis lives: the Picard iterations of a step make both blocks on one basis again
+# and again, and scipy's sum of duplicates (a sort of every row) was most of their time
+_PATTERNS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _pattern(pbasis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(indptr, indices, place)``: the CSR pattern of ``pbasis``'s tetrahedra's blocks
+    and, for each entry of ``local.ravel()``, the index of its CSR entry."""
+    if pbasis in _PATTERNS:
+        return _PATTERNS[pbasis]
+    dofs = np.asarray(pbasis.element_dofs).T.astype(np.int64)      # (ne, 4)
+    n = np.int64(pbasis.N)
+    key = (np.repeat(dofs, 4, axis=1) * n + np.tile(dofs, (1, 4))).ravel()
+    entries, place = unique_ints(key, return_inverse=True)
+    indptr = np.zeros(pbasis.N + 1, np.int64)
+    np.cumsum(np.bincount(entries // n, minlength=pbasis.N), out=indptr[1:])
+    small = np.int32 if max(pbasis.N, entries.size) < 2 ** 31 else np.int64
+    out = (indptr.astype(small), (entries % n).astype(small), place.astype(small))
+    _PATTERNS[pbasis] = out
+    return out
 
 
 def weighted_mass_tet(pbasis, c: np.ndarray) -> sp.csr_matrix:

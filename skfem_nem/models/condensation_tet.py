@@ -38,7 +38,7 @@ from ..basis.cell_rows import PARALLEL_MIN, count_then_fill
 from ..basis.summation import (basis_row_order, blocks, incidence, node_pattern,
                                stencil_gradients)
 from ..coordinates.batch import index_dtype
-from ..jit import serial_twin
+from ..jit import EXACT_FASTMATH, serial_twin
 from .block_rows import BlockSymmetricRows
 from .condensation import CondensedViscous
 from .coupling_tet import TetCoupling, add_weighted_rows
@@ -90,7 +90,7 @@ def _tet_blocks(ptr, nq, w, gb, Wsum, gsum, Ainv, det):
                 Ainv[e, a, b] = Ainv[e, b, a] = m
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=EXACT_FASTMATH)
 def _condensed_rows_tet(ptr, sten, G, Wsum, g, Ainv, inc_ptr, inc_e, inc_l, cptr, cols, n3,
                         order, nblocks, klo, ubptr, indices_out, data_out):
     """The condensed viscous block row by row: node v's three rows hold its couplings
@@ -145,7 +145,7 @@ def _upper_pattern(cptr, cols):
     return klo, ubptr, bind
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=EXACT_FASTMATH)
 def _add_row_tet(e, j, ptr, sten, G, Wsum, g, Ainv, pos, base, kstride, cvstride,
                  data_out):
     """Add row j (three components) of tetrahedron e's condensed element matrix:

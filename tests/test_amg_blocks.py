@@ -80,3 +80,38 @@ def test_another_first_level_is_refused_by_name():
         amg_blocks.hierarchy_of_blocks(blocks, B, AMG_STRENGTH, AMG_COARSE_SOLVER,
                                        smooth="jacobi", improve_candidates=None)
     assert not amg_blocks.plain_aggregation({"smooth": None})
+
+
+def test_the_galerkin_product_of_aggregates_is_the_sliced_product():
+    """The kernel's ``T^T A T`` is scipy's product of the block's rows: for pyamg's
+    tentative prolongator (BSR), the same rescaled as a refresh does (CSR, width given),
+    one with rows in no aggregate; and a prolongator not of aggregates takes scipy's."""
+    from pyamg.aggregation import fit_candidates, standard_aggregation
+    A, blocks, B = _scaled_block()
+    B = np.hstack([B, np.random.default_rng(1).standard_normal((B.shape[0], 3))])
+    aggregates, _ = standard_aggregation(blocks.strong(AMG_STRENGTH[1]["theta"]))
+    T, _ = fit_candidates(aggregates, B)
+    dense = A.toarray()
+
+    def check(P, width=None):
+        got = amg_blocks.galerkin_of_blocks(blocks, P, width)
+        want = sps.csr_matrix(P).T @ dense @ sps.csr_matrix(P).toarray()
+        k = width or P.blocksize[1]
+        assert got.format == "bsr" and got.blocksize == (k, k) and got.has_sorted_indices
+        assert abs(got.toarray() - want).max() <= 1e-13 * abs(want).max()
+        sliced = amg_blocks._galerkin_by_slices(blocks, P, k)
+        assert abs(got - sliced).max() <= 1e-13 * abs(sliced).max()
+        return got
+
+    check(T)
+    s = np.random.default_rng(2).uniform(0.5, 2.0, T.shape[0])
+    check(sps.csr_matrix(sps.diags(s) @ T), width=6)
+    some = sps.csr_matrix(T)
+    some = sps.csr_matrix(sps.diags((np.arange(T.shape[0]) % 7 != 0).astype(float)) @ some)
+    some.eliminate_zeros()
+    check(some, width=6)
+    assert amg_blocks._aggregate_rows(sps.csr_matrix(some), 6) is not None
+    mixed = sps.csr_matrix(T) + sps.csr_matrix(
+        (np.ones(3), ([0, 1, 2], [T.shape[1] - 1] * 3)), shape=T.shape)
+    assert amg_blocks._aggregate_rows(mixed, 6) is None
+    check(mixed, width=6)

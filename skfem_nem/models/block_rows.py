@@ -166,12 +166,12 @@ class BlockSymmetricRows:
         ``rows`` (positions among the unknowns', increasing) those rows only, over all
         columns. Columns are sorted; every value of a block is an entry (zeros too)."""
         row_pos = self.position if rows is None else np.asarray(rows, dtype=np.int64)
-        return self._walk(self._expansion(), row_pos)
+        return self._walk(self.walk_tables(), row_pos)
 
     def row_slices(self, step: int):
         """The rows of the unknowns as CSR (:meth:`tocsr`), ``step`` rows at a time, the
         blocks' transposed pattern found once for all of them."""
-        ex = self._expansion()
+        ex = self.walk_tables()
         for r0 in range(0, self.shape[0], step):
             yield self._walk(ex, self.position[r0:r0 + step])
 
@@ -182,13 +182,16 @@ class BlockSymmetricRows:
         values are ones (single precision)."""
         diag = np.zeros(WIDTH * self.n_nodes)
         diag[self.position] = np.abs(self.diagonal())
-        C = self._walk(self._expansion(), self.position, float(theta) ** 2, diag)
+        C = self._walk(self.walk_tables(), self.position, float(theta) ** 2, diag)
         C.data = np.ones(C.nnz, dtype=np.float32)
         return C
 
-    def _expansion(self) -> tuple:
-        """What walking the rows needs: each position's column (-1: not an unknown), each
-        block's row node and, for each node, the blocks of the nodes below it."""
+    def walk_tables(self) -> tuple:
+        """What walking the rows of the whole symmetric matrix needs: ``(col_of, owner,
+        tptr, tblock)``, each position's column (-1: not an unknown), each block's row
+        node and, for each node j, the blocks (i, j) with i < j
+        (``tblock[tptr[j]:tptr[j + 1]]``); row r's entries are then entry (b, a) of those
+        blocks and entry (a, b) of the node's own (``a = position[r] % 3``)."""
         col_of = np.full(WIDTH * self.n_nodes, -1, dtype=np.int64)
         col_of[self.position] = np.arange(self.shape[0])
         owner = np.repeat(np.arange(self.n_nodes, dtype=np.int32), np.diff(self.indptr))

@@ -267,7 +267,8 @@ class ViscousAMG:
         if self._blocks:
             self.fine, self.exact = self._scaled_blocks(A, overwrite, self.fine)
             if coarse:
-                self._galerkin(first=galerkin_of_blocks(self.exact, levels[0].P))
+                self._galerkin(first=galerkin_of_blocks(self.exact, levels[0].P,
+                                                        levels[0].B.shape[1]))
                 self._coarse_scale = scale
         else:
             levels[0].A = scaled_block(A, scale, overwrite=overwrite)

@@ -734,3 +734,26 @@ def test_quadratic_solvers_prints_the_iterations_of_each_method(capsys):
     assert rows["two-level, stars"][1] < rows["two-level, Jacobi"][1]
     assert rows["two-level, stars"][0] == rows["P2 SA"][0]
     assert rows["NEM (linear) SA"][0] == rows["P1 SA"][0]
+
+
+def test_solver_scaling_prints_iterations_and_their_ratio():
+    """benchmarks/solver_scaling.py: a table per case with a row per size, the iterations'
+    ratio to the smallest size's as printed, and CG with a V-cycle beside it taking more
+    iterations than flexible CG with K-cycles; fewer than 1000 unknowns are refused."""
+    bench = load_benchmark("solver_scaling")
+    out = bench.main(["--dofs", "2000", "6000", "--cases", "linear-poisson",
+                      "linear-elasticity", "--baseline"])
+    for case in ("linear-poisson", "linear-elasticity"):
+        rows = out[case]
+        assert [r["unknowns"] > 1000 for r in rows] == [True, True]
+        assert rows[0]["unknowns"] < rows[1]["unknowns"]
+        lines = bench.table(case, rows, True).splitlines()[4:]
+        for line, r in zip(lines, rows):
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            assert int(cells[3]) == r["ours"]["its"]
+            assert float(cells[4]) == pytest.approx(r["ours"]["its"] / rows[0]["ours"]["its"],
+                                                    abs=0.005)
+            assert r["ours"]["its"] < r["base"]["its"]
+    with pytest.raises(SystemExit) as e:
+        bench.main(["--dofs", "500"])
+    assert e.value.code == 2

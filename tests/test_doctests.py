@@ -12,7 +12,7 @@ import skfem_nem
 
 DOCUMENTED = ["delaunay_mesh", "NaturalNeighbourBasis", "sibson_coordinates", "Triangulation",
               "LagrangianMesh", "ElementNaturalNeighbour2", "NaturalNeighbourInterpolator",
-              "estimate_gradients", "natural_neighbour_to_grid"]
+              "estimate_gradients", "natural_neighbour_to_grid", "natural_neighbour_solver"]
 
 
 def _own_tests(name):

@@ -147,38 +147,6 @@ def test_a_small_change_renews_the_finest_level_alone(spaces, monkeypatch):
     assert np.allclose(amg.matvec(x), large.A @ x, rtol=1e-12)
 
 
-def _energy_error(A, x, exact):
-    e = exact - x
-    return float(np.sqrt(e @ (A @ e)))
-
-
-def test_a_k_cycle_is_nearer_the_solution_than_a_v_cycle(monkeypatch):
-    """On a hierarchy of four levels or more the K-cycle (two flexible CG steps on each
-    coarse level, preconditioned by that level's cycle) leaves a smaller energy error than
-    the V-cycle; on the coarsest level it is the coarse solve; where its first step always
-    suffices (tolerance 1) it is the V-cycle scaled by its optimal step."""
-    import skfem_nem.models.stokes_amg as amg_mod
-    from skfem_nem.models.stokes_amg import k_cycle, v_cycle
-    A = pyamg.gallery.poisson((60, 60), format="csr")
-    ml = pyamg.smoothed_aggregation_solver(A, max_coarse=10, presmoother=AMG_SMOOTHER,
-                                           postsmoother=AMG_SMOOTHER)
-    assert len(ml.levels) >= 4
-    b = np.random.default_rng(5).standard_normal(A.shape[0])
-    exact = spla.spsolve(A.tocsc(), b)
-    v, k = v_cycle(ml, b), k_cycle(ml, b)
-    assert _energy_error(A, k, exact) < 0.8 * _energy_error(A, v, exact)
-    last = len(ml.levels) - 1
-    bc = np.random.default_rng(6).standard_normal(ml.levels[last].A.shape[0])
-    np.testing.assert_array_equal(k_cycle(ml, bc, level=last),
-                                  ml.coarse_solver(ml.levels[last].A, bc))
-    monkeypatch.setattr(amg_mod, "K_CYCLE_TOL", 1.0)
-    Ak = ml.levels[last - 1].A
-    bk = np.random.default_rng(7).standard_normal(Ak.shape[0])
-    x = v_cycle(ml, bk, level=last - 1)
-    np.testing.assert_allclose(k_cycle(ml, bk, level=last - 1),
-                               (x @ bk) / (x @ (Ak @ x)) * x, rtol=1e-12, atol=1e-14)
-
-
 def test_the_3d_flexible_solver_k_cycles_and_takes_fewer_iterations(monkeypatch):
     """A 3D block coarsened to three levels or more (a small coarsest level forced): the
     preconditioner of ``"fgmres"`` cycles with k_cycle below the finest level (v_cycle

@@ -90,7 +90,10 @@ def test_the_coarse_level_of_the_preconditioner(basis):
 
 def test_refuses_bad_input_by_name(mesh, basis):
     with pytest.raises(ValueError, match="ElementNaturalNeighbour2"):
-        natural_neighbour_solver(NaturalNeighbourBasis(mesh, ElementNaturalNeighbour()))
+        nested_prolongation(NaturalNeighbourBasis(mesh, ElementNaturalNeighbour()))
+    with pytest.raises(ValueError, match="cycle"):
+        TwoLevelPreconditioner(laplace.assemble(basis), nested_prolongation(basis),
+                               cycle="W")
     with pytest.raises(ValueError, match="tol"):
         natural_neighbour_solver(basis, tol=2.0)
     A, b = laplace.assemble(basis), load.assemble(basis)

@@ -8,7 +8,7 @@ from .elements import (ElementNaturalNeighbour, ElementNaturalNeighbour2,
                        ElementTetNaturalNeighbour, gauss_rule)
 from .facet_basis import NaturalNeighbourFacetBasis
 from .natural_neighbour import NaturalNeighbourBasis
-from .two_level import natural_neighbour_solver
+from .solvers import natural_neighbour_solver
 
 __all__ = ["ElementNaturalNeighbour", "ElementNaturalNeighbour2", "ElementTetNaturalNeighbour",
            "NaturalNeighbourBasis", "NaturalNeighbourFacetBasis", "gauss_rule",

@@ -13,13 +13,10 @@ for a linear field gives the average). The Galerkin product ``P^T A P`` is the c
 matrix. The smoother must take what Jacobi leaves: a node's edge dofs can oscillate at
 little cost in energy, so each node's star (its dof and its edges' dofs) is solved as one
 block (:func:`star_smoother`, overlapping additive Schwarz) inside Chebyshev.
-:class:`TwoLevelPreconditioner` combines the two, with one smoothed-aggregation V-cycle on
-the coarse matrix. As CG's preconditioner it takes fewer iterations than P2 with pyamg
-(docs/quadratic.md).
-
-:func:`natural_neighbour_solver` makes it a solver for scikit-fem's ``solve``::
-
-    solve(*condense(A, b, x=x, D=D), solver=natural_neighbour_solver(basis, D))
+:class:`TwoLevelPreconditioner` combines the two, with a smoothed-aggregation V-cycle or
+K-cycle on the coarse matrix. As CG's preconditioner it takes fewer iterations than P2 with
+pyamg (docs/quadratic.md). :func:`skfem_nem.basis.solvers.natural_neighbour_solver` makes it
+a solver for scikit-fem's ``solve``.
 """
 from __future__ import annotations
 
@@ -30,11 +27,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from .multigrid import k_cycle, smoothed_aggregation, v_cycle
 from .rigid_modes import rigid_modes
 
 __all__ = ["nested_prolongation", "star_dofs", "star_smoother", "TwoLevelPreconditioner",
-           "TwoLevelSpace", "level_step", "natural_neighbour_solver", "v_cycle", "CHEBYSHEV_DEGREE",
-           "SOLVER_TOL"]
+           "TwoLevelSpace", "CHEBYSHEV_DEGREE", "SOLVER_COARSE_SMOOTHER"]
 
 # degree of the Chebyshev smoother on the quadratic matrix, preconditioned by the node stars
 # (star_smoother). With Jacobi in place of the stars, degree 5 took 34 / 44 / 67 CG
@@ -49,22 +46,20 @@ CHEBYSHEV_BOUNDS = (1.0 / 30.0, 1.1)
 # keeping them all coarsened 31,812 nodes to 1,679 in one level and took 36 CG iterations at
 # 128,000 unknowns; theta 0.1 coarsens to 6,856 and took 26 (0.25: 112); Chebyshev as for the
 # viscous blocks (models.stokes_amg)
-MAX_COARSE = 500
 COARSE_STRENGTH = ("symmetric", {"theta": 0.1})
 COARSE_SMOOTHER = ("chebyshev", {"degree": 2})
+# the coarse level's smoother in natural_neighbour_solver, whose K-cycles (basis.multigrid)
+# take what a V-cycle's coarse levels leave: symmetric Gauss-Seidel. Poisson at 127,961
+# unknowns, flexible CG to 1e-8: 20 iterations against 26 with the Chebyshev smoother above
+# (V-cycles: 22 and 26)
+SOLVER_COARSE_SMOOTHER = ("gauss_seidel", {"sweep": "symmetric"})
 # prolongator smoothing of the coarse aggregation (pyamg's default)
 COARSE_PROLONGATOR = ("jacobi", {"omega": 4.0 / 3.0})
-# solve on the coarsest level: sparse LU (pyamg's default, a pseudo-inverse by dense SVD,
-# took 6 s of a SolCx solve at 33,242 velocity unknowns)
-COARSEST_SOLVER = "splu"
 # Lanczos steps of the spectral-radius estimate of the star-preconditioned matrix (one product
 # with the matrix and one with the stars each): at 31,969 unknowns 15 steps gave 5.31 (20: 5.39,
 # converged), where 30 power iterations, twice the products, gave 5.24; the set-up at 127,961
 # unknowns spent 2.2 s of its 8.3 s in those power iterations
 LANCZOS_STEPS = 15
-# CG's relative residual, and its iteration limit, by default
-SOLVER_TOL = 1e-8
-SOLVER_MAXITER = 5000
 
 
 def nested_prolongation(basis) -> sp.csr_matrix:
@@ -176,17 +171,22 @@ def _spectral_radius(A, B) -> float:
 class TwoLevelPreconditioner:
     """Chebyshev smoothing on ``A`` (``degree``), preconditioned by ``smoother`` (a sparse
     ``B``, e.g. :func:`star_smoother`; None: Jacobi), the coarse correction with ``P^T A P``
-    (``coarse``: ``"sa"``, one V-cycle of pyamg's smoothed aggregation with ``modes`` as its
-    near null space, or ``"direct"``, a sparse LU), smoothing again: symmetric, for CG. Call
-    it on a residual. ``renumber``: the products in a bandwidth-reducing order
+    (``coarse``: ``"sa"``, pyamg's smoothed aggregation with ``modes`` as its near null space
+    and ``coarse_smoother`` on its levels, or ``"direct"``, a sparse LU), smoothing again.
+    ``cycle``: the aggregation's ``"V"``-cycle (a symmetric map, for CG) or its
+    ``"K"``-cycle (:func:`~skfem_nem.basis.multigrid.k_cycle`, for flexible methods). Call it
+    on a residual. ``renumber``: the products in a bandwidth-reducing order
     (:meth:`_bandwidth_order`; ``order``, None without)."""
 
     def __init__(self, A: sp.spmatrix, P: sp.spmatrix, degree: int = CHEBYSHEV_DEGREE,
                  coarse: str = "sa", smoother: Optional[sp.spmatrix] = None,
-                 modes: Optional[np.ndarray] = None, renumber: bool = True):
+                 modes: Optional[np.ndarray] = None, renumber: bool = True,
+                 cycle: str = "V", coarse_smoother=COARSE_SMOOTHER):
         from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
         if coarse not in ("sa", "direct"):
             raise ValueError(f"coarse must be 'sa' or 'direct', got {coarse!r}")
+        if cycle not in ("V", "K"):
+            raise ValueError(f"cycle must be 'V' or 'K', got {cycle!r}")
         self.A, self.P = sp.csr_matrix(A), sp.csr_matrix(P)
         self.R = self.P.T.tocsr()
         d = self.A.diagonal()
@@ -202,7 +202,7 @@ class TwoLevelPreconditioner:
         if coarse == "direct":
             self.coarse = spla.splu(Ac.tocsc()).solve
         else:
-            self.coarse = self._coarse_cycle(Ac, modes)
+            self.coarse = self._coarse_cycle(Ac, modes, cycle, coarse_smoother)
         self.order = None
         if renumber:
             self._bandwidth_order()
@@ -223,21 +223,15 @@ class TwoLevelPreconditioner:
         self.P = self.P[order].tocsr()
         self.R = self.P.T.tocsr()
 
-    def _coarse_cycle(self, Ac: sp.csr_matrix, modes: Optional[np.ndarray]):
-        """One smoothed-aggregation V-cycle on the coarse matrix (``modes``: its near null
+    def _coarse_cycle(self, Ac: sp.csr_matrix, modes: Optional[np.ndarray], cycle: str,
+                      smoother):
+        """A cycle of smoothed aggregation on the coarse matrix (``modes``: its near null
         space, None for the constants); counts its levels in ``levels``."""
-        import pyamg
-        state = np.random.get_state()       # pyamg's random starts: the same every run
-        np.random.seed(0)
-        try:
-            ml = pyamg.smoothed_aggregation_solver(
-                Ac, B=modes, symmetry="symmetric", max_coarse=MAX_COARSE,
-                strength=COARSE_STRENGTH, presmoother=COARSE_SMOOTHER,
-                postsmoother=COARSE_SMOOTHER, coarse_solver=COARSEST_SOLVER,
-                smooth=COARSE_PROLONGATOR)
-        finally:
-            np.random.set_state(state)
+        ml = smoothed_aggregation(Ac, modes, strength=COARSE_STRENGTH, presmoother=smoother,
+                                  postsmoother=smoother, smooth=COARSE_PROLONGATOR)
         self.levels = 1 + len(ml.levels)
+        if cycle == "K":
+            return lambda r: k_cycle(ml, r)
         return lambda r: v_cycle(ml, r)
 
     def smooth(self, x: Optional[np.ndarray], b: np.ndarray) -> np.ndarray:
@@ -267,35 +261,6 @@ class TwoLevelPreconditioner:
         return out
 
 
-def v_cycle(ml, b: np.ndarray, level: int = 0) -> np.ndarray:
-    """One V-cycle of pyamg's multilevel solver ``ml`` from zero for ``A x = b``
-    (pyamg's own ``solve`` also computes two norms and a residual per cycle, which are
-    not needed inside a Krylov method: 54 against 22 ms on the coarse level of SolCx at
-    33,242 velocity unknowns); ``level``: the cycle from that level down, ``A`` its
-    matrix (a caller that treats the finer levels itself)."""
-    last = len(ml.levels) - 1
-
-    def cycle(k, rhs):
-        if k == last:
-            return ml.coarse_solver(ml.levels[k].A, rhs)
-        return level_step(ml, k, rhs, cycle)
-
-    return cycle(level, b)
-
-
-def level_step(ml, k: int, b: np.ndarray, correction) -> np.ndarray:
-    """Level ``k`` of a cycle of ``ml`` from zero for ``A_k x = b`` (not the coarsest):
-    pre-smoothing, the coarse correction ``correction(k + 1, r)`` of the restricted
-    residual, post-smoothing. A V-cycle's correction is the next level's cycle; a K-cycle's
-    (:func:`skfem_nem.models.stokes_amg.k_cycle`) two CG steps preconditioned by it."""
-    lv = ml.levels[k]
-    x = np.zeros_like(b)
-    lv.presmoother(lv.A, x, b)
-    x += lv.P @ correction(k + 1, lv.R @ (b - lv.A @ x))
-    lv.postsmoother(lv.A, x, b)
-    return x
-
-
 class TwoLevelSpace:
     """What the two-level method takes from the quadratic natural-neighbour ``basis`` (scalar
     or vector) with only the dofs ``free`` unknown: the nested prolongation from the nodal
@@ -321,43 +286,14 @@ class TwoLevelSpace:
         """Number of free dofs."""
         return self.free.size
 
-    def preconditioner(self, A: sp.spmatrix) -> TwoLevelPreconditioner:
-        """The two-level preconditioner of ``A`` (on the free dofs, in their order)."""
+    def preconditioner(self, A: sp.spmatrix, cycle: str = "V",
+                       coarse_smoother=COARSE_SMOOTHER) -> TwoLevelPreconditioner:
+        """The two-level preconditioner of ``A`` (on the free dofs, in their order) with
+        ``cycle`` and ``coarse_smoother`` on its coarse level (:class:`TwoLevelPreconditioner`)."""
         if A.shape != (self.size, self.size):
             raise ValueError(f"the matrix is {A.shape[0]} x {A.shape[1]}, the basis has "
                              f"{self.size} free dofs: condense it with the same D")
         return TwoLevelPreconditioner(A, self.prolongation, self.degree,
                                       smoother=star_smoother(A, *self.stars), modes=self.modes,
-                                      renumber=self.modes is not None)
-
-
-def natural_neighbour_solver(basis, D: Optional[np.ndarray] = None, tol: float = SOLVER_TOL,
-                             maxiter: int = SOLVER_MAXITER, degree: int = CHEBYSHEV_DEGREE):
-    """A solver for scikit-fem's ``solve`` on the quadratic natural-neighbour ``basis``
-    (scalar or vector) with the Dirichlet dofs ``D`` condensed out: CG preconditioned by
-    :class:`TwoLevelPreconditioner`, to the relative residual ``tol``. The solver records
-    its iterations in ``solver.iterations``; it raises ``RuntimeError`` if CG does not
-    converge in ``maxiter``, ``ValueError`` on a matrix of another size than the free dofs,
-    ``TypeError`` on keywords it does not take."""
-    if not (0 < tol < 1):
-        raise ValueError(f"tol must be in (0, 1), got {tol!r}")
-    D = np.zeros(0, np.int64) if D is None else np.asarray(D, dtype=np.int64).ravel()
-    space = TwoLevelSpace(basis, np.setdiff1d(np.arange(basis.N), D), degree)
-
-    def solver(A, b, **kwargs):
-        if kwargs:
-            raise TypeError(f"natural_neighbour_solver takes no keywords, got {sorted(kwargs)}")
-        M = space.preconditioner(A)
-        its = [0]
-        x, info = spla.cg(A, b, M=spla.LinearOperator(A.shape, matvec=M, dtype=float),
-                          rtol=tol, maxiter=maxiter,
-                          callback=lambda *_: its.__setitem__(0, its[0] + 1))
-        solver.iterations = its[0]
-        if info != 0:
-            res = np.linalg.norm(b - A @ x) / max(np.linalg.norm(b), 1e-300)
-            raise RuntimeError(f"CG with the two-level preconditioner did not converge: "
-                               f"{its[0]} iterations, relative residual {res:.2e} > {tol:.0e}")
-        return x
-
-    solver.iterations = 0
-    return solver
+                                      renumber=self.modes is not None, cycle=cycle,
+                                      coarse_smoother=coarse_smoother)

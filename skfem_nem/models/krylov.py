@@ -1,6 +1,7 @@
 """Krylov methods and vector products shared by the Stokes solvers and their
 multigrid: restarted flexible GMRES, restarted MINRES, a few preconditioned CG steps and
-BLAS-free dot products.
+the Lanczos bound of a Chebyshev smoother (the BLAS-free products of :mod:`skfem_nem.vectors`
+are re-exported).
 
 Kept apart from :mod:`skfem_nem.models.stokes_solvers` because they are linear
 algebra on vectors and callables alone, with no knowledge of the Stokes blocks;
@@ -12,6 +13,8 @@ from typing import Callable, Optional
 
 import numpy as np
 import scipy.linalg as sla
+
+from ..vectors import dot, norm
 
 __all__ = ["FGMRES_RESTART", "LANCZOS_STEPS", "MINRES_MAX_RTOL", "MINRES_TOL_FACTOR", "cg_steps",
            "dot", "fgmres", "largest_eigenvalue", "minres_steps", "norm", "restarted_minres"]
@@ -35,17 +38,6 @@ LANCZOS_STEPS = 20
 # diagonal entry so far: the start spans an invariant subspace (a small or a reducible
 # operator), whose Ritz values are exact
 LANCZOS_BREAKDOWN = 1e-12
-
-
-def dot(a: np.ndarray, b: np.ndarray) -> float:
-    """``a . b`` without BLAS: inside the app a threaded BLAS waited for cores held
-    by numba's threads (docs/stokes.md), ``einsum`` does not."""
-    return float(np.einsum("i,i->", a, b))
-
-
-def norm(a: np.ndarray) -> float:
-    """Euclidean norm without BLAS (see :func:`dot`)."""
-    return float(np.sqrt(dot(a, a)))
 
 
 def cg_steps(A, precondition: Callable, b: np.ndarray, steps: int) -> np.ndarray:

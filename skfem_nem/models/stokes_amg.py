@@ -9,7 +9,6 @@ choices behind the constants are measured in ``docs/stokes.md``.
 """
 from __future__ import annotations
 
-from contextlib import contextmanager
 from typing import Optional
 
 import numpy as np
@@ -17,11 +16,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit, prange
 
+from ..basis.multigrid import AMG_SEED, K_CYCLE_TOL, k_cycle, seeded_global_random, v_cycle
 from ..basis.rigid_modes import rigid_modes, velocity_components
-from ..basis.two_level import level_step, v_cycle
 from .amg_blocks import galerkin_of_blocks, hierarchy_of_blocks, plain_aggregation
 from .block_rows import BlockSymmetricRows, node_positions
-from .krylov import cg_steps, dot, largest_eigenvalue, norm
+from .krylov import cg_steps, largest_eigenvalue
 from .symmetric_rows import SymmetricRows
 
 __all__ = ["AMG_COARSE_SOLVER", "AMG_MAX_COARSE", "AMG_SEED", "AMG_SMOOTHER", "AMG_STRENGTH",
@@ -64,10 +63,6 @@ FINE_VALUES = np.float32
 # entries, and keeping them all (pyamg's theta 0) coarsens 200,834 unknowns to 5,346 in
 # one level; 0.02 coarsens to 15,927 and cuts the CG iterations from 38 to 24
 AMG_STRENGTH = ("symmetric", {"theta": 0.02})
-# seed of the start vectors of pyamg's spectral-radius estimates (prolongator smoothing,
-# Chebyshev bounds), which it draws from numpy's global generator: fixed, the same block
-# gets the same hierarchy in every run (a run with "fgmres" repeats bit for bit)
-AMG_SEED = 0
 # Prolongator smoothing of the 3D natural-neighbour block: none (plain aggregation). Its
 # rows have some 450 entries (three components of some 150 neighbours), so the smoothed
 # prolongator A T is dense and the Galerkin product took most of the set-up: at 4,033
@@ -95,21 +90,6 @@ K_CYCLE_3D = True
 # nodes a product took 28.6 ms in single and 31.8 ms in double precision, against 47 and 48
 # ms entry by entry (SymmetricRows), and the triangles' indices 32 MB against 580 MB
 FINE_BLOCKS_3D = True
-# a K-cycle's coarse correction stops after its first CG step where that step has reduced
-# the coarse residual below this fraction (Notay's threshold)
-K_CYCLE_TOL = 0.25
-
-
-@contextmanager
-def seeded_global_random(seed: int = AMG_SEED):
-    """numpy's global (legacy) generator seeded with ``seed`` inside the block, the
-    caller's state restored after it: pyamg draws its random starts from that generator."""
-    state = np.random.get_state()
-    np.random.seed(seed)
-    try:
-        yield
-    finally:
-        np.random.set_state(state)
 
 
 def viscous_amg(problem, overwrite: bool = False):
@@ -385,38 +365,6 @@ class ViscousAMG:
         """One V-cycle as a linear operator approximating ``A^-1``."""
         n = self.scale.size
         return spla.LinearOperator((n, n), matvec=self.cycle, dtype=float)
-
-
-def k_cycle(ml, b: np.ndarray, level: int = 0) -> np.ndarray:
-    """A K-cycle of pyamg's multilevel solver ``ml`` for ``A x = b`` on ``level`` (Notay &
-    Vassilevski 2008): two flexible CG steps on the level, each preconditioned by its
-    cycle, whose coarse correction is again such a pair on the next level; the coarsest
-    level is solved. The second step is skipped where the first has reduced the residual
-    below :data:`K_CYCLE_TOL` of its own. Not a linear map of ``b``: for flexible outer
-    methods only. Each level's cost is at most doubled against a V-cycle, and with a
-    coarsening of some 15 times a level the finest level's products still dominate."""
-    levels, last = ml.levels, len(ml.levels) - 1
-
-    def cycle(k, rhs):
-        return level_step(ml, k, rhs, pair)
-
-    def pair(k, r):
-        if k == last:
-            return ml.coarse_solver(levels[k].A, r)
-        A = levels[k].A
-        c1 = cycle(k, r)
-        v1 = A @ c1
-        rho1, a1 = dot(c1, v1), dot(c1, r)
-        r2 = r - (a1 / rho1) * v1
-        if norm(r2) <= K_CYCLE_TOL * norm(r):
-            return (a1 / rho1) * c1
-        c2 = cycle(k, r2)
-        v2 = A @ c2
-        g, a2 = dot(c2, v1), dot(c2, r2)
-        rho2 = dot(c2, v2) - g * g / rho1
-        return (a1 / rho1 - g * a2 / (rho1 * rho2)) * c1 + (a2 / rho2) * c2
-
-    return pair(level, b)
 
 
 def _own_csr(A: sp.spmatrix, overwrite: bool) -> sp.csr_matrix:

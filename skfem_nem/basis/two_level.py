@@ -41,11 +41,11 @@ CHEBYSHEV_DEGREE = 3
 # the smoother's interval, relative to the spectral radius of the Jacobi-scaled matrix
 # (pyamg's own Chebyshev bounds)
 CHEBYSHEV_BOUNDS = (1.0 / 30.0, 1.1)
-# coarsest level of the smoothed aggregation on the coarse matrix (solved directly there), its
-# strength of connection and smoother: the coarse matrix has some 42 entries a row, and
-# keeping them all coarsened 31,812 nodes to 1,679 in one level and took 36 CG iterations at
-# 128,000 unknowns; theta 0.1 coarsens to 6,856 and took 26 (0.25: 112); Chebyshev as for the
-# viscous blocks (models.stokes_amg)
+# strength of connection and smoother of the smoothed aggregation on the coarse matrix (its
+# coarsest level: basis.multigrid.MAX_COARSE, solved by sparse LU): the coarse matrix has
+# some 42 entries a row, and keeping them all coarsened 31,812 nodes to 1,679 in one level
+# and took 36 CG iterations at 128,000 unknowns; theta 0.1 coarsens to 6,856 and took 26
+# (0.25: 112); Chebyshev as for the viscous blocks (models.stokes_amg)
 COARSE_STRENGTH = ("symmetric", {"theta": 0.1})
 COARSE_SMOOTHER = ("chebyshev", {"degree": 2})
 # the coarse level's smoother in natural_neighbour_solver, whose K-cycles (basis.multigrid)

@@ -13,10 +13,11 @@ The problems, on the Delaunay triangles of random nodes in the unit square (``bo
 * ``elasticity``: linear elasticity (E = 1, nu = 0.3) clamped at x = 0 under its own weight.
 
 ``--dofs`` sets the unknowns aimed at: the nodes are chosen for each basis (the quadratic one has
-about four dofs a node, a vector basis two components).
+about four dofs a node, a vector basis a component a dimension). ``--dim 3``: the same in the
+unit cube on Delaunay tetrahedra (``box_nodes_3d``; the linear basis only, the weight along -z).
 
 Run ``python benchmarks/solver_scaling.py [--dofs 1e4 1e5 1e6] [--cases linear-poisson
-linear-elasticity quadratic-poisson quadratic-elasticity] [--baseline]``.
+linear-elasticity quadratic-poisson quadratic-elasticity] [--dim 3] [--baseline]``.
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ CASES = ("linear-poisson", "linear-elasticity", "quadratic-poisson", "quadratic-
 TOL = 1e-8
 
 
-def _forms(elasticity: bool):
+def _forms(elasticity: bool, dim: int):
     """The bilinear and linear form of the case (Poisson: quadratic_cost.py's)."""
     from skfem import LinearForm
     from skfem.models.elasticity import linear_elasticity
@@ -43,27 +44,29 @@ def _forms(elasticity: bool):
     if elasticity:
         @LinearForm
         def weight(v, w):
-            return -v[1]
+            return -v[dim - 1]
         return linear_elasticity(1.0, 0.3), weight
     from quadratic_cost import forms
     return forms()[:2]
 
 
-def problem(case: str, dofs: float):
+def problem(case: str, dofs: float, dim: int = 2):
     """The basis, condensed matrix and load, and the Dirichlet dofs of ``case`` at about
-    ``dofs`` unknowns."""
+    ``dofs`` unknowns in ``dim`` dimensions."""
     from skfem import ElementVector, condense
 
     from skfem_nem import (ElementNaturalNeighbour, ElementNaturalNeighbour2,
                            NaturalNeighbourBasis, delaunay_mesh)
+    from skfem_nem.geometry import box_nodes_3d
     from skfem_nem.geometry.nodesets import box_nodes
 
     quadratic, elasticity = case.startswith("quadratic"), case.endswith("elasticity")
-    per_node = (4 if quadratic else 1) * (2 if elasticity else 1)
+    per_node = (4 if quadratic else 1) * (dim if elasticity else 1)
     elem = ElementNaturalNeighbour2() if quadratic else ElementNaturalNeighbour()
     elem = ElementVector(elem) if elasticity else elem
-    basis = NaturalNeighbourBasis(delaunay_mesh(box_nodes(int(dofs / per_node), seed=0)), elem)
-    a, f = _forms(elasticity)
+    nodes = (box_nodes if dim == 2 else box_nodes_3d)(int(dofs / per_node), seed=0)
+    basis = NaturalNeighbourBasis(delaunay_mesh(nodes), elem)
+    a, f = _forms(elasticity, dim)
     D = (basis.get_dofs(lambda x: x[0] < 1e-12).all() if elasticity
          else basis.get_dofs().all())
     A, b = condense(a.assemble(basis), f.assemble(basis), D=D)[:2]
@@ -118,8 +121,8 @@ def table(case: str, rows: list, with_baseline: bool) -> str:
     return "\n".join(lines)
 
 
-def measure(case: str, dofs: float, with_baseline: bool) -> dict:
-    basis, A, b, D = problem(case, dofs)
+def measure(case: str, dofs: float, with_baseline: bool, dim: int = 2) -> dict:
+    basis, A, b, D = problem(case, dofs, dim)
     row = {"unknowns": A.shape[0], "per_row": A.nnz / A.shape[0], "ours": ours(basis, A, b, D)}
     if with_baseline:
         row["base"] = baseline(basis, A, b, D)
@@ -130,16 +133,20 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--dofs", type=float, nargs="+", default=[1e4, 1e5])
     ap.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=2)
     ap.add_argument("--baseline", action="store_true")
     a = ap.parse_args(argv)
     if any(d < 1000 for d in a.dofs):
         ap.error("--dofs: at least 1000 unknowns")
+    if a.dim == 3 and any(c.startswith("quadratic") for c in a.cases):
+        ap.error("--dim 3: the quadratic basis is on triangles only (give --cases "
+                 "linear-poisson linear-elasticity)")
     out = {}
     for case in a.cases:
-        measure(case, 2000, False)                 # warm: numba's kernels loaded
-        rows = [measure(case, d, a.baseline) for d in a.dofs]
+        measure(case, 2000, False, a.dim)          # warm: numba's kernels loaded
+        rows = [measure(case, d, a.baseline, a.dim) for d in a.dofs]
         out[case] = rows
-        print(table(case, rows, a.baseline), end="\n\n", flush=True)
+        print(table(f"{case}, {a.dim}D", rows, a.baseline), end="\n\n", flush=True)
     return out
 
 

@@ -757,3 +757,9 @@ def test_solver_scaling_prints_iterations_and_their_ratio():
     with pytest.raises(SystemExit) as e:
         bench.main(["--dofs", "500"])
     assert e.value.code == 2
+    with pytest.raises(SystemExit) as e:
+        bench.main(["--dim", "3", "--cases", "quadratic-poisson"])
+    assert e.value.code == 2
+    basis, A, b, D = bench.problem("linear-elasticity", 3000, dim=3)
+    assert basis.mesh.dim() == 3 and A.shape[0] == basis.N - D.size == b.size
+    assert 2000 < A.shape[0] < 6000      # (box_nodes_3d adds the boundary nodes)

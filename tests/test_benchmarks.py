@@ -739,7 +739,9 @@ def test_quadratic_solvers_prints_the_iterations_of_each_method(capsys):
 def test_solver_scaling_prints_iterations_and_their_ratio():
     """benchmarks/solver_scaling.py: a table per case with a row per size, the iterations'
     ratio to the smallest size's as printed, and CG with a V-cycle beside it taking more
-    iterations than flexible CG with K-cycles; fewer than 1000 unknowns are refused."""
+    iterations than flexible CG with K-cycles, or as many where the hierarchy has two levels
+    (the coarse level solved: the two cycles are one); fewer than 1000 unknowns are refused,
+    and the quadratic basis in 3D."""
     bench = load_benchmark("solver_scaling")
     out = bench.main(["--dofs", "2000", "6000", "--cases", "linear-poisson",
                       "linear-elasticity", "--baseline"])
@@ -753,7 +755,7 @@ def test_solver_scaling_prints_iterations_and_their_ratio():
             assert int(cells[3]) == r["ours"]["its"]
             assert float(cells[4]) == pytest.approx(r["ours"]["its"] / rows[0]["ours"]["its"],
                                                     abs=0.005)
-            assert r["ours"]["its"] < r["base"]["its"]
+            assert r["ours"]["its"] <= r["base"]["its"]
     with pytest.raises(SystemExit) as e:
         bench.main(["--dofs", "500"])
     assert e.value.code == 2

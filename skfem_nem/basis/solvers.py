@@ -6,7 +6,8 @@ smoothed aggregation with V-cycles takes more and more iterations as they grow. 
 gets its multigrid, the same for a scalar problem and for elasticity (the rigid-body modes
 as near null space):
 
-* the linear basis (triangles or tetrahedra): smoothed aggregation on the matrix, K-cycles
+* the linear basis (triangles or tetrahedra): smoothed aggregation on the matrix, one cycle
+  an iteration whose coarse corrections are K-cycles
   (:func:`~skfem_nem.basis.multigrid.k_cycle`);
 * the quadratic basis: the two-level method of :mod:`.two_level`, the nodes as its coarse
   level and K-cycles of smoothed aggregation below them.
@@ -61,7 +62,8 @@ class AggregationSpace:
                              f"{self.size} free dofs: condense it with the same D")
         ml = smoothed_aggregation(sp.csr_matrix(A), self.modes)
         self.levels = len(ml.levels)
-        return lambda r: k_cycle(ml, r)
+        # (the cycle of the finest level: flexible CG outside is its Krylov method)
+        return lambda r: k_cycle(ml, r, steps=False)
 
 
 def _space(basis, free: np.ndarray, degree: Optional[int]):
@@ -113,7 +115,7 @@ def natural_neighbour_solver(basis, D: Optional[np.ndarray] = None, tol: float =
     >>> D = basis.get_dofs().all()
     >>> s = natural_neighbour_solver(basis, D)
     >>> x = solve(*condense(A, b, D=D), solver=s)
-    >>> s.iterations <= 15, s.levels
+    >>> s.iterations < 25, s.levels
     (True, 2)
     """
     if not (0 < tol < 1):

@@ -8,9 +8,9 @@ import pytest
 import scipy.sparse.linalg as spla
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from skfem import Basis, BilinearForm, ElementTriP1, ElementVector, LinearForm, condense, solve
-from skfem.helpers import dot, grad
+from skfem import Basis, ElementTriP1, ElementVector, LinearForm, condense, solve
 from skfem.models.elasticity import linear_elasticity
+from skfem.models.poisson import laplace
 
 import skfem_nem.basis.multigrid as mg
 from skfem_nem import (ElementNaturalNeighbour, NaturalNeighbourBasis, delaunay_mesh,
@@ -19,11 +19,6 @@ from skfem_nem.geometry import box_nodes_3d
 from skfem_nem.geometry.nodesets import box_nodes
 
 CHEBYSHEV = ("chebyshev", {"degree": 2})
-
-
-@BilinearForm
-def laplace(u, v, w):
-    return dot(grad(u), grad(v))
 
 
 @LinearForm

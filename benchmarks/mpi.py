@@ -1,19 +1,22 @@
 """The Stokes solve on PETSc over MPI: assembly, solve, iterations and memory per rank.
 
 SolCx at a viscosity contrast of 1e6 (``examples/ex07_solcx.py``'s nodes, the interface
-as segments, natural-neighbour velocity with bubbles, free slip, tol 1e-10), solved with
-``solve_stokes(..., solver="petsc")`` under ``mpiexec -n R`` for each rank count ``R``
-and node count. Each run is a fresh ``mpiexec`` of this script (``--worker``), so its
-peak memory is its own. Reported, the slowest rank's seconds (best of ``--repeat``):
+as segments, free slip) or Donea-Huerta's flow (``--flow donea-huerta``: random nodes in
+the unit square, no slip), natural-neighbour velocity with bubbles, tol 1e-10, solved
+with ``solve_stokes(..., solver="petsc")`` under ``mpiexec -n R`` for each rank count
+``R`` and node count. Each run is a fresh ``mpiexec`` of this script (``--worker``), so
+its peak memory is its own. Reported, the slowest rank's seconds (best of ``--repeat``):
 
-- ``spaces``: the bases (natural-neighbour coordinates at the quadrature points), built
-  on every rank: replicated, like the mesh;
-- ``assembly``: this rank's share of the system (its strip of triangles,
-  ``StokesSpaces.restricted``), the part that distributed assembly divides;
+- ``spaces``: the bases (natural-neighbour coordinates at the quadrature points). By
+  default each rank builds them on its strip of triangles alone
+  (``stokes_spaces(mesh, elements="owned")``: divided); ``--spaces whole`` builds them
+  for the whole mesh on every rank (replicated, the distributed assembly then takes its
+  strip of them);
+- ``assembly``: this rank's share of the system (its strip of triangles);
 - ``solve``: the rest of ``solve_stokes`` (walls, the rows summed into PETSc, FGMRES);
 - FGMRES iterations, the triangles each rank assembled, the peak resident memory of
-  the largest rank, and the relative velocity and pressure difference to the run on
-  the first rank count.
+  the largest rank, its ratio to the first rank count's, and the relative velocity and
+  pressure difference to the run on the first rank count.
 
 Needs petsc4py and mpi4py (``docs/parallel.md``) and ``mpiexec`` on the path. Prints a
 markdown table. Quick run::
@@ -36,26 +39,38 @@ HERE = Path(__file__).resolve()
 sys.path.insert(0, str(HERE.parents[1] / "examples"))
 
 
-def worker(nodes: int, repeat: int, out: str) -> None:
+def flow(name: str, nodes: int):
+    """The mesh, viscosity, force and walls of the flow ``name`` at about ``nodes`` nodes
+    (seeded: the same on every rank)."""
+    from skfem_nem import delaunay_mesh
+    from skfem_nem.geometry.nodesets import box_nodes
+    from skfem_nem.models.analytic import DoneaHuerta, SolCx
+    if name == "solcx":
+        from ex07_solcx import make_mesh
+        ex = SolCx(1.0, 1e6)
+        return make_mesh(nodes, constrained=True), ex.viscosity, ex.force, {}
+    return (delaunay_mesh(box_nodes(nodes, seed=1)), 1.0, DoneaHuerta.force,
+            {"free_slip": None, "no_slip": "all"})
+
+
+def worker(name: str, nodes: int, divided: bool, repeat: int, out: str) -> None:
     """Runs on every rank: times spaces, assembly and solve; rank 0 writes the JSON
     summary and the solution to ``out``."""
-    from ex07_solcx import make_mesh
-    from skfem_nem.models.analytic import SolCx
     from skfem_nem.models.stokes import assemble_stokes, solve_stokes, stokes_spaces
     from skfem_nem.parallel.petsc import import_petsc, owned_elements
     comm = import_petsc().COMM_WORLD.tompi4py()
-    ex = SolCx(1.0, 1e6)
-    best = None
+    mesh, eta, force, walls = flow(name, nodes)
+    best = sol = None
     for _ in range(repeat):
+        spaces = sol = None  # (the last repetition's let go before the next is built)
         comm.Barrier()
         t0 = time.perf_counter()
-        spaces = stokes_spaces(make_mesh(nodes, constrained=True), "nem")
+        spaces = stokes_spaces(mesh, "nem", elements="owned" if divided else None)
         t1 = time.perf_counter()
-        mine = owned_elements(spaces.mesh)
-        assemble_stokes(spaces if mine is None else spaces.restricted(mine), ex.viscosity,
-                        ex.force)
+        mine = None if divided else owned_elements(mesh)
+        assemble_stokes(spaces if mine is None else spaces.restricted(mine), eta, force)
         t2 = time.perf_counter()
-        sol = solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=1e-10)
+        sol = solve_stokes(spaces, eta, force, solver="petsc", tol=1e-10, **walls)
         t3 = time.perf_counter()
         # solve_stokes assembles the same share again: the solve is the rest
         times = np.array([t1 - t0, t2 - t1, max(t3 - t2 - (t2 - t1), 0.0)])
@@ -65,21 +80,22 @@ def worker(nodes: int, repeat: int, out: str) -> None:
     triangles = comm.allgather(sol.info["assembled_triangles"])
     if comm.Get_rank() == 0:
         np.savez(Path(out) / "solution.npz", u=sol.u, p=sol.p)
-        summary = {"nodes": int(spaces.mesh.p.shape[1]), "ranks": comm.Get_size(),
+        summary = {"nodes": int(mesh.p.shape[1]), "ranks": comm.Get_size(),
                    "spaces": best[0], "assembly": best[1], "solve": best[2],
                    "iterations": sol.iterations, "triangles": triangles,
                    "peak_mb": max(peak), "residual": sol.residual}
         (Path(out) / "summary.json").write_text(json.dumps(summary))
 
 
-def launch(ranks: int, nodes: int, repeat: int, out: str) -> dict:
+def launch(ranks: int, args, nodes: int, out: str) -> dict:
     """One ``mpiexec -n ranks`` run of the worker; its summary and solution."""
     env = dict(os.environ, OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1",
                OMPI_MCA_btl_vader_single_copy_mechanism="none",
                OMPI_MCA_rmaps_base_oversubscribe="1")
     root = ["--allow-run-as-root"] if hasattr(os, "geteuid") and os.geteuid() == 0 else []
     cmd = ["mpiexec", *root, "-n", str(ranks), sys.executable, str(HERE), "--worker",
-           "--nodes", str(nodes), "--repeat", str(repeat), "--out", out]
+           "--flow", args.flow, "--spaces", args.spaces, "--nodes", str(nodes),
+           "--repeat", str(args.repeat), "--out", out]
     subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
     summary = json.loads((Path(out) / "summary.json").read_text())
     with np.load(Path(out) / "solution.npz") as z:
@@ -91,38 +107,44 @@ def rel(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
-def table(sizes, ranks, repeat) -> None:
+def table(args) -> None:
     """The markdown table, a row per size and rank count, printed as they come."""
-    print(f"SolCx, contrast 1e6, tol 1e-10, seconds of the slowest rank (best of {repeat})\n")
+    what = {"solcx": "SolCx, contrast 1e6, free slip",
+            "donea-huerta": "Donea-Huerta, no slip"}[args.flow]
+    print(f"{what}, spaces {args.spaces}, tol 1e-10, seconds of the slowest rank "
+          f"(best of {args.repeat})\n")
     print("| nodes | ranks | spaces s | assembly s | solve s | FGMRES its | triangles per "
-          "rank | peak MB per rank | du, dp vs first |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for n in sizes:
+          "rank | peak MB per rank | memory ratio | du, dp vs first |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for n in args.sizes:
         first = None
-        for r in ranks:
+        for r in args.ranks:
             with tempfile.TemporaryDirectory() as tmp:
-                s = launch(r, n, repeat, tmp)
+                s = launch(r, args, n, tmp)
             first = s if first is None else first
             diff = f"{rel(s['u'], first['u']):.1e}, {rel(s['p'], first['p']):.1e}"
             tri = "/".join(str(t) for t in s["triangles"])
             print(f"| {s['nodes']} | {r} | {s['spaces']:.2f} | {s['assembly']:.2f} | "
                   f"{s['solve']:.2f} | {s['iterations']} | {tri} | {s['peak_mb']:.0f} | "
-                  f"{diff} |", flush=True)
+                  f"{s['peak_mb'] / first['peak_mb']:.2f} | {diff} |", flush=True)
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[10000, 30000, 100000])
-    ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2, 4])
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--flow", choices=["solcx", "donea-huerta"], default="solcx")
+    ap.add_argument("--spaces", choices=["divided", "whole"], default="divided",
+                    help="bases on each rank's strip (default) or whole on every rank")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--nodes", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--out", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
-        worker(args.nodes, args.repeat, args.out)
+        worker(args.flow, args.nodes, args.spaces == "divided", args.repeat, args.out)
     else:
-        table(args.sizes, args.ranks, args.repeat)
+        table(args)
 
 
 if __name__ == "__main__":

@@ -244,6 +244,88 @@ def test_restricted_spaces_add_up_to_the_whole_system(method):
     assert sub.n_velocity == spaces.n_velocity and sub.n_pressure == spaces.n_pressure
 
 
+@pytest.mark.parametrize("method", ["nem", "nem-projection", "nem2", "taylor-hood", "mini"])
+def test_spaces_built_on_some_triangles_are_the_restricted_whole_ones(method):
+    """``stokes_spaces(mesh, elements=...)`` computes nothing for the other triangles
+    (its bases hold the given triangles alone) and assembles, bit for bit, what the
+    whole spaces restricted to those triangles assemble."""
+    from skfem_nem.models.stokes import assemble_stokes
+    mesh = delaunay_mesh(box_nodes(150, seed=4))
+    part = np.random.default_rng(1).permutation(mesh.nelements)[: mesh.nelements // 3]
+    ex = SolCx(1.0, 1e3)
+    whole = stokes_spaces(mesh, method)
+    eta = ex.viscosity(whole.quadrature_points)   # given on all triangles: taken at theirs
+    divided = stokes_spaces(mesh, method, elements=part)
+    assert np.array_equal(divided.elements, np.sort(part))
+    assert divided.quadrature_points.shape[1] == part.size == divided.ubasis.nelems
+    a = assemble_stokes(whole.restricted(part), eta, ex.force)
+    b = assemble_stokes(divided, eta, ex.force)
+    for name in ("A", "B", "S", "Mp", "m", "f", "g"):
+        x, y = getattr(a, name), getattr(b, name)
+        if x is None:
+            assert y is None
+            continue
+        assert (abs(x - y).max() if hasattr(x, "nnz") else np.abs(x - y).max()) == 0.0, name
+
+
+@pytest.mark.parametrize("method", ["taylor-hood", "mini", "nem"])
+def test_spaces_built_on_some_tetrahedra_are_the_restricted_whole_ones(method):
+    """The same on tetrahedra, where the scikit-fem velocities can be divided; the
+    natural-neighbour velocity with condensed bubbles refuses, naming the method."""
+    from skfem_nem.models.stokes import assemble_stokes
+    rng = np.random.default_rng(3)
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    mesh = delaunay_mesh(np.r_[corners, rng.random((60, 3))])
+    part = np.arange(0, mesh.nelements, 4)
+    whole = stokes_spaces(mesh, method)
+    if method == "nem":
+        for build in (lambda: stokes_spaces(mesh, method, elements=part),
+                      lambda: whole.restricted(part)):
+            with pytest.raises(ValueError, match="method 'nem' on tetrahedra is built on all"):
+                build()
+        return
+
+    def load(x):
+        return np.stack([0 * x[0], 0 * x[0], -1.0 - x[0]])
+
+    a = assemble_stokes(whole.restricted(part), 2.0, load)
+    b = assemble_stokes(stokes_spaces(mesh, method, elements=part), 2.0, load)
+    assert abs(a.A - b.A).max() == 0.0 and abs(a.B - b.B).max() == 0.0
+    assert np.abs(a.f - b.f).max() == 0.0
+
+
+def test_spaces_of_some_triangles_solve_only_over_mpi():
+    """One rank's share solves with solver "petsc" alone (with the others' shares);
+    serial solvers and the visco-elasto-plastic step refuse it, naming the solver."""
+    from skfem_nem.models.rheology import Material, vep_step
+    mesh = delaunay_mesh(box_nodes(100, seed=4))
+    divided = stokes_spaces(mesh, elements=np.arange(mesh.nelements // 2))
+    for solver in ("auto", "schur", "fgmres"):
+        with pytest.raises(ValueError, match=f"solve them with solver='petsc', got "
+                                             f"solver='{solver}'"):
+            solve_stokes(divided, 1.0, solver=solver)
+    ne, nq = divided.quadrature_points.shape[1:]
+    with pytest.raises(ValueError, match="one MPI rank's share"):
+        vep_step(divided, Material(viscosity=1.0, shear_modulus=1.0), np.zeros((2, 2, ne, nq)),
+                 0.1, solver="schur")
+    with pytest.raises(ValueError, match=f"non-empty subset of the {mesh.nelements} triangles"):
+        stokes_spaces(mesh, elements=[mesh.nelements])
+    with pytest.raises(ValueError, match="cell indices or 'owned', got 'mine'"):
+        stokes_spaces(mesh, elements="mine")
+
+
+def test_owned_triangles_name_the_mpi_installation_without_petsc4py():
+    from skfem_nem.parallel import PetscUnavailableError, import_petsc
+    mesh = delaunay_mesh(box_nodes(60, seed=4))
+    try:
+        import_petsc()
+    except PetscUnavailableError:
+        with pytest.raises(PetscUnavailableError, match="petsc4py and mpi4py"):
+            stokes_spaces(mesh, elements="owned")
+    else:  # (one process: every triangle is its own)
+        assert stokes_spaces(mesh, elements="owned").elements is None
+
+
 def test_restricted_spaces_check_their_elements():
     spaces = stokes_spaces(delaunay_mesh(box_nodes(60, seed=2)))
     ne = spaces.mesh.nelements

@@ -60,7 +60,7 @@ from ..models.rheology import (Material, PicardNotConverged, from_ip_field, seco
 from ..models.stokes import outline_flux, stokes_spaces
 from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
 from ..parallel.failures import FailureChannel
-from ..parallel.petsc import ranks_differing, world
+from ..parallel.petsc import joined, maximum, ranks_differing, summed, world
 
 # (PlateConfig, load_config and stored_config are re-exported from plate_config)
 __all__ = ["SinkingPlate", "StepStalled", "run"]
@@ -308,26 +308,34 @@ class SinkingPlate:
         lm = self.lm
         t0 = _time.perf_counter()
         gauss = c.integration == "gauss"
+        # over MPI each rank builds the bases of its strip of triangles alone and updates
+        # the integration-point fields there; the fields are then joined on every rank
         spaces = stokes_spaces(lm.mesh, "nem", npoints=3 if gauss else None,
-                               integration=c.integration)
+                               integration=c.integration,
+                               elements="owned" if self.ranks > 1 else None)
+        mine, nt = spaces.elements, lm.triangles.shape[0]
         t_basis = _time.perf_counter() - t0
         mat, force, plate = self.materials(spaces)
-        tau_old = from_ip_field(lm.ip_fields["stress"])
-        ps_old = lm.ip_fields["plastic_strain"]
+        tau_old = from_ip_field(_rows(lm.ip_fields["stress"], mine))
+        ps_old = _rows(lm.ip_fields["plastic_strain"], mine)
         # the plate is incompressible as a whole: zero net flux of the nodal
         # velocities through its outline (the polygon's area is kept)
         # Picard iterations start from the effective viscosity of the previous
         # step, carried (as its logarithm) by the mesh like the stress
-        guess = lm.ip_fields.get("log_eta_eff")
+        guess = _rows(lm.ip_fields.get("log_eta_eff"), mine)
         # the step's Picard iterations share a cache (what it kept is counted below)
         cache = StokesCache() if c.solver in CACHED_SOLVERS else None
         r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
                      tol=c.picard_tol, solver=c.solver,
                      constraints=self._area_constraint(spaces, dt),
                      eta_guess=None if guess is None else np.exp(guess), cache=cache)
-        lm.ip_fields["log_eta_eff"] = np.log(r.eta_eff)
-        lm.ip_fields["stress"] = to_ip_field(r.tau)
-        lm.ip_fields["plastic_strain"] = np.ascontiguousarray(r.plastic_strain)
+        lm.ip_fields["log_eta_eff"] = _whole(np.log(r.eta_eff), mine, nt)
+        lm.ip_fields["stress"] = _whole(to_ip_field(r.tau), mine, nt)
+        lm.ip_fields["plastic_strain"] = _whole(np.ascontiguousarray(r.plastic_strain),
+                                                mine, nt)
+        yielded = int(_total(np.count_nonzero(r.yielded), mine))
+        plate_stress = _total(float(second_invariant(r.tau)[plate].max()) if plate.any()
+                              else 0.0, mine, largest=True)
         v = hold_off_walls(lm, r.solution.velocity_at_nodes(), c)
         t_solve = _time.perf_counter() - t0
 
@@ -348,16 +356,14 @@ class SinkingPlate:
         self.dt_next = self._stable_dt(v)
         t_evolution = _time.perf_counter() - t0 - t_solve
         A, cen = self.plate_area_centroid()
-        tauII = second_invariant(r.tau)
         row = {"step": lm.step, "time": lm.time, "dt": dt,
                "plate_depth": c.height - cen[1], "plate_x": cen[0],
                "plate_area": A, "fluid_area": c.width * c.height - A,
                "outline_crossings": self.outlines.crossings(lm.nodes),
                "inverted_triangles": int(np.count_nonzero(lm.triangulation.orientation() <= 0)),
                "non_delaunay_edges": lm.triangulation.non_delaunay_edges(),
-               "max_plastic_strain": float(r.plastic_strain.max()),
-               "yielded_points": int(r.yielded.sum()),
-               "max_plate_stress": float(tauII[plate].max()) if plate.any() else 0.0,
+               "max_plastic_strain": float(lm.ip_fields["plastic_strain"].max()),
+               "yielded_points": yielded, "max_plate_stress": plate_stress,
                "max_speed": float(np.hypot(*v.T).max()),
                "flips": rep["flips"], "injected": rep["injected"],
                "relocated": rep["relocated"], "substeps": rep["substeps"],
@@ -579,6 +585,26 @@ class SinkingPlate:
         (:func:`~skfem_nem.apps.plate_figures.plate_figures`; rank 0 only); returns
         their paths."""
         return plate_figures(self) if self.root else []
+
+
+def _rows(field: Optional[np.ndarray], cells: Optional[np.ndarray]):
+    """An integration-point field (triangles first) at the triangles ``cells`` (this
+    rank's strip; None: all of them)."""
+    return field if field is None or cells is None else field[cells]
+
+
+def _whole(part: np.ndarray, cells: Optional[np.ndarray], n: int) -> np.ndarray:
+    """The field of all ``n`` triangles from every rank's ``part`` on its ``cells``
+    (itself where ``cells`` is None: one process holds all)."""
+    return part if cells is None else joined(part, cells, n)
+
+
+def _total(value: float, cells: Optional[np.ndarray], largest: bool = False) -> float:
+    """The sum (or the largest) of ``value`` over the ranks holding strips of ``cells``
+    (itself where ``cells`` is None)."""
+    if cells is None:
+        return value
+    return float((maximum if largest else summed)(np.array([value], dtype=float))[0])
 
 
 def run(cfg: PlateConfig, out="out/sinking-plate", restart: bool = False,

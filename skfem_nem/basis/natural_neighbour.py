@@ -568,7 +568,11 @@ class NaturalNeighbourBasis(NaturalNeighbourBasisBase):
     def construction_keywords(self) -> dict:
         """The keywords that rebuild this basis (coordinates, method, integration, rule,
         elements) with another element."""
-        rule = {"quadrature": self.quadrature} if self.integration == "gauss" else {}
+        X, W = value_rule(self.mesh.dim())
+        default = self.integration == "smoothed" and self.X.shape == X.shape and \
+            np.array_equal(self.X, X) and np.array_equal(self.W, W)
+        # (a smoothed basis on tetrahedra may carry its values at a Gauss rule's points)
+        rule = {} if default else {"quadrature": self.quadrature}
         return {"coordinates": self.coordinates, "method": self.method,
                 "integration": self.integration, "elements": self.tind, **rule}
 

@@ -46,14 +46,15 @@ dofs, and fixes the pressure mean only where the walls confine the flow.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from functools import cached_property
 from typing import Callable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from .return_mapping import (ArrayLike, deviator, maxwell_coefficients, return_map,
                              rotate_stress, second_invariant, spin, strain_rate, vep_update)
-from .stokes import (StokesCache, StokesSolution, StokesSpaces, quadrature_values,
-                     solve_stokes)
+from .stokes import (StokesCache, StokesSolution, StokesSpaces, check_divided, largest,
+                     quadrature_values, solve_stokes)
 from .stokes_solvers import CACHED_SOLVERS, check_solver
 
 __all__ = ["Material", "combine_materials", "maxwell_coefficients", "strain_rate", "spin",
@@ -438,7 +439,7 @@ def vep_step(spaces: StokesSpaces, material: Material, tau_old: np.ndarray, dt: 
     RuntimeError
         If the Picard iterations do not converge in ``maxiter`` (naming both numbers).
     """
-    check_solver(solver, cache)
+    check_solver(solver, cache), check_divided(spaces, solver)
     if cache is None and solver in CACHED_SOLVERS:
         cache = StokesCache()
     st = _step_setup(spaces, material, tau_old, dt, f, gravity, plastic_strain, rotation,
@@ -490,14 +491,17 @@ class _StepSetup:
     eta_min: float               # lower bound of the effective viscosity
     load: np.ndarray             # (2, ne, nq) body force
     plastic_strain: np.ndarray   # (ne, nq) at the start
+    # the largest of a number over the MPI ranks (spaces of one rank's cells) or itself
+    largest: Callable[[float], float] = float
 
-    @property
+    @cached_property
     def iterate(self) -> bool:
         """True if the viscosity or the stress depends on the velocity: a finite yield
-        stress, or an old stress that the rotation turns (none without elasticity)."""
-        if np.isfinite(self.yield_stress).any():
-            return True
-        return self.rotation != "none" and bool(np.any(self.chi * np.abs(self.tau_old)))
+        stress, or an old stress that the rotation turns (none without elasticity), at
+        any point (of any rank's cells)."""
+        here = bool(np.isfinite(self.yield_stress).any()) or (
+            self.rotation != "none" and bool(np.any(self.chi * np.abs(self.tau_old))))
+        return self.largest(float(here)) > 0
 
     def rotated(self, G: Optional[np.ndarray]) -> np.ndarray:
         """The old stress rotated with the spin of the velocity gradient ``G``."""
@@ -559,7 +563,10 @@ def _step_setup(spaces: StokesSpaces, material: Material, tau_old, dt, f, gravit
     Y = material.at_points("yield_stress", ne, nq)
     eta_ve, keep = maxwell_coefficients(eta, mu, dt)
     chi = keep / eta_ve           # 1 / (mu dt), zero for mu = inf
-    eta_min = (MIN_VISCOSITY_FACTOR * float(eta_ve.min()) if min_viscosity is None
+    def most(v: float) -> float:
+        return largest(spaces, v)
+
+    eta_min = (-MIN_VISCOSITY_FACTOR * most(-float(eta_ve.min())) if min_viscosity is None
                else float(min_viscosity))
     load = quadrature_values(spaces, f, "body force f", shape=(tau_old.shape[0],))
     if gravity is not None:
@@ -570,7 +577,7 @@ def _step_setup(spaces: StokesSpaces, material: Material, tau_old, dt, f, gravit
     ps = np.zeros((ne, nq)) if plastic_strain is None else np.asarray(plastic_strain, dtype=float)
     if ps.shape != (ne, nq):
         raise ValueError(f"plastic_strain has shape {ps.shape}, expected ({ne}, {nq})")
-    return _StepSetup(tau_old, dt, rotation, eta_ve, chi, Y, eta_min, load, ps)
+    return _StepSetup(tau_old, dt, rotation, eta_ve, chi, Y, eta_min, load, ps, most)
 
 
 def _plastic_viscosity(st: _StepSetup, eps: np.ndarray, rotated: np.ndarray) -> np.ndarray:
@@ -620,7 +627,7 @@ def _picard(spaces: StokesSpaces, st: _StepSetup, u: Optional[np.ndarray],
                 weight = PICARD_RELAXATION    # cycling (no slow, steady approach): relax
         history.append(res)
         u, du_last = sol.u, du
-        d_eta = float(np.abs(np.log(eta_new / eta_eff)).max())
+        d_eta = st.largest(float(np.abs(np.log(eta_new / eta_eff)).max()))
         resolved = linear <= floor      # (a loose first solve: one more, not accepted)
         if res <= tol * weight and (d_eta <= VISCOSITY_SETTLED or it > 1) and resolved:
             eta_eff = eta_new

@@ -122,7 +122,7 @@ __all__ = ["StokesSpaces", "StokesSolution", "StokesCache", "stokes_spaces", "so
            "outline_flux",
            "boundary_flux",
            "assemble_stokes", "inf_sup_constant", "quadrature_values", "takes_viscous_blocks",
-           "wall_dofs"]
+           "wall_dofs", "check_divided", "largest"]
 
 Field = Union[float, np.ndarray, Callable]
 
@@ -496,6 +496,8 @@ def _distributed(spaces: StokesSpaces, solver: str):
     """The spaces to assemble on and the :class:`_Share`: for solver ``"petsc"`` on
     several MPI ranks, this rank's strip of triangles (distributed assembly); else
     all of ``spaces`` and None."""
+    if spaces.elements is not None:
+        return spaces, _divided_share(spaces, solver)
     if solver != "petsc":
         return spaces, None
     from ..parallel.petsc import owned_elements, summed, world
@@ -508,6 +510,48 @@ def _distributed(spaces: StokesSpaces, solver: str):
     if key not in cache:
         cache[key] = spaces.restricted(mine)
     return cache[key], _Share(world()[0] == 0, summed)
+
+
+def check_divided(spaces: StokesSpaces, solver: str) -> None:
+    """``ValueError`` for spaces built on some cells only (one MPI rank's share,
+    ``stokes_spaces(..., elements=...)``) with a solver other than ``"petsc"``."""
+    if spaces.elements is not None and solver != "petsc":
+        cells = "tetrahedra" if spaces.dim == 3 else "triangles"
+        raise ValueError(f"these spaces hold {spaces.elements.size} of the mesh's "
+                         f"{spaces.mesh.nelements} {cells} (one MPI rank's share): "
+                         f"solve them with solver='petsc', got solver={solver!r}")
+
+
+def largest(spaces: StokesSpaces, value: float) -> float:
+    """The largest of ``value`` over the MPI ranks where ``spaces`` are one rank's share
+    (built on some cells only), else ``value``: a number every rank needs the same of
+    (the smallest viscosity of the mesh, whether a step iterates)."""
+    if spaces.elements is None:
+        return float(value)
+    from ..parallel.petsc import maximum
+    return float(maximum(np.array([value], dtype=float))[0])
+
+
+def _divided_share(spaces: StokesSpaces, solver: str) -> _Share:
+    """The :class:`_Share` of spaces built on some cells only (``stokes_spaces(...,
+    elements=...)``): a rank's part of a distributed solve, which needs ``"petsc"`` and
+    the ranks' cells to be a partition of the mesh (checked once; ``ValueError`` naming
+    the first cell assembled by no rank or by several)."""
+    cells = "tetrahedra" if spaces.dim == 3 else "triangles"
+    check_divided(spaces, solver)
+    from ..parallel.petsc import summed, world
+    if not spaces.__dict__.get("_partition_checked"):
+        count = np.zeros(spaces.mesh.nelements)
+        count[spaces.elements] = 1.0
+        count = summed(count)
+        bad = np.flatnonzero(count != 1.0)
+        if bad.size:
+            raise ValueError(f"the ranks' {cells} must be a partition of the mesh: "
+                             f"{cells[:-1] if spaces.dim == 2 else 'tetrahedron'} "
+                             f"{int(bad[0])} is in the spaces of {int(count[bad[0]])} "
+                             f"rank(s) ({bad.size} such)")
+        spaces._partition_checked = True
+    return _Share(world()[0] == 0, summed)
 
 
 @dataclass

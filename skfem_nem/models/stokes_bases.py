@@ -92,11 +92,8 @@ class StokesSpaces:
         triangles' share of every block, and the shares of a partition of the
         triangles add up to the whole system (distributed assembly). Coefficients
         given at the quadrature points of all triangles are taken at these."""
-        elements = np.unique(np.asarray(elements, dtype=np.int64))
-        if elements.size == 0 or elements[0] < 0 or elements[-1] >= self.mesh.nelements:
-            raise ValueError(f"elements must be a non-empty subset of the "
-                             f"{self.mesh.nelements} triangles, got {elements.size} index(es)"
-                             f" in [{elements.min(initial=0)}, {elements.max(initial=0)}]")
+        elements = _subset(self.mesh, elements)
+        _divisible(self.mesh, self.method)
         if self.elements is not None:
             raise ValueError("these spaces are already restricted: restrict the whole ones")
         quad = self.pbasis.quadrature
@@ -116,7 +113,8 @@ class StokesSpaces:
 
 
 def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optional[int] = None,
-                  coordinates: str = "sibson", integration: Optional[str] = None) -> StokesSpaces:
+                  coordinates: str = "sibson", integration: Optional[str] = None,
+                  elements=None) -> StokesSpaces:
     """Velocity/pressure bases for :func:`solve_stokes`.
 
     Parameters
@@ -147,22 +145,19 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
         ``"smoothed"`` or ``"gauss"`` for the natural-neighbour velocity (see
         :class:`~skfem_nem.NaturalNeighbourBasis`); ``None`` follows
         ``npoints``. Not an option of Taylor-Hood or MINI.
+    elements
+        ``None`` (default: all the cells), cell indices, or ``"owned"``: this MPI rank's
+        strip of the cells (:func:`skfem_nem.parallel.owned_elements`; all of them on one
+        rank). The spaces are then built on those cells alone, nothing is computed or held
+        for the others, and they are what :meth:`StokesSpaces.restricted` gives of the
+        whole spaces, to round-off: this rank's share of a distributed solve
+        (``solve_stokes(..., solver="petsc")``, the ranks' cells a partition of the mesh).
     """
     tet = isinstance(mesh, MeshTet)
-    if not (tet or isinstance(mesh, MeshTri)):
-        raise ValueError(f"mesh must be a Delaunay MeshTri or MeshTet, got "
-                         f"{type(mesh).__name__}")
+    method = _checked_method(mesh, method, npoints)
     el = _ELEMENTS["tet" if tet else "tri"]
-    method = "taylor-hood" if method == "th" else method
-    if method not in ("nem", "nem-projection", "nem2", "taylor-hood", "mini"):
-        raise ValueError(f"method must be 'nem', 'nem-projection', 'nem2', 'taylor-hood' "
-                         f"or 'mini', got {method!r}")
-    if tet and npoints is not None:
-        raise ValueError(f"npoints={npoints!r} chooses a triangle rule; on tetrahedra "
-                         f"leave it None (each method takes its own rule)")
-    if tet and method == "nem2":
-        raise ValueError("method 'nem2' (quadratic natural neighbours) is built on "
-                         "triangles only; on tetrahedra use 'nem' or 'taylor-hood'")
+    elements = _cells(mesh, method, elements)
+    on = {} if elements is None else {"elements": elements}
     bb = None
     if method.startswith("nem"):
         elem = ElementNaturalNeighbour2() if method == "nem2" else ElementNaturalNeighbour()
@@ -172,10 +167,10 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
         ub = NaturalNeighbourBasis(mesh, ElementVector(elem, mesh.dim()), npoints=npoints,
                                    coordinates=coordinates,
                                    integration="smoothed" if smoothed else integration,
-                                   intorder=BUBBLE_ORDER if smoothed else None)
+                                   intorder=BUBBLE_ORDER if smoothed else None, **on)
         quad = ub.quadrature
         if method == "nem":
-            bb = Bubbles(mesh, quad)
+            bb = Bubbles(mesh, quad, elements)
     else:
         if integration not in (None, "gauss"):
             raise ValueError(f"integration={integration!r} is an option of the "
@@ -187,13 +182,71 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
         else:
             quad = gauss_rule(6 if npoints is None else npoints)
         ub = Basis(mesh, ElementVector(el["p2" if method == "taylor-hood" else "mini"]()),
-                   quadrature=quad)
-    pb = Basis(mesh, el["p1"](), quadrature=quad)
-    p0 = Basis(mesh, el["p0"](), quadrature=quad)
+                   quadrature=quad, **on)
+    pb = Basis(mesh, el["p1"](), quadrature=quad, **on)
+    p0 = Basis(mesh, el["p0"](), quadrature=quad, **on)
     if tet:
         for b in (ub, pb, p0, None if bb is None else bb.basis):
             _zero_flat_gradients(b)
-    return StokesSpaces(mesh, method, ub, pb, p0, bb)
+    return StokesSpaces(mesh, method, ub, pb, p0, bb, elements)
+
+
+def _checked_method(mesh, method: str, npoints) -> str:
+    """The method's name (``"th"`` is Taylor-Hood), after checking the mesh, the method and
+    ``npoints`` (``ValueError`` naming what is wrong)."""
+    tet = isinstance(mesh, MeshTet)
+    if not (tet or isinstance(mesh, MeshTri)):
+        raise ValueError(f"mesh must be a Delaunay MeshTri or MeshTet, got "
+                         f"{type(mesh).__name__}")
+    method = "taylor-hood" if method == "th" else method
+    if method not in ("nem", "nem-projection", "nem2", "taylor-hood", "mini"):
+        raise ValueError(f"method must be 'nem', 'nem-projection', 'nem2', 'taylor-hood' "
+                         f"or 'mini', got {method!r}")
+    if tet and npoints is not None:
+        raise ValueError(f"npoints={npoints!r} chooses a triangle rule; on tetrahedra "
+                         f"leave it None (each method takes its own rule)")
+    if tet and method == "nem2":
+        raise ValueError("method 'nem2' (quadratic natural neighbours) is built on "
+                         "triangles only; on tetrahedra use 'nem' or 'taylor-hood'")
+    return method
+
+
+def _cells(mesh, method: str, elements) -> Optional[np.ndarray]:
+    """The cells of ``stokes_spaces(..., elements=...)``: None (all), or sorted indices
+    (``"owned"``: this MPI rank's strip, None on one rank)."""
+    if isinstance(elements, str):
+        if elements != "owned":
+            raise ValueError(f"elements must be None, cell indices or 'owned', got "
+                             f"{elements!r}")
+        from ..parallel.petsc import owned_elements
+        elements = owned_elements(mesh)
+    if elements is None:
+        return None
+    elements = _subset(mesh, elements)
+    _divisible(mesh, method)
+    return elements
+
+
+def _divisible(mesh, method: str) -> None:
+    """``ValueError`` for the spaces that cannot be built on some cells only: the
+    natural-neighbour velocity with bubbles on tetrahedra, whose condensation numbers the
+    bubbles of the cells it integrates and not of the mesh (its division is not built)."""
+    if isinstance(mesh, MeshTet) and method == "nem":
+        raise ValueError("method 'nem' on tetrahedra is built on all the mesh's cells only "
+                         "(its condensed bubbles are not yet divided among MPI ranks); "
+                         "'taylor-hood' and 'mini' can be")
+
+
+def _subset(mesh, elements) -> np.ndarray:
+    """``elements`` as sorted unique cell indices; ``ValueError`` unless a non-empty
+    subset of the mesh's cells."""
+    elements = np.unique(np.asarray(elements, dtype=np.int64))
+    if elements.size == 0 or elements[0] < 0 or elements[-1] >= mesh.nelements:
+        cells = "tetrahedra" if mesh.dim() == 3 else "triangles"
+        raise ValueError(f"elements must be a non-empty subset of the "
+                         f"{mesh.nelements} {cells}, got {elements.size} index(es)"
+                         f" in [{elements.min(initial=0)}, {elements.max(initial=0)}]")
+    return elements
 
 
 def _zero_flat_gradients(basis) -> None:

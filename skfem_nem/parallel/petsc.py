@@ -34,7 +34,8 @@ import scipy.sparse as sp
 __all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debian_petsc_dir",
            "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
            "default_options", "default_split", "split_bounds", "row_range", "ranks_differing",
-           "world", "rows_to_petsc", "summed_rows", "summed", "owned_elements"]
+           "world", "rows_to_petsc", "summed_rows", "summed", "maximum", "joined",
+           "owned_elements"]
 
 PETSC_INSTALL_HINT = (
     "petsc4py and mpi4py are needed for the parallel solvers. PyPI has PETSc only as a "
@@ -180,6 +181,31 @@ def summed(values: np.ndarray, comm=None) -> np.ndarray:
     from mpi4py import MPI
     comm.tompi4py().Allreduce(values, out, op=MPI.SUM)
     return out
+
+
+def maximum(values: np.ndarray, comm=None) -> np.ndarray:
+    """The entrywise maximum over the ranks of ``values`` (the same shape on every rank),
+    on every rank."""
+    PETSc = import_petsc()
+    comm = PETSc.COMM_WORLD if comm is None else comm
+    values = np.ascontiguousarray(values, dtype=float)
+    if comm.getSize() == 1:
+        return values.copy()
+    out = np.empty_like(values)
+    from mpi4py import MPI
+    comm.tompi4py().Allreduce(values, out, op=MPI.MAX)
+    return out
+
+
+def joined(part: np.ndarray, rows: np.ndarray, n: int, comm=None) -> np.ndarray:
+    """The whole array of ``n`` rows of which each rank holds the rows ``rows`` (``part``,
+    its cells' values of an integration-point field; the ranks' ``rows`` a partition of
+    ``range(n)``), on every rank. Each row comes from one rank and is added to zeros,
+    so it is that rank's bit for bit."""
+    part = np.asarray(part, dtype=float)
+    whole = np.zeros((n,) + part.shape[1:])
+    whole[rows] = part
+    return summed(whole, comm)
 
 
 def vector(values: np.ndarray, comm=None, owned: Optional[Sequence[int]] = None):

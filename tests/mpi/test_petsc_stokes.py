@@ -142,3 +142,35 @@ def test_each_rank_assembles_its_strip_of_triangles(square, comm, agree):
     for a, _, _, n, n_given, du, dp in got:
         assert n == len(a) and n_given == 0
         assert du < AGREEMENT and dp < AGREEMENT, (du, dp)
+
+
+@pytest.mark.parametrize("method", ["nem", "taylor-hood"])
+def test_divided_spaces_give_the_solution_of_the_whole_ones(square, comm, agree, method):
+    """Spaces built on this rank's strip alone (``elements="owned"``: no whole-mesh basis
+    on any rank) solve to the solution of the whole spaces, and hold that strip only."""
+    whole = square[0] if method == "nem" else stokes_spaces(square[0].mesh, method)
+    mesh = whole.mesh
+    ex = SolCx(1.0, 1e6)
+    divided = stokes_spaces(mesh, method, elements="owned")
+    s = solve_stokes(divided, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL)
+    ref = solve_stokes(whole, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL)
+    held = mesh.nelements if divided.elements is None else divided.elements.size
+    points = divided.quadrature_points.shape[1]
+    got = agree((held, points, s.info["assembled_triangles"], rel(s.u, ref.u),
+                 rel(s.p, ref.p)))
+    assert sum(g[0] for g in got) == mesh.nelements
+    for held, points, assembled, du, dp in got:
+        assert points == held == assembled
+        assert du < AGREEMENT and dp < AGREEMENT, (du, dp)
+
+
+def test_divided_spaces_must_partition_the_mesh(square, comm):
+    """Every rank taking the same half of the triangles: on two ranks each triangle of it
+    is in two ranks' spaces, the others in none; on one rank half are in none. Every rank
+    raises, naming a triangle and its count."""
+    mesh = square[0].mesh
+    half = stokes_spaces(mesh, "nem", elements=np.arange(mesh.nelements // 2))
+    with pytest.raises(ValueError, match="must be a partition of the mesh: triangle"):
+        solve_stokes(half, 1.0, solver="petsc")
+    with pytest.raises(ValueError, match="solve them with solver='petsc'"):
+        solve_stokes(half, 1.0, solver="fgmres")

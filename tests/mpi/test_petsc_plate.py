@@ -81,6 +81,48 @@ def test_twenty_steps_match_the_serial_run(comm, agree, shared_dir, tmp_path, ti
             assert abs(float(rows[0][k]) - float(rows[1][k])) <= 1e-6 * abs(float(rows[1][k]))
 
 
+@pytest.fixture
+def serial_like(monkeypatch):
+    """The serial reference's settings of test_twenty_steps_match_the_serial_run: every
+    solve of the Picard iterations to LINEAR_TOL, every serial solve factorised."""
+    import skfem_nem.models.rheology as rheology
+    import skfem_nem.models.stokes_solvers as solvers
+    monkeypatch.setattr(rheology, "PICARD_LINEAR_FACTOR", 0.0)
+    monkeypatch.setattr(solvers, "REUSE_FACTOR", False)
+
+
+def test_restart_on_another_number_of_ranks(comm, agree, shared_dir, tmp_path, tight,
+                                            serial_like):
+    """A checkpoint written by one process continues on the ranks, and one written by
+    the ranks continues in one process: after 2 + 2 steps, both give the nodes, velocity
+    and pressure of an uninterrupted serial run of 4 steps."""
+    cfg = {"nodes": NODES}
+    ref = SinkingPlate(PlateConfig(**cfg, solver="schur"), tmp_path / "ref")
+    ref.run(progress=False, max_steps=4)
+    mpi = comm.tompi4py()
+    one, many = shared_dir("one"), shared_dir("many")   # (collective: named on every rank)
+    if comm.getRank() == 0:      # one process writes the checkpoint of step 2 ...
+        SinkingPlate(PlateConfig(**cfg, solver="schur"), one).run(progress=False, max_steps=2)
+    mpi.barrier()                # ... and the ranks go on from it
+    on_ranks = SinkingPlate.restart(one, PlateConfig(**cfg, solver="petsc"))
+    on_ranks.run(progress=False, max_steps=2)
+    # the ranks write the checkpoint of step 2, and one process goes on from it
+    SinkingPlate(PlateConfig(**cfg, solver="petsc"), many).run(progress=False, max_steps=2)
+    mpi.barrier()
+    diffs = []
+    if comm.getRank() == 0:
+        alone = SinkingPlate.restart(many, PlateConfig(**cfg, solver="schur"))
+        alone.run(progress=False, max_steps=2)
+        diffs = [alone.lm.step, rel(alone.lm.nodes, ref.lm.nodes),
+                 rel(alone.solution.u, ref.solution.u), rel(alone.solution.p, ref.solution.p)]
+    got = agree((on_ranks.lm.step, rel(on_ranks.lm.nodes, ref.lm.nodes),
+                 rel(on_ranks.solution.u, ref.solution.u),
+                 rel(on_ranks.solution.p, ref.solution.p), diffs))
+    for step, dx, du, dp, alone in got:
+        assert step == 4 and max(dx, du, dp) < AGREEMENT, (step, dx, du, dp)
+    assert got[0][-1][0] == 4 and max(got[0][-1][1:]) < AGREEMENT, got[0][-1]
+
+
 def test_rank_zero_alone_writes(comm, agree, shared_dir):
     out = shared_dir("cli")
     code = main(["sinking-plate", "--solver", "petsc", "--nodes", str(NODES),

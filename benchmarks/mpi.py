@@ -6,7 +6,7 @@ the unit square, no slip), natural-neighbour velocity with bubbles, tol 1e-10, s
 with ``solve_stokes(..., solver="petsc")`` under ``mpiexec -n R`` for each rank count
 ``R`` and node count; or (``--flow plate``) the first step of the sinking plate
 (``skfem-nem sinking-plate --solver petsc --nodes N`` for each size N, random nodes drawn
-before the outline's and thinning: the mesh has about 1.8 N nodes; its
+before the outline's and thinning: the mesh has about 0.9 N nodes; its
 Picard iterations, the fields joined, the node motion and flips on every rank). Each run
 is a fresh ``mpiexec`` of this script (``--worker``), so its peak memory is its own.
 Reported, the slowest rank's seconds (best of ``--repeat``):

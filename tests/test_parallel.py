@@ -2,13 +2,15 @@
 route when petsc4py is missing, finding Debian's PETSc, the row split, the strip
 ordering of the Stokes unknowns, argument checks. The solves themselves are checked
 against the serial solvers in tests/mpi, which the MPI step of CI runs under mpiexec
-with 1 and 2 ranks (the default run does not collect it; see pyproject.toml)."""
+with 1, 2 and 4 ranks (the default run does not collect it; see pyproject.toml)."""
 import pathlib
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from skfem_nem import delaunay_mesh
 from skfem_nem.geometry.nodesets import box_nodes
@@ -175,3 +177,22 @@ def test_the_sinking_plate_without_petsc_is_a_user_error(no_petsc, tmp_path, cap
     assert stop.value.code == 2 and len(err) == 1, err
     assert err[0].startswith("skfem-nem: sinking-plate: ") and "apt-get install" in err[0]
     assert "Traceback" not in err[0] and not out.exists()
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(1, 40), st.integers(0, 10**6), st.data())
+def test_renumbered_rows_are_scipys_double_fancy_indexing(n, seed, data):
+    """The rows a rank sends under a renumbering: one copy of those rows, equal to
+    ``A[order][:, order]``'s rows, in canonical form."""
+    import scipy.sparse as sp
+    from skfem_nem.parallel.petsc import inverse_order, renumbered
+    rng = np.random.default_rng(seed)
+    A = sp.random(n, n, density=0.3, format="csr", random_state=rng)
+    order = rng.permutation(n)
+    a = data.draw(st.integers(0, n))
+    b = data.draw(st.integers(a, n))
+    got = renumbered(A, order[a:b], inverse_order(order))
+    ref = A[order][:, order][a:b]
+    assert got.shape == ref.shape and got.has_canonical_format
+    assert (got != ref).nnz == 0
+    assert np.array_equal(inverse_order(order)[order], np.arange(n))

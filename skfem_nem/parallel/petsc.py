@@ -35,6 +35,7 @@ __all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debia
            "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
            "default_options", "default_split", "split_bounds", "row_range", "ranks_differing",
            "world", "rows_to_petsc", "summed_rows", "summed", "maximum", "joined",
+           "inverse_order", "renumbered",
            "owned_elements"]
 
 PETSC_INSTALL_HINT = (
@@ -156,18 +157,46 @@ def rows_to_petsc(block: sp.spmatrix, n: int, comm):
     return M
 
 
-def summed_rows(part: sp.spmatrix, comm, owned: Optional[Sequence[int]] = None):
+def summed_rows(part: sp.spmatrix, comm, owned: Optional[Sequence[int]] = None,
+                order: Optional[np.ndarray] = None):
     """This rank's rows (:func:`row_range`) of the sum over the ranks of ``part``, each
     rank's share of a matrix assembled in parts (its own triangles): every rank sends
     each other rank the rows it owns and adds what it receives, so no rank ever holds
-    more than its share and its own rows."""
+    more than its share and its own rows. ``order``: the unknowns renumbered first (new
+    ``i`` is old ``order[i]``, rows and columns), block by block as they are sent."""
     part = sp.csr_matrix(part)
-    blocks = [part[a:b] for a, b in split_bounds(part.shape[0], comm.getSize(), owned)]
+    bounds = split_bounds(part.shape[0], comm.getSize(), owned)
+    if order is None:
+        blocks = [part[a:b] for a, b in bounds]
+    else:
+        new = inverse_order(order)
+        blocks = [renumbered(part, order[a:b], new) for a, b in bounds]
     got = comm.tompi4py().alltoall(blocks)
     total = got[0]
     for b in got[1:]:
         total = total + b
     return sp.csr_matrix(total)
+
+
+def inverse_order(order: np.ndarray) -> np.ndarray:
+    """The new number of each old unknown under ``order`` (new ``i`` is old
+    ``order[i]``)."""
+    order = np.asarray(order)
+    new = np.empty_like(order)
+    new[order] = np.arange(order.size, dtype=order.dtype)
+    return new
+
+
+def renumbered(A: sp.csr_matrix, rows: np.ndarray, new: np.ndarray) -> sp.csr_matrix:
+    """The rows ``rows`` of ``A`` (old numbers, in their new order) with the columns
+    renumbered by ``new`` (:func:`inverse_order`): ``A[order][:, order]`` restricted to
+    those rows, made as one copy of the rows (scipy's two fancy indexings make two of
+    the whole matrix)."""
+    out = A[np.asarray(rows)]
+    out.indices = new[out.indices].astype(out.indices.dtype, copy=False)
+    out.has_sorted_indices = False
+    out.sort_indices()
+    return out
 
 
 def summed(values: np.ndarray, comm=None) -> np.ndarray:

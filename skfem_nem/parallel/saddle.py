@@ -32,7 +32,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .petsc import (check_replicated, csr_to_petsc, default_options, destroying, gather,
-                    import_petsc, row_range, rows_to_petsc, split_bounds, summed_rows, vector)
+                    import_petsc, inverse_order, renumbered, row_range, rows_to_petsc,
+                    split_bounds, summed_rows, vector)
 from .petsc import summed as summed_vector
 from .solver import converged_or_raise, null_space
 
@@ -97,17 +98,18 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     for name, v in (("schur_diagonal", schur_diagonal), ("pressure_null", pressure_null)):
         if v is not None and np.shape(v) != (n2,):
             raise ValueError(f"{name} has shape {np.shape(v)}, expected ({n2},) like g")
-    K = sp.bmat([[A, B.T], [B, C]], format="csr")
     perm = np.arange(n) if order is None else np.asarray(order)
     if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
         raise ValueError(f"order must be a permutation of the {n} unknowns")
-    K = K[perm][:, perm]
+    K = sp.bmat([[A, B.T], [B, C]], format="csr")
     if summed:
         f, g, schur_diagonal = (summed_vector(v, comm) for v in (f, g, schur_diagonal))
-        Kmat = rows_to_petsc(summed_rows(K, comm), n, comm)
+        Kmat = rows_to_petsc(summed_rows(K, comm, order=perm), n, comm)
     else:
+        K = renumbered(K, perm, inverse_order(perm))
         check_replicated(K, comm, "saddle-point matrix")
         Kmat = csr_to_petsc(K, comm)
+    del K  # (PETSc holds the rows now)
     velocity = perm < n1
     r0, r1 = row_range(n, comm)
     with destroying(Kmat, vector(np.concatenate([f, g])[perm], comm)) as objs:

@@ -336,6 +336,11 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     if viscous_blocks and not takes_viscous_blocks(spaces):
         raise ValueError(f"viscous_blocks=True needs the natural-neighbour velocity on "
                          f"tetrahedra, got method {spaces.method!r} in {spaces.dim}D")
+    if spaces.elements is not None and takes_viscous_blocks(spaces):
+        # (its condensation numbers the bubbles of the cells it integrates, not the mesh's)
+        raise ValueError("method 'nem' on tetrahedra assembles on all the mesh's cells only "
+                         "(its condensed bubbles are not yet divided among MPI ranks); "
+                         "'taylor-hood' and 'mini' spaces on some tetrahedra assemble")
     d = spaces.dim
     e = quadrature_values(spaces, eta, "viscosity eta", positive=True)
     fv = quadrature_values(spaces, f, "body force f", shape=(d,))

@@ -93,7 +93,6 @@ class StokesSpaces:
         triangles add up to the whole system (distributed assembly). Coefficients
         given at the quadrature points of all triangles are taken at these."""
         elements = _subset(self.mesh, elements)
-        _divisible(self.mesh, self.method)
         if self.elements is not None:
             raise ValueError("these spaces are already restricted: restrict the whole ones")
         quad = self.pbasis.quadrature
@@ -156,7 +155,7 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
     tet = isinstance(mesh, MeshTet)
     method = _checked_method(mesh, method, npoints)
     el = _ELEMENTS["tet" if tet else "tri"]
-    elements = _cells(mesh, method, elements)
+    elements = _cells(mesh, elements)
     on = {} if elements is None else {"elements": elements}
     bb = None
     if method.startswith("nem"):
@@ -211,7 +210,7 @@ def _checked_method(mesh, method: str, npoints) -> str:
     return method
 
 
-def _cells(mesh, method: str, elements) -> Optional[np.ndarray]:
+def _cells(mesh, elements) -> Optional[np.ndarray]:
     """The cells of ``stokes_spaces(..., elements=...)``: None (all), or sorted indices
     (``"owned"``: this MPI rank's strip, None on one rank)."""
     if isinstance(elements, str):
@@ -222,19 +221,7 @@ def _cells(mesh, method: str, elements) -> Optional[np.ndarray]:
         elements = owned_elements(mesh)
     if elements is None:
         return None
-    elements = _subset(mesh, elements)
-    _divisible(mesh, method)
-    return elements
-
-
-def _divisible(mesh, method: str) -> None:
-    """``ValueError`` for the spaces that cannot be built on some cells only: the
-    natural-neighbour velocity with bubbles on tetrahedra, whose condensation numbers the
-    bubbles of the cells it integrates and not of the mesh (its division is not built)."""
-    if isinstance(mesh, MeshTet) and method == "nem":
-        raise ValueError("method 'nem' on tetrahedra is built on all the mesh's cells only "
-                         "(its condensed bubbles are not yet divided among MPI ranks); "
-                         "'taylor-hood' and 'mini' can be")
+    return _subset(mesh, elements)
 
 
 def _subset(mesh, elements) -> np.ndarray:

@@ -53,8 +53,9 @@ import numpy as np
 
 from .return_mapping import (ArrayLike, deviator, maxwell_coefficients, return_map,
                              rotate_stress, second_invariant, spin, strain_rate, vep_update)
-from .stokes import (StokesCache, StokesSolution, StokesSpaces, check_divided, largest,
-                     quadrature_values, solve_stokes)
+from .stokes import (StokesCache, StokesSolution, StokesSpaces, quadrature_values,
+                     solve_stokes)
+from .stokes_share import check_divided, largest
 from .stokes_solvers import CACHED_SOLVERS, check_solver
 
 __all__ = ["Material", "combine_materials", "maxwell_coefficients", "strain_rate", "spin",

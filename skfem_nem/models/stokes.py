@@ -99,7 +99,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable, NamedTuple, Optional, Sequence, Union
+from typing import Callable, Optional, Sequence, Union
 
 import numpy as np
 import scipy.sparse as sp
@@ -117,12 +117,13 @@ from .stokes_walls import (boundary_flux, constraint_rows, fixed_velocity, free_
                            outline_flux, wall_dofs, walls_fix_pressure)
 from .saddle_problem import SaddlePointProblem, SaddlePointSolution
 from .stokes_solvers import SOLVERS, StokesCache, check_solver
+from .stokes_share import Share, distributed
 
 __all__ = ["StokesSpaces", "StokesSolution", "StokesCache", "stokes_spaces", "solve_stokes",
            "outline_flux",
            "boundary_flux",
            "assemble_stokes", "inf_sup_constant", "quadrature_values", "takes_viscous_blocks",
-           "wall_dofs", "check_divided", "largest"]
+           "wall_dofs"]
 
 Field = Union[float, np.ndarray, Callable]
 
@@ -475,88 +476,17 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     return _stokes_solution(spaces, sys_, red, x, solver, info)
 
 
-class _Share(NamedTuple):
-    """A distributed assembly: this MPI rank's share of the system, whether it is rank
-    0 (which alone adds what is not assembled over triangles: the constraint rows),
-    and the sum of a vector over the ranks."""
-
-    root: bool
-    total: Callable[[np.ndarray], np.ndarray]
-
-
 def _system(spaces: StokesSpaces, solver: str, system: Optional[StokesSystem], eta, f, tau0):
     """The system to solve (``system``, or assembled: whole, or this rank's share), the
-    :class:`_Share` of a distributed assembly (or None) and the triangles assembled."""
+    :class:`Share` of a distributed assembly (or None) and the triangles assembled."""
     if system is not None:
         return system, None, 0
-    part, share = _distributed(spaces, solver)
+    part, share = distributed(spaces, solver)
     n = spaces.mesh.nelements if part.elements is None else int(part.elements.size)
     # (the solvers that factorise or hand the block on take it as CSR: "auto" converts
     # where it chooses one of them)
     blocks = solver in ("auto", "fgmres") and takes_viscous_blocks(spaces)
     return assemble_stokes(part, eta, f, tau0, viscous_blocks=blocks), share, n
-
-
-def _distributed(spaces: StokesSpaces, solver: str):
-    """The spaces to assemble on and the :class:`_Share`: for solver ``"petsc"`` on
-    several MPI ranks, this rank's strip of triangles (distributed assembly); else
-    all of ``spaces`` and None."""
-    if spaces.elements is not None:
-        return spaces, _divided_share(spaces, solver)
-    if solver != "petsc":
-        return spaces, None
-    from ..parallel.petsc import owned_elements, summed, world
-    mine = owned_elements(spaces.mesh)
-    if mine is None:
-        return spaces, None
-    # kept with the spaces: the Picard iterations of a step solve on the same strip
-    cache = spaces.__dict__.setdefault("_cache", {})
-    key = ("strip", mine.tobytes())
-    if key not in cache:
-        cache[key] = spaces.restricted(mine)
-    return cache[key], _Share(world()[0] == 0, summed)
-
-
-def check_divided(spaces: StokesSpaces, solver: str) -> None:
-    """``ValueError`` for spaces built on some cells only (one MPI rank's share,
-    ``stokes_spaces(..., elements=...)``) with a solver other than ``"petsc"``."""
-    if spaces.elements is not None and solver != "petsc":
-        cells = "tetrahedra" if spaces.dim == 3 else "triangles"
-        raise ValueError(f"these spaces hold {spaces.elements.size} of the mesh's "
-                         f"{spaces.mesh.nelements} {cells} (one MPI rank's share): "
-                         f"solve them with solver='petsc', got solver={solver!r}")
-
-
-def largest(spaces: StokesSpaces, value: float) -> float:
-    """The largest of ``value`` over the MPI ranks where ``spaces`` are one rank's share
-    (built on some cells only), else ``value``: a number every rank needs the same of
-    (the smallest viscosity of the mesh, whether a step iterates)."""
-    if spaces.elements is None:
-        return float(value)
-    from ..parallel.petsc import maximum
-    return float(maximum(np.array([value], dtype=float))[0])
-
-
-def _divided_share(spaces: StokesSpaces, solver: str) -> _Share:
-    """The :class:`_Share` of spaces built on some cells only (``stokes_spaces(...,
-    elements=...)``): a rank's part of a distributed solve, which needs ``"petsc"`` and
-    the ranks' cells to be a partition of the mesh (checked once; ``ValueError`` naming
-    the first cell assembled by no rank or by several)."""
-    cells = "tetrahedra" if spaces.dim == 3 else "triangles"
-    check_divided(spaces, solver)
-    from ..parallel.petsc import summed, world
-    if not spaces.__dict__.get("_partition_checked"):
-        count = np.zeros(spaces.mesh.nelements)
-        count[spaces.elements] = 1.0
-        count = summed(count)
-        bad = np.flatnonzero(count != 1.0)
-        if bad.size:
-            raise ValueError(f"the ranks' {cells} must be a partition of the mesh: "
-                             f"{cells[:-1] if spaces.dim == 2 else 'tetrahedron'} "
-                             f"{int(bad[0])} is in the spaces of {int(count[bad[0]])} "
-                             f"rank(s) ({bad.size} such)")
-        spaces._partition_checked = True
-    return _Share(world()[0] == 0, summed)
 
 
 @dataclass
@@ -569,11 +499,11 @@ class _Reduced:
     fixed: np.ndarray               # fixed velocity dofs
     u0: np.ndarray                  # (nu,) their values (zero elsewhere)
     n_pressure: int                 # pressure dofs (without the k multipliers)
-    share: Optional[_Share] = None  # distributed assembly: the blocks are a share
+    share: Optional[Share] = None  # distributed assembly: the blocks are a share
 
 
 def _with_constraints(sys_: StokesSystem, A: sp.csr_matrix, constraints, nu: int,
-                      share: Optional[_Share] = None):
+                      share: Optional[Share] = None):
     """``B``, ``g``, ``m``, ``S`` and the pressure preconditioner diagonal, with
     the rows of the extra constraints ``C u = c`` appended as multipliers (by rank
     0 alone in a distributed assembly: the others append zero rows)."""
@@ -596,7 +526,7 @@ def _with_constraints(sys_: StokesSystem, A: sp.csr_matrix, constraints, nu: int
 
 
 def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndarray,
-            pressure_mean: bool, constraints, share: Optional[_Share] = None,
+            pressure_mean: bool, constraints, share: Optional[Share] = None,
             own: bool = False):
     """The saddle-point problem on the free velocity dofs (fixed values moved
     to the right side), and ``sys_`` without its whole viscous block: the solve reads the

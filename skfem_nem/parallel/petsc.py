@@ -201,20 +201,18 @@ def renumbered(A: sp.csr_matrix, rows: np.ndarray, new: np.ndarray) -> sp.csr_ma
 
 def summed(values: np.ndarray, comm=None) -> np.ndarray:
     """The sum over the ranks of ``values`` (the same shape on every rank), on every rank."""
-    PETSc = import_petsc()
-    comm = PETSc.COMM_WORLD if comm is None else comm
-    values = np.ascontiguousarray(values, dtype=float)
-    if comm.getSize() == 1:
-        return values.copy()
-    out = np.empty_like(values)
-    from mpi4py import MPI
-    comm.tompi4py().Allreduce(values, out, op=MPI.SUM)
-    return out
+    return _allreduced(values, "SUM", comm)
 
 
 def maximum(values: np.ndarray, comm=None) -> np.ndarray:
     """The entrywise maximum over the ranks of ``values`` (the same shape on every rank),
     on every rank."""
+    return _allreduced(values, "MAX", comm)
+
+
+def _allreduced(values: np.ndarray, op: str, comm=None) -> np.ndarray:
+    """``values`` reduced over the ranks by MPI's operation ``op`` (its name), on every
+    rank (a copy on one rank)."""
     PETSc = import_petsc()
     comm = PETSc.COMM_WORLD if comm is None else comm
     values = np.ascontiguousarray(values, dtype=float)
@@ -222,7 +220,7 @@ def maximum(values: np.ndarray, comm=None) -> np.ndarray:
         return values.copy()
     out = np.empty_like(values)
     from mpi4py import MPI
-    comm.tompi4py().Allreduce(values, out, op=MPI.MAX)
+    comm.tompi4py().Allreduce(values, out, op=getattr(MPI, op))
     return out
 
 

@@ -1,8 +1,10 @@
 """The Stokes solve on PETSc over MPI: assembly, solve, iterations and memory per rank.
 
 SolCx at a viscosity contrast of 1e6 (``examples/ex07_solcx.py``'s nodes, the interface
-as segments, free slip) or Donea-Huerta's flow (``--flow donea-huerta``: random nodes in
-the unit square, no slip), natural-neighbour velocity with bubbles, tol 1e-10, solved
+as segments, free slip), Donea-Huerta's flow (``--flow donea-huerta``: random nodes in
+the unit square, no slip) or, in 3D, the sinker (``--flow sinker``: eight spheres at a
+viscosity ratio of 1e4 in the unit cube, random nodes, no slip; tetrahedra),
+natural-neighbour velocity with bubbles, tol 1e-10, solved
 with ``solve_stokes(..., solver="petsc")`` under ``mpiexec -n R`` for each rank count
 ``R`` and node count; or (``--flow plate``) the first step of the sinking plate
 (``skfem-nem sinking-plate --solver petsc --nodes N`` for each size N, random nodes drawn
@@ -12,7 +14,7 @@ is a fresh ``mpiexec`` of this script (``--worker``), so its peak memory is its 
 Reported, the slowest rank's seconds (best of ``--repeat``):
 
 - ``spaces``: the bases (natural-neighbour coordinates at the quadrature points). By
-  default each rank builds them on its strip of triangles alone
+  default each rank builds them on its strip of triangles (or tetrahedra) alone
   (``stokes_spaces(mesh, elements="owned")``: divided); ``--spaces whole`` builds them
   for the whole mesh on every rank (replicated, the distributed assembly then takes its
   strip of them);
@@ -48,8 +50,14 @@ def flow(name: str, nodes: int):
     """The mesh, viscosity, force and walls of the flow ``name`` at about ``nodes`` nodes
     (seeded: the same on every rank)."""
     from skfem_nem import delaunay_mesh
+    from skfem_nem.geometry import box_nodes_3d
     from skfem_nem.geometry.nodesets import box_nodes
     from skfem_nem.models.analytic import DoneaHuerta, SolCx
+    from skfem_nem.models.analytic3d import Sinker
+    if name == "sinker":
+        ex = Sinker(8, contrast=1e4, seed=0)
+        return (delaunay_mesh(box_nodes_3d(nodes, seed=0)), ex.viscosity, ex.force,
+                {"free_slip": None, "no_slip": "all"})
     if name == "solcx":
         from ex07_solcx import make_mesh
         ex = SolCx(1.0, 1e6)
@@ -139,12 +147,13 @@ def table(args) -> None:
     """The markdown table, a row per size and rank count, printed as they come."""
     what = {"solcx": "SolCx, contrast 1e6, free slip",
             "donea-huerta": "Donea-Huerta, no slip",
+            "sinker": "the 3D sinker, 8 spheres, ratio 1e4, no slip",
             "plate": "the sinking plate's first step (last Picard solve's iterations)"
             }[args.flow]
     tol = "the plate's tolerances" if args.flow == "plate" else "tol 1e-10"
     print(f"{what}, spaces {args.spaces}, {tol}, seconds of the slowest rank "
           f"(best of {args.repeat})\n")
-    print("| nodes | ranks | spaces s | assembly s | solve s | FGMRES its | triangles per "
+    print("| nodes | ranks | spaces s | assembly s | solve s | FGMRES its | cells per "
           "rank | peak MB per rank | memory ratio | du, dp vs first |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for n in args.sizes:
@@ -165,7 +174,8 @@ def main(argv=None) -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=[10000, 30000, 100000])
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2, 4])
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--flow", choices=["solcx", "donea-huerta", "plate"], default="solcx")
+    ap.add_argument("--flow", choices=["solcx", "donea-huerta", "sinker", "plate"],
+                    default="solcx")
     ap.add_argument("--spaces", choices=["divided", "whole"], default="divided",
                     help="bases on each rank's strip (default) or whole on every rank")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)

@@ -135,6 +135,42 @@ def test_strip_order_keeps_strips_together():
     assert 0.3 * n1 < np.count_nonzero(half < n1) < 0.7 * n1
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_strip_order_places_the_mini_bubbles_at_their_cells(dim):
+    """scikit-fem puts the MINI bubbles at NaN; the strips take each at its cell's
+    centroid, so the first half of the order holds about half of them (all went to the
+    last rank before)."""
+    from skfem_nem.geometry import box_nodes_3d
+    mesh = delaunay_mesh(box_nodes(150, seed=4) if dim == 2 else box_nodes_3d(80, seed=4))
+    spaces = stokes_spaces(mesh, "mini")
+
+    class Captured(Exception):
+        pass
+
+    def capture(problem, tol, maxiter, info):
+        raise Captured(problem)
+
+    SOLVERS["capture"] = capture
+    try:
+        with pytest.raises(Captured) as got:
+            solve_stokes(spaces, 1.0, solver="capture")
+    finally:
+        del SOLVERS["capture"]
+    problem = got.value.args[0]
+    order = strip_order(problem)
+    inner = np.asarray(spaces.ubasis.dofs.interior_dofs).ravel()
+    bubble = np.zeros(spaces.ubasis.N, bool)
+    bubble[inner] = True
+    bubble = np.r_[bubble[problem.free], np.zeros(problem.n_pressure, bool)]
+    first = np.count_nonzero(bubble[order[:order.size // 2]])
+    assert 0.3 < first / np.count_nonzero(bubble) < 0.7
+    centroid = mesh.p[0, mesh.t].mean(axis=0)
+    xu = np.array(spaces.ubasis.doflocs[0])
+    xu[np.asarray(spaces.ubasis.dofs.interior_dofs)] = centroid
+    x = np.r_[xu[problem.free], mesh.p[0]][order]
+    assert np.all(np.diff(x) >= 0)
+
+
 def test_petsc_is_a_solver_without_cache():
     check_solver("petsc", None)
     with pytest.raises(ValueError, match="not by solver='petsc'"):
@@ -152,16 +188,16 @@ def test_solver_petsc_checks_its_arguments_before_needing_petsc(no_petsc):
 
 def test_the_default_run_leaves_the_mpi_tests_to_the_mpi_step():
     """tests/mpi is not collected by ``python -m pytest`` (it would fail without
-    petsc4py), and .ci/run runs it under mpiexec on 1 and 2 ranks."""
+    petsc4py), and .ci/run runs it under mpiexec on 1, 2 and 4 ranks."""
     out = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q",
                           "-p", "no:cacheprovider", "tests/test_parallel.py", "tests"],
                          capture_output=True, text=True, cwd=ROOT).stdout
     assert "tests/mpi" not in out and "test_parallel.py" in out
     assert sorted(p.name for p in (ROOT / "tests" / "mpi").glob("test_*.py")) == \
         ["test_petsc_failures.py", "test_petsc_plate.py", "test_petsc_solver.py",
-         "test_petsc_stokes.py"]
+         "test_petsc_stokes.py", "test_petsc_stokes_3d.py"]
     ci = (ROOT / ".ci" / "run").read_text()
-    for ranks in (1, 2):
+    for ranks in (1, 2, 4):
         assert f"mpiexec --allow-run-as-root -n {ranks} python -m pytest" in ci
     assert "tests/mpi" in ci
 

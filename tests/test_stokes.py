@@ -268,31 +268,70 @@ def test_spaces_built_on_some_triangles_are_the_restricted_whole_ones(method):
         assert (abs(x - y).max() if hasattr(x, "nnz") else np.abs(x - y).max()) == 0.0, name
 
 
+def _cube_mesh(n, seed):
+    rng = np.random.default_rng(seed)
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    return delaunay_mesh(np.r_[corners, rng.random((n, 3))])
+
+
+def _tet_load(x):
+    return np.stack([0 * x[0], x[2] - 0.5, -1.0 - x[0]])
+
+
 @pytest.mark.parametrize("method", ["taylor-hood", "mini", "nem"])
 def test_spaces_built_on_some_tetrahedra_are_the_restricted_whole_ones(method):
-    """The same on tetrahedra, where the scikit-fem velocities can be divided; the
-    natural-neighbour velocity with condensed bubbles builds, but refuses to assemble on
-    some tetrahedra, naming the method."""
+    """The same on tetrahedra: the scikit-fem velocities, and the natural-neighbour one
+    whose condensed bubbles keep the mesh's numbering (``3 cell + c``) on some cells."""
     from skfem_nem.models.stokes import assemble_stokes
-    rng = np.random.default_rng(3)
-    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
-    mesh = delaunay_mesh(np.r_[corners, rng.random((60, 3))])
+    mesh = _cube_mesh(60, 3)
     part = np.arange(0, mesh.nelements, 4)
     whole = stokes_spaces(mesh, method)
-    if method == "nem":
-        for some in (stokes_spaces(mesh, method, elements=part), whole.restricted(part)):
-            assert some.ubasis.nelems == part.size
-            with pytest.raises(ValueError, match="'nem' on tetrahedra assembles on all"):
-                assemble_stokes(some, 2.0)
-        return
+    divided = stokes_spaces(mesh, method, elements=part)
+    assert divided.ubasis.nelems == part.size
+    eta = 2.0 + whole.quadrature_points[0]           # given on all cells: taken at theirs
+    a = assemble_stokes(whole.restricted(part), eta, _tet_load)
+    b = assemble_stokes(divided, eta, _tet_load)
+    for name in ("A", "B", "S", "Mp", "m", "f", "g"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert (abs(x - y).max() if hasattr(x, "nnz") else np.abs(x - y).max()) == 0.0, name
 
-    def load(x):
-        return np.stack([0 * x[0], 0 * x[0], -1.0 - x[0]])
 
-    a = assemble_stokes(whole.restricted(part), 2.0, load)
-    b = assemble_stokes(stokes_spaces(mesh, method, elements=part), 2.0, load)
-    assert abs(a.A - b.A).max() == 0.0 and abs(a.B - b.B).max() == 0.0
-    assert np.abs(a.f - b.f).max() == 0.0
+@pytest.mark.parametrize("blocks", [False, True])
+def test_natural_neighbour_tetrahedra_add_up_to_the_whole_system(blocks):
+    """Each tetrahedron's bubbles are condensed where it is integrated, so the condensed
+    systems of the parts of a partition add up to the whole mesh's (also the viscous block
+    as its nodes' 3 x 3 blocks), and their bubbles' coupling keeps the mesh's rows."""
+    from skfem_nem.models.stokes import assemble_stokes
+    mesh = _cube_mesh(80, 5)
+    spaces = stokes_spaces(mesh)
+    eta = 1.0 + 10.0 * (spaces.quadrature_points[2] > 0.5)
+    whole = assemble_stokes(spaces, eta, _tet_load, viscous_blocks=blocks)
+    parts = np.array_split(np.random.default_rng(2).permutation(mesh.nelements), 3)
+    shares = [assemble_stokes(spaces.restricted(p), eta, _tet_load, viscous_blocks=blocks)
+              for p in parts]
+
+    def matrix(A):
+        return A.tocsr() if hasattr(A, "tocsr") else A
+
+    for name in ("A", "B", "S", "Mp", "m", "f", "g"):
+        total = sum(matrix(getattr(s, name)) for s in shares)
+        ref = matrix(getattr(whole, name))
+        diff = total - ref
+        diff = abs(diff).max() if hasattr(diff, "nnz") else np.abs(diff).max()
+        scale = abs(ref).max() if hasattr(ref, "nnz") else np.abs(ref).max()
+        assert diff <= 1e-13 * scale, (name, diff)
+    u = np.random.default_rng(0).standard_normal(spaces.n_velocity)
+    coupling = whole.bubble[1]
+    bubbles = sum(s.bubble[1] @ u for s in shares)
+    assert np.abs(bubbles - coupling @ u).max() <= 1e-13 * np.abs(coupling @ u).max()
+    y = np.random.default_rng(1).standard_normal(coupling.shape[0])
+    back = sum(s.bubble[1].T @ y for s in shares)
+    assert np.abs(back - coupling.T @ y).max() <= 1e-12 * np.abs(coupling.T @ y).max()
+    first, ref = shares[0].bubble[1].tocsr(), coupling.tocsr()
+    rows = np.zeros(ref.shape[0], bool)
+    rows[(3 * parts[0][:, None] + np.arange(3)).ravel()] = True
+    assert first[~rows].nnz == 0                  # (the other parts' bubbles: not here)
+    assert abs(first[rows] - ref[rows]).max() <= 1e-13 * abs(ref).max()
 
 
 def test_spaces_of_some_triangles_solve_only_over_mpi():

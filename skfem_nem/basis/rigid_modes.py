@@ -28,7 +28,9 @@ def velocity_components(ubasis) -> np.ndarray:
 def rigid_modes(ubasis, free: np.ndarray) -> np.ndarray:
     """(len(free), 3) rigid-body modes (two translations, one rotation) of a 2D
     vector velocity basis, or (len(free), 6) in 3D (three translations, three
-    rotations), restricted to the dofs ``free``."""
+    rotations), restricted to the dofs ``free``. Dofs without a location (scikit-fem
+    places the MINI elements' bubbles at NaN) are zero in every mode: a rigid motion is
+    linear, and the linear part of such a space holds it with its bubbles at zero."""
     loc = np.asarray(ubasis.doflocs)  # (dim, nu)
     comp = velocity_components(ubasis)
     d = loc.shape[0]
@@ -39,4 +41,5 @@ def rigid_modes(ubasis, free: np.ndarray) -> np.ndarray:
     for k, (a, b) in enumerate(pairs):   # rotation in the (a, b) plane
         Bm[comp == a, d + k] = -loc[b, comp == a]
         Bm[comp == b, d + k] = loc[a, comp == b]
+    Bm[~np.isfinite(loc).all(axis=0)] = 0.0
     return Bm[free]

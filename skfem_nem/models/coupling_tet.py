@@ -19,6 +19,8 @@ to add ``w^T M_e`` for a weight vector ``w`` row by row.
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
@@ -33,11 +35,20 @@ class TetCoupling:
     natural-neighbour velocity (dofs ``3 node + d``): tetrahedron e's stencil
     ``sten[ptr[e]:ptr[e + 1]]`` with gradients ``G`` (3 a stencil function, flat), its
     bubbles' weighted gradient ``g[e]`` and the inverse ``Q[e]`` of their block (exactly
-    symmetric; zero for a flat tetrahedron, which has no bubble)."""
+    symmetric; zero for a flat tetrahedron, which has no bubble). ``bubbles``: the
+    (ne, 3) bubble dofs of these tetrahedra where they are some of a mesh's (an MPI rank's
+    strip), and ``n_bubbles`` all of them; then the rows are those dofs (``3 cell + c``).
+    None: the tetrahedra are all the mesh's, in order."""
 
-    def __init__(self, ptr, sten, G, g, Q, n_velocity: int, parallel: bool = True):
+    def __init__(self, ptr, sten, G, g, Q, n_velocity: int, parallel: bool = True,
+                 bubbles: Optional[np.ndarray] = None, n_bubbles: Optional[int] = None):
         self.ptr, self.sten, self.G, self.g, self.Q = ptr, sten, G, g, Q
-        self.shape = (3 * (ptr.shape[0] - 1), int(n_velocity))
+        ne = ptr.shape[0] - 1
+        if bubbles is not None and bubbles.shape != (ne, 3):
+            raise ValueError(f"TetCoupling: bubbles must have shape ({ne}, 3), got "
+                             f"{bubbles.shape}")
+        self.rows = None if bubbles is None else np.ascontiguousarray(bubbles).ravel()
+        self.shape = (3 * ne if bubbles is None else int(n_bubbles), int(n_velocity))
         self.dtype = np.dtype(np.float64)
         self.parallel = parallel
 
@@ -46,10 +57,14 @@ class TetCoupling:
         if u.shape != (self.shape[1],):
             raise ValueError(f"TetCoupling @ u needs u of shape ({self.shape[1]},), got "
                              f"{u.shape}")
-        out = np.empty(self.shape[0])
+        out = np.empty(self.rows.size if self.rows is not None else self.shape[0])
         (_apply if self.parallel else _apply_serial)(self.ptr, self.sten, self.G, self.g,
                                                      self.Q, u, out)
-        return out
+        if self.rows is None:
+            return out
+        whole = np.zeros(self.shape[0])      # (the other tetrahedra's bubbles: not here)
+        whole[self.rows] = out
+        return whole
 
     @property
     def T(self) -> "_Transposed":
@@ -64,7 +79,11 @@ class TetCoupling:
         _entries(self.ptr, self.sten, self.G, self.g, self.Q, indices, data)
         indptr = np.zeros(3 * ne + 1, np.int64)
         indptr[1:] = np.cumsum(np.repeat(3 * np.diff(self.ptr), 3))
-        return sp.csr_matrix((data, indices, indptr), shape=self.shape)
+        local = sp.csr_matrix((data, indices, indptr), shape=(3 * ne, self.shape[1]))
+        if self.rows is None:
+            return local
+        return sp.csr_matrix((np.ones(3 * ne), (self.rows, np.arange(3 * ne))),
+                             shape=(self.shape[0], 3 * ne)) @ local
 
     def row_weights(self) -> tuple:
         """``(ptr, sten, G, g, Q)``: what a kernel needs to add ``w^T M_e`` (the row
@@ -87,7 +106,8 @@ class _Transposed:
             raise ValueError(f"TetCoupling.T @ y needs y of shape ({M.shape[0]},), got "
                              f"{y.shape}")
         out = np.zeros(M.shape[1])
-        _apply_transposed(M.ptr, M.sten, M.G, M.g, M.Q, y, out)
+        _apply_transposed(M.ptr, M.sten, M.G, M.g, M.Q, y if M.rows is None else y[M.rows],
+                          out)
         return out
 
 

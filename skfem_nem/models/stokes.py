@@ -308,7 +308,8 @@ def _blocks_once(spaces: StokesSpaces) -> dict:
     else:
         cache["Bb"] = bb.bilinear(bform, pb)
         if nem3:  # the natural-neighbour part and the bubbles' blocks, for the condensation
-            cache["tet_divergence"] = TetDivergence(divergence_tet(ub, pb), cache["Bb"], pb)
+            cache["tet_divergence"] = TetDivergence(divergence_tet(ub, pb), cache["Bb"], pb,
+                                                    bb.element_dofs.T)
     cache["m"] = _unit.assemble(pb)
     return cache
 
@@ -337,11 +338,6 @@ def assemble_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
     if viscous_blocks and not takes_viscous_blocks(spaces):
         raise ValueError(f"viscous_blocks=True needs the natural-neighbour velocity on "
                          f"tetrahedra, got method {spaces.method!r} in {spaces.dim}D")
-    if spaces.elements is not None and takes_viscous_blocks(spaces):
-        # (its condensation numbers the bubbles of the cells it integrates, not the mesh's)
-        raise ValueError("method 'nem' on tetrahedra assembles on all the mesh's cells only "
-                         "(its condensed bubbles are not yet divided among MPI ranks); "
-                         "'taylor-hood' and 'mini' spaces on some tetrahedra assemble")
     d = spaces.dim
     e = quadrature_values(spaces, eta, "viscosity eta", positive=True)
     fv = quadrature_values(spaces, f, "body force f", shape=(d,))

@@ -532,9 +532,18 @@ def strip_order(problem: SaddlePointProblem) -> np.ndarray:
     first coordinate of where they live, multipliers last: split into consecutive
     blocks, each rank owns a strip of the domain with its velocity and pressure
     unknowns together. Pressure dofs are taken to be the mesh's nodes (P1); otherwise
-    the pressures keep their place after the velocity."""
+    the pressures keep their place after the velocity. A cell's interior dofs without a
+    location (scikit-fem's MINI bubbles, at NaN) are placed at its centroid, so the
+    strips share them out and not all to the last rank."""
     ub = problem.ubasis
-    xu = np.asarray(ub.doflocs)[0, problem.free]
+    xu = np.array(np.asarray(ub.doflocs)[0])
+    inner = np.asarray(ub.dofs.interior_dofs)
+    if inner.size:
+        centroid = np.broadcast_to(np.asarray(ub.mesh.p)[0, ub.mesh.t].mean(axis=0),
+                                   inner.shape)
+        unplaced = np.isnan(xu[inner])
+        xu[inner[unplaced]] = centroid[unplaced]
+    xu = xu[problem.free]
     nodes = np.asarray(ub.mesh.p)[0]
     m = problem.m
     npr = int(np.count_nonzero(m))

@@ -14,11 +14,11 @@ is a fresh ``mpiexec`` of this script (``--worker``), so its peak memory is its 
 Reported, the slowest rank's seconds (best of ``--repeat``):
 
 - ``spaces``: the bases (natural-neighbour coordinates at the quadrature points). By
-  default each rank builds them on its strip of triangles (or tetrahedra) alone
+  default each rank builds them on its part of the triangles (or tetrahedra) alone
   (``stokes_spaces(mesh, elements="owned")``: divided); ``--spaces whole`` builds them
   for the whole mesh on every rank (replicated, the distributed assembly then takes its
-  strip of them);
-- ``assembly``: this rank's share of the system (its strip of triangles);
+  part of them);
+- ``assembly``: this rank's share of the system (its part of the cells);
 - ``solve``: the rest of ``solve_stokes`` (walls, the rows summed into PETSc, FGMRES);
   for the plate, the assemblies and solves of all its Picard iterations;
 - FGMRES iterations, the triangles each rank assembled, the peak resident memory of
@@ -87,7 +87,7 @@ def stokes_solve(name: str, nodes: int, divided: bool, comm):
 
 def plate_step(nodes: int, out: str, comm):
     """The first step of the sinking plate drawing ``nodes`` random nodes (the bases built
-    per strip, the fields joined, the evolution on every rank): this rank's seconds of
+    per part, the fields joined, the evolution on every rank): this rank's seconds of
     its bases, assemblies and solves, the last Stokes solution, and the node count."""
     from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate
     sim = SinkingPlate(PlateConfig(nodes=nodes, solver="petsc"), Path(out) / "plate")
@@ -177,7 +177,7 @@ def main(argv=None) -> None:
     ap.add_argument("--flow", choices=["solcx", "donea-huerta", "sinker", "plate"],
                     default="solcx")
     ap.add_argument("--spaces", choices=["divided", "whole"], default="divided",
-                    help="bases on each rank's strip (default) or whole on every rank")
+                    help="bases on each rank's part (default) or whole on every rank")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--nodes", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--out", help=argparse.SUPPRESS)

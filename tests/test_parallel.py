@@ -15,9 +15,10 @@ from hypothesis import strategies as st
 from skfem_nem import delaunay_mesh
 from skfem_nem.geometry.nodesets import box_nodes
 from skfem_nem.models.stokes import outline_flux, solve_stokes, stokes_spaces
-from skfem_nem.models.stokes_solvers import SOLVERS, StokesCache, check_solver, strip_order
+from skfem_nem.models.stokes_solvers import SOLVERS, StokesCache, check_solver, part_order
 from skfem_nem.parallel import PETSC_INSTALL_HINT, PetscUnavailableError, solver_petsc
 from skfem_nem.parallel import petsc as petsc_module
+from skfem_nem.parallel.partition import Bisection
 from skfem_nem.parallel.petsc import debian_petsc_dir, import_petsc, row_range
 from skfem_nem.parallel.saddle import split_counts
 
@@ -104,13 +105,62 @@ def test_a_given_split_is_checked():
         row_range(10, FakeComm(0, 2), owned=[7, 2])
 
 
-def test_strip_order_keeps_strips_together():
-    """Split in two, each half holds the velocity and pressure unknowns of one side of
-    the square; constraint multipliers come last."""
-    mesh = delaunay_mesh(box_nodes(200, seed=4))
-    spaces = stokes_spaces(mesh)
-    C = outline_flux(spaces, np.arange(4))
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 31), n=st.integers(1, 400), dim=st.sampled_from([2, 3]),
+       parts=st.integers(1, 9))
+def test_bisection_parts_are_balanced(seed, n, dim, parts):
+    """Random points (distinct coordinates): each part holds ``n / parts`` points to
+    within one at every cut, so within the depth of the cuts; the cuts classify the same
+    points the same way, and unplaced points come last."""
+    x = np.random.default_rng(seed).random((dim, n))
+    b = Bisection(x, parts)
+    part = b.part(x)
+    counts = np.bincount(part, minlength=parts)
+    assert counts.size == parts and counts.sum() == n
+    depth = int(np.ceil(np.log2(parts)))
+    if n >= parts:
+        assert np.abs(counts - n / parts).max() <= depth + 1, counts
+    y = np.c_[x, np.full((dim, 1), np.nan)]
+    assert np.array_equal(b.part(y), np.r_[part, parts])
 
+
+def test_bisection_cuts_four_parts_of_a_square_in_quadrants():
+    """Four parts of a square are its quadrants (two cuts, one along each axis), where
+    strips would be four slabs along x; bad input is named."""
+    g = np.linspace(0.05, 0.95, 10)
+    x = np.array(np.meshgrid(g, g)).reshape(2, -1)
+    part = Bisection(x, 4).part(x)
+    for k in range(4):
+        inside = x[:, part == k]
+        assert inside.shape[1] == 25
+        assert np.ptp(inside[0]) < 0.5 and np.ptp(inside[1]) < 0.5
+    with pytest.raises(ValueError, match="parts must be a positive integer, got 0"):
+        Bisection(x, 0)
+    with pytest.raises(ValueError, match=r"finite \(dim, n\) array"):
+        Bisection(np.c_[x, [np.inf, 0.0]], 2)
+
+
+def test_part_order_keeps_parts_together():
+    """Split in four, each quarter of the order holds the velocity and pressure
+    unknowns of about one part of the square (a quadrant: the bisection's), in their
+    order along x; a single part sorts them along x."""
+    mesh = delaunay_mesh(box_nodes(300, seed=4))
+    spaces = stokes_spaces(mesh)
+    problem = _captured_problem(spaces)
+    order = part_order(problem, 4)
+    n = problem.n_velocity + problem.n_pressure
+    assert np.array_equal(np.sort(order), np.arange(n))
+    x = np.c_[spaces.ubasis.doflocs[:, problem.free], mesh.p]
+    part = Bisection(mesh.p, 4).part(x)[order]
+    assert np.all(np.diff(part) >= 0)
+    for k in range(4):
+        block = part[k * n // 4:(k + 1) * n // 4]
+        assert np.count_nonzero(block == k) > 0.95 * block.size
+    assert np.all(np.diff(x[0, part_order(problem)]) >= 0)
+
+
+def _captured_problem(spaces, **kw):
+    """The saddle-point problem ``solve_stokes`` hands to its solver."""
     class Captured(Exception):
         pass
 
@@ -120,12 +170,20 @@ def test_strip_order_keeps_strips_together():
     SOLVERS["capture"] = capture
     try:
         with pytest.raises(Captured) as got:
-            solve_stokes(spaces, 1.0, lambda x: [0 * x[0], -x[0]], solver="capture",
-                         constraints=C)
+            solve_stokes(spaces, 1.0, lambda x: np.concatenate([0 * x[:-1], -x[:1]]),
+                         solver="capture", **kw)
     finally:
         del SOLVERS["capture"]
-    problem = got.value.args[0]
-    order = strip_order(problem)
+    return got.value.args[0]
+
+
+def test_part_order_of_one_part_keeps_strips_together():
+    """Split in two, each half holds the velocity and pressure unknowns of one side of
+    the square; constraint multipliers come last."""
+    mesh = delaunay_mesh(box_nodes(200, seed=4))
+    spaces = stokes_spaces(mesh)
+    problem = _captured_problem(spaces, constraints=outline_flux(spaces, np.arange(4)))
+    order = part_order(problem)
     n1, n = problem.n_velocity, problem.n_velocity + problem.n_pressure
     assert np.array_equal(np.sort(order), np.arange(n))
     assert order[-1] == n - 1                        # the multiplier
@@ -136,28 +194,15 @@ def test_strip_order_keeps_strips_together():
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-def test_strip_order_places_the_mini_bubbles_at_their_cells(dim):
+def test_part_order_places_the_mini_bubbles_at_their_cells(dim):
     """scikit-fem puts the MINI bubbles at NaN; the strips take each at its cell's
     centroid, so the first half of the order holds about half of them (all went to the
     last rank before)."""
     from skfem_nem.geometry import box_nodes_3d
     mesh = delaunay_mesh(box_nodes(150, seed=4) if dim == 2 else box_nodes_3d(80, seed=4))
     spaces = stokes_spaces(mesh, "mini")
-
-    class Captured(Exception):
-        pass
-
-    def capture(problem, tol, maxiter, info):
-        raise Captured(problem)
-
-    SOLVERS["capture"] = capture
-    try:
-        with pytest.raises(Captured) as got:
-            solve_stokes(spaces, 1.0, solver="capture")
-    finally:
-        del SOLVERS["capture"]
-    problem = got.value.args[0]
-    order = strip_order(problem)
+    problem = _captured_problem(spaces)
+    order = part_order(problem)
     inner = np.asarray(spaces.ubasis.dofs.interior_dofs).ravel()
     bubble = np.zeros(spaces.ubasis.N, bool)
     bubble[inner] = True

@@ -146,7 +146,7 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
         ``npoints``. Not an option of Taylor-Hood or MINI.
     elements
         ``None`` (default: all the cells), cell indices, or ``"owned"``: this MPI rank's
-        strip of the cells (:func:`skfem_nem.parallel.owned_elements`; all of them on one
+        part of the cells (:func:`skfem_nem.parallel.owned_elements`; all of them on one
         rank). The spaces are then built on those cells alone, nothing is computed or held
         for the others, and they are what :meth:`StokesSpaces.restricted` gives of the
         whole spaces, to round-off: this rank's share of a distributed solve
@@ -212,7 +212,7 @@ def _checked_method(mesh, method: str, npoints) -> str:
 
 def _cells(mesh, elements) -> Optional[np.ndarray]:
     """The cells of ``stokes_spaces(..., elements=...)``: None (all), or sorted indices
-    (``"owned"``: this MPI rank's strip, None on one rank)."""
+    (``"owned"``: this MPI rank's part, None on one rank)."""
     if isinstance(elements, str):
         if elements != "owned":
             raise ValueError(f"elements must be None, cell indices or 'owned', got "

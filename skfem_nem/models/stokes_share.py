@@ -2,7 +2,7 @@
 rank's share of a distributed solve.
 
 Kept apart from :mod:`skfem_nem.models.stokes` (forms, assembly, the solve) because it is
-one concern of its own: spaces built whole are restricted to this rank's strip of cells
+one concern of its own: spaces built whole are restricted to this rank's part of the cells
 for ``solver="petsc"``; spaces built on some cells only (``stokes_spaces(...,
 elements=...)``) are this rank's share as they are, checked once to partition the mesh
 with the other ranks'; and the numbers every rank needs the same of are reduced over the
@@ -30,7 +30,7 @@ class Share(NamedTuple):
 
 def distributed(spaces: StokesSpaces, solver: str):
     """The spaces to assemble on and the :class:`Share`: for solver ``"petsc"`` on
-    several MPI ranks, this rank's strip of triangles (distributed assembly); else
+    several MPI ranks, this rank's part of the cells (distributed assembly); else
     all of ``spaces`` and None."""
     if spaces.elements is not None:
         return spaces, divided_share(spaces, solver)
@@ -40,9 +40,9 @@ def distributed(spaces: StokesSpaces, solver: str):
     mine = owned_elements(spaces.mesh)
     if mine is None:
         return spaces, None
-    # kept with the spaces: the Picard iterations of a step solve on the same strip
+    # kept with the spaces: the Picard iterations of a step solve on the same part
     cache = spaces.__dict__.setdefault("_cache", {})
-    key = ("strip", mine.tobytes())
+    key = ("part", mine.tobytes())
     if key not in cache:
         cache[key] = spaces.restricted(mine)
     return cache[key], Share(world()[0] == 0, summed)

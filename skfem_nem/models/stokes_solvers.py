@@ -58,6 +58,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..basis import NaturalNeighbourBasis
+from ..parallel.partition import Bisection
 from .block_rows import BlockSymmetricRows
 from .krylov import FGMRES_RESTART, MINRES_TOL_FACTOR, dot, fgmres, norm, restarted_minres
 from .saddle_problem import SaddlePointProblem, SaddlePointSolution, saddle_matvec
@@ -70,7 +71,7 @@ __all__ = ["SaddlePointProblem", "SaddlePointSolution", "SolverNotConverged", "S
            "CACHED_SOLVERS",
            "StokesCache", "auto_solver", "check_solver", "solve_auto", "solve_direct",
            "solve_schur", "solve_schur_amg", "solve_minres", "solve_fgmres", "solve_petsc",
-           "strip_order", "rigid_modes", "saddle_matvec"]
+           "part_order", "rigid_modes", "saddle_matvec"]
 
 class SolverNotConverged(RuntimeError):
     """A Stokes solve stopped at its iteration limit above its tolerance. A time loop may
@@ -511,47 +512,50 @@ def solve_petsc(problem: SaddlePointProblem, tol: float, maxiter: int,
     1/eta-weighted pressure mass for the Schur complement, the constant pressure as
     the null space when the mean is fixed. The problem is either the same on every
     rank or (``problem.total`` set) this rank's share of a distributed assembly; each
-    rank owns the rows of a strip of the domain (:func:`strip_order`) and every rank
+    rank owns the rows of a part of the domain (:func:`part_order`) and every rank
     gets the whole solution. Options: PETSc's,
     prefix ``-stokes_``. Records ``info["ranks"]``, ``info["ksp_reason"]`` and
     ``info["viscous_pc"]`` (the viscous block's preconditioner)."""
     from ..parallel import solve_saddle_petsc
+    from ..parallel.petsc import world
     pressure = problem.m != 0                       # not the constraint multipliers
     res = solve_saddle_petsc(
         problem.A, problem.B, -problem.S, problem.f, problem.g, -problem.dp, tol, maxiter,
         modes=rigid_modes(problem.ubasis, problem.free),
         pressure_null=pressure.astype(float) if problem.pressure_mean else None,
-        order=strip_order(problem), summed=problem.total is not None)
+        order=part_order(problem, world()[1]), summed=problem.total is not None)
     info.update(ranks=res.ranks, ksp_reason=res.reason, viscous_pc=res.viscous_pc)
     p = problem.mean_free(res.p)
     return SaddlePointSolution(res.u, p, res.krylov_iterations, problem.residual(res.u, p))
 
 
-def strip_order(problem: SaddlePointProblem) -> np.ndarray:
+def part_order(problem: SaddlePointProblem, parts: int = 1) -> np.ndarray:
     """The unknowns (free velocity dofs, then pressures and multipliers) sorted by the
-    first coordinate of where they live, multipliers last: split into consecutive
-    blocks, each rank owns a strip of the domain with its velocity and pressure
-    unknowns together. Pressure dofs are taken to be the mesh's nodes (P1); otherwise
-    the pressures keep their place after the velocity. A cell's interior dofs without a
-    location (scikit-fem's MINI bubbles, at NaN) are placed at its centroid, so the
-    strips share them out and not all to the last rank."""
+    part of the domain where they live (the recursive bisection of the mesh's nodes into
+    ``parts``, :class:`~skfem_nem.parallel.partition.Bisection`, whose cells a rank
+    assembles: :func:`~skfem_nem.parallel.petsc.owned_elements`), then by their first
+    coordinate, multipliers last: split into consecutive blocks of equal count, each rank
+    owns about its part's velocity and pressure unknowns. Pressure dofs are taken to be
+    the mesh's nodes (P1); otherwise the pressures keep their place after the velocity.
+    A cell's interior dofs without a location (scikit-fem's MINI bubbles, at NaN) are
+    placed at its centroid, so the parts share them out and not all to the last rank."""
     ub = problem.ubasis
-    xu = np.array(np.asarray(ub.doflocs)[0])
+    nodes = np.asarray(ub.mesh.p)
+    loc = np.array(np.asarray(ub.doflocs))                    # (dim, N)
     inner = np.asarray(ub.dofs.interior_dofs)
     if inner.size:
-        centroid = np.broadcast_to(np.asarray(ub.mesh.p)[0, ub.mesh.t].mean(axis=0),
-                                   inner.shape)
-        unplaced = np.isnan(xu[inner])
-        xu[inner[unplaced]] = centroid[unplaced]
-    xu = xu[problem.free]
-    nodes = np.asarray(ub.mesh.p)[0]
+        centroid = nodes[:, ub.mesh.t].mean(axis=1)           # (dim, ne)
+        unplaced = np.isnan(loc[0, inner])
+        loc[:, inner[unplaced]] = np.broadcast_to(centroid[:, None], (nodes.shape[0],)
+                                                  + inner.shape)[:, unplaced]
     m = problem.m
     npr = int(np.count_nonzero(m))
-    if npr == nodes.size and np.all(m[:npr] != 0):
-        xp = np.concatenate([nodes, np.full(problem.n_pressure - npr, np.inf)])
-    else:
-        xp = np.full(problem.n_pressure, np.inf)
-    return np.argsort(np.concatenate([xu, xp]), kind="stable")
+    xp = np.full((nodes.shape[0], problem.n_pressure), np.inf)
+    if npr == nodes.shape[1] and np.all(m[:npr] != 0):
+        xp[:, :npr] = nodes
+    x = np.concatenate([loc[:, problem.free], xp], axis=1)
+    part = Bisection(nodes, parts).part(x)
+    return np.lexsort((x[0], part))
 
 
 def auto_solver(problem: SaddlePointProblem, cached: bool) -> str:

@@ -2,7 +2,7 @@
 
 Between the basis and the models: it turns scipy matrices assembled by scikit-fem (the
 whole matrix on every rank, or each rank's share of a distributed assembly over its own
-strip of triangles) into distributed PETSc matrices, solves them with PETSc's Krylov
+part of the cells) into distributed PETSc matrices, solves them with PETSc's Krylov
 methods and multigrid, and gathers the solution to every rank. Importing this
 package does not import petsc4py; the first solve does, and raises
 :class:`PetscUnavailableError` naming the installation route if it is missing.

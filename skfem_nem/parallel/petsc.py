@@ -10,7 +10,7 @@ A matrix reaches PETSc in one of two ways. Replicated: every rank holds the whol
 matrix and inserts only its own block of rows (PETSc's default split of the rows, or the
 split the caller gives); :func:`check_replicated` verifies that the ranks really hold the
 same matrix (a random node set drawn without a seed would differ). Distributed: every
-rank holds only its share (the part its own triangles assembled, :func:`owned_elements`)
+rank holds only its share (the part its own cells assembled, :func:`owned_elements`)
 and :func:`summed_rows` sends each rank the rows it owns from every other share; the
 owned rows then come in as one CSR block, which preallocates the MPIAIJ matrix exactly.
 The mesh itself is the same on every rank (:func:`ranks_differing` checks it).
@@ -30,6 +30,8 @@ from typing import Iterator, Optional, Sequence, Tuple
 
 import numpy as np
 import scipy.sparse as sp
+
+from .partition import Bisection
 
 __all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debian_petsc_dir",
            "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
@@ -331,15 +333,13 @@ def world() -> Tuple[int, int]:
 
 
 def owned_elements(mesh) -> Optional[np.ndarray]:
-    """This rank's share of the triangles of ``mesh`` for distributed assembly: the
-    triangles sorted by the first coordinate of their centroids and split into
-    consecutive blocks of (nearly) equal size, so each rank assembles a strip of the
-    domain (as the rows are split, :func:`skfem_nem.models.stokes_solvers.strip_order`).
-    None on a single rank (every triangle)."""
+    """This rank's share of the cells of ``mesh`` for distributed assembly: those whose
+    centroids lie in this rank's part of the recursive bisection of the mesh's nodes
+    (:class:`~skfem_nem.parallel.partition.Bisection`; the rows are split by the same
+    parts, :func:`skfem_nem.models.stokes_solvers.part_order`), sorted. None on a single
+    rank (every cell)."""
     rank, size = world()
     if size == 1:
         return None
-    x = np.asarray(mesh.p)[0, np.asarray(mesh.t)].mean(axis=0)
-    order = np.argsort(x, kind="stable")
-    a, b = split_bounds(order.size, size)[rank]
-    return np.sort(order[a:b])
+    p, t = np.asarray(mesh.p), np.asarray(mesh.t)
+    return np.flatnonzero(Bisection(p, size).part(p[:, t].mean(axis=1)) == rank)

@@ -19,7 +19,7 @@ free is handed to PETSc as the null space of the whole matrix, in place of the s
 solvers' rank-one term (which would make a dense block).
 
 The unknowns may be renumbered (``order``) before the rows are split between the ranks,
-so that each rank owns a strip of the domain with its velocity and pressure unknowns
+so that each rank owns a part of the domain with its velocity and pressure unknowns
 together. Every default is a PETSc option under the prefix (``-stokes_``), which the
 options database overrides: ``-stokes_fieldsplit_0_pc_type hypre``,
 ``-stokes_ksp_monitor``, ``-stokes_pc_type lu -stokes_pc_factor_mat_solver_type mumps``.

@@ -61,7 +61,7 @@ def test_twenty_steps_match_the_serial_run(comm, agree, shared_dir, tmp_path, ti
     same_mesh = np.array_equal(sim.lm.triangles, serial.lm.triangles)
     fields = [rel(sim.lm.ip_fields[k], serial.lm.ip_fields[k])
               for k in ("stress", "plastic_strain", "log_eta_eff")]
-    # each rank held the bases of its strip of triangles alone
+    # each rank held the bases of its part of the triangles alone
     held = sim._last[0].elements
     held = sim.lm.triangles.shape[0] if held is None else held.size
     got = agree((sim.lm.step, same_mesh, rel(sim.lm.nodes, serial.lm.nodes), rel(a.u, b.u),
@@ -73,7 +73,7 @@ def test_twenty_steps_match_the_serial_run(comm, agree, shared_dir, tmp_path, ti
         assert ranks == comm.getSize()
     assert sum(g[-2] for g in got) == sim.lm.triangles.shape[0]
     assert [g[-1] for g in got] == [r == 0 for r in range(comm.getSize())]
-    if sim.root:  # the step's sums and maxima over the strips: the serial run's
+    if sim.root:  # the step's sums and maxima over the parts: the serial run's
         rows = [list(csv.DictReader((d / "diagnostics.csv").read_text().splitlines()))[-1]
                 for d in (sim.out, serial.out)]
         assert rows[0]["yielded_points"] == rows[1]["yielded_points"]

@@ -1,6 +1,8 @@
 """solve_stokes(..., solver="petsc") on tetrahedra, with the spaces divided among the
-ranks: each rank builds the natural-neighbour velocity (and its condensed bubbles)
-or Taylor-Hood on its own strip of tetrahedra, and the solution is the serial one."""
+ranks: each rank builds the natural-neighbour velocity and its condensed bubbles on its own
+part of the tetrahedra, and the solution is the serial one. (Taylor-Hood and MINI divide by
+scikit-fem's own restriction: tests/test_stokes.py compares their divided systems bit for
+bit, serially.)"""
 import numpy as np
 import pytest
 
@@ -23,13 +25,13 @@ def cube():
     """Random nodes in the unit cube (seeded: the same mesh on every rank)."""
     rng = np.random.default_rng(5)
     corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
-    return delaunay_mesh(np.r_[corners, rng.random((250, 3))])
+    return delaunay_mesh(np.r_[corners, rng.random((200, 3))])
 
 
-@pytest.mark.parametrize("method", ["nem", "taylor-hood"])
+@pytest.mark.parametrize("method", ["nem"])
 def test_divided_tetrahedra_give_the_serial_solution(cube, agree, method):
     """The manufactured flow of viscosity ratio 20 (free slip on the cube's faces): the
-    ranks' strips partition the tetrahedra, none holds another's, and the velocity and
+    ranks' parts partition the tetrahedra, none holds another's, and the velocity and
     pressure are the serial direct solve's."""
     ex = Manufactured3D()
     serial = solve_stokes(stokes_spaces(cube, method), ex.viscosity, ex.force,

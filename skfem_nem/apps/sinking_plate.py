@@ -308,7 +308,7 @@ class SinkingPlate:
         lm = self.lm
         t0 = _time.perf_counter()
         gauss = c.integration == "gauss"
-        # over MPI each rank builds the bases of its strip of triangles alone and updates
+        # over MPI each rank builds the bases of its part of the triangles alone and updates
         # the integration-point fields there; the fields are then joined on every rank
         spaces = stokes_spaces(lm.mesh, "nem", npoints=3 if gauss else None,
                                integration=c.integration,
@@ -589,7 +589,7 @@ class SinkingPlate:
 
 def _rows(field: Optional[np.ndarray], cells: Optional[np.ndarray]):
     """An integration-point field (triangles first) at the triangles ``cells`` (this
-    rank's strip; None: all of them)."""
+    rank's part; None: all of them)."""
     return field if field is None or cells is None else field[cells]
 
 
@@ -600,7 +600,7 @@ def _whole(part: np.ndarray, cells: Optional[np.ndarray], n: int) -> np.ndarray:
 
 
 def _total(value: float, cells: Optional[np.ndarray], largest: bool = False) -> float:
-    """The sum (or the largest) of ``value`` over the ranks holding strips of ``cells``
+    """The sum (or the largest) of ``value`` over the ranks holding parts of ``cells``
     (itself where ``cells`` is None)."""
     if cells is None:
         return value

@@ -29,7 +29,6 @@ against 0.34 s as a sparse product and a difference).
 """
 from __future__ import annotations
 
-from typing import Optional
 
 import numpy as np
 import scipy.sparse as sp
@@ -237,13 +236,13 @@ def condensed_viscous_tet(ubasis, bubbles, eta: np.ndarray,
                          f"block is singular ({int(bad.sum())} tetrahedra)")
     A = _summed_tet(ubasis, G, Wsum, gsum, Ainv, parallel, blocks)
     coupling = TetCoupling(ptr, ubasis.stencil_nodes, G, gsum, Ainv, ubasis.N, parallel,
-                           _strip_dofs(bubbles), bubbles.N)
+                           _part_dofs(bubbles), bubbles.N)
     return CondensedViscous(A, bubbles.block_diagonal(Ainv), coupling, None)
 
 
-def _strip_dofs(bubbles):
+def _part_dofs(bubbles):
     """(ne, 3) the bubble dofs of the tetrahedra integrated over where they are some of
-    the mesh's (an MPI rank's strip), else None."""
+    the mesh's (an MPI rank's part), else None."""
     return None if bubbles.elements is None else np.ascontiguousarray(bubbles.element_dofs.T)
 
 
@@ -297,12 +296,11 @@ def divergence_tet(ubasis, pbasis) -> sp.csr_matrix:
 class TetDivergence:
     """The parts of the condensed divergence block ``B_n - B_b A_bb^-1 A_bn`` that do not
     change with the viscosity, prepared once per spaces: the natural-neighbour functions'
-    block ``Bn`` (np, nu), tetrahedron e's 4 x 3 block of the bubbles' ``Bb`` (np, nb;
-    e's bubble dofs ``bubbles[e]``, by default ``3 e + c``) and the tetrahedra around each
+    block ``Bn`` (np, nu), tetrahedron e's 4 x 3 block of the bubbles' ``Bb`` (np, nb; e's
+    bubble dofs ``bubbles[e]``, the mesh's ``3 cell + c``) and the tetrahedra around each
     pressure dof. :meth:`condensed` adds the bubbles' part row by row."""
 
-    def __init__(self, Bn: sp.csr_matrix, Bb: sp.csr_matrix, pbasis,
-                 bubbles: Optional[np.ndarray] = None):
+    def __init__(self, Bn: sp.csr_matrix, Bb: sp.csr_matrix, pbasis, bubbles: np.ndarray):
         Bn = sp.csr_matrix(Bn)
         Bn.sum_duplicates()
         # columns in 32 bits where the velocity dofs allow (at 100,000 nodes this block and
@@ -314,8 +312,6 @@ class TetDivergence:
         pd = np.asarray(pbasis.element_dofs)                   # (4, ne) pressure dofs
         ne = pd.shape[1]
         rows = np.repeat(pd.T, 3, axis=1).ravel()              # (e, k, c) order
-        if bubbles is None:
-            bubbles = 3 * np.arange(ne)[:, None] + np.arange(3)[None]
         cols = np.tile(bubbles, (1, 4)).ravel()
         self.local = np.asarray(sp.csr_matrix(Bb)[rows, cols]).reshape(ne, 4, 3)
         self.incidence = incidence(np.arange(0, 4 * ne + 1, 4), pd.T.ravel(), Bn.shape[0])

@@ -37,7 +37,7 @@ class TetCoupling:
     bubbles' weighted gradient ``g[e]`` and the inverse ``Q[e]`` of their block (exactly
     symmetric; zero for a flat tetrahedron, which has no bubble). ``bubbles``: the
     (ne, 3) bubble dofs of these tetrahedra where they are some of a mesh's (an MPI rank's
-    strip), and ``n_bubbles`` all of them; then the rows are those dofs (``3 cell + c``).
+    part), and ``n_bubbles`` all of them; then the rows are those dofs (``3 cell + c``).
     None: the tetrahedra are all the mesh's, in order."""
 
     def __init__(self, ptr, sten, G, g, Q, n_velocity: int, parallel: bool = True,

@@ -90,8 +90,8 @@ maps its solution back.
 
 Distributed assembly
 --------------------
-With ``solver="petsc"`` on several MPI ranks each rank assembles only its strip
-of triangles (:meth:`StokesSpaces.restricted`, the shares adding up to the
+With ``solver="petsc"`` on several MPI ranks each rank assembles only its part
+of the cells (:meth:`StokesSpaces.restricted`, the shares adding up to the
 whole system) and PETSc sums the rows each rank owns; the mesh stays the same
 on every rank (``docs/parallel.md``).
 """
@@ -445,7 +445,7 @@ def solve_stokes(spaces: StokesSpaces, eta: Field, f: Field = 0.0,
         exert on the fluid (zero elsewhere), ``info["fixed"]`` those dofs,
         ``info["bubble"]`` the condensed bubble dofs (``spaces.bubbles``), and
         ``info["assembled_triangles"]`` the triangles this process assembled
-        (all of them; with ``solver="petsc"`` on several MPI ranks its strip; 0 for a
+        (all of them; with ``solver="petsc"`` on several MPI ranks its part; 0 for a
         given ``system``); ``info["assembly_seconds"]``, ``info["solver_seconds"]``.
 
     Raises

@@ -30,8 +30,9 @@ Cut = Union[int, tuple]
 
 class Bisection:
     """Recursive coordinate bisection of ``points`` (dim, n) into ``parts`` parts of
-    nearly equal counts (parts ``0 .. parts - 1``; counts within one of ``n / parts``
-    where no two points share a coordinate at a cut)."""
+    nearly equal counts (parts ``0 .. parts - 1``): each cut puts its share of the points
+    below it to within one where no two points share a coordinate there, so a part's
+    count is ``n / parts`` to within the number of cuts above it, plus one."""
 
     def __init__(self, points: np.ndarray, parts: int):
         points = np.asarray(points, dtype=float)

@@ -8,6 +8,7 @@ import pytest
 
 from skfem_nem.apps.cli import main
 from skfem_nem.apps.sinking_plate import PlateConfig, SinkingPlate
+from agreement import rel
 
 # agreement asked of the MPI run with the serial one after STEPS steps (nodes, velocity
 # and pressure, relative in the 2-norm)
@@ -20,10 +21,6 @@ AGREEMENT = 1e-8
 PETSC_RTOL = 1e-12
 STEPS = 20
 NODES = 300
-
-
-def rel(a, b):
-    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
 @pytest.fixture(scope="module")

@@ -10,6 +10,7 @@ from skfem_nem import NaturalNeighbourBasis, delaunay_mesh
 from skfem_nem.geometry.nodesets import box_nodes
 from skfem_nem.parallel import solver_petsc
 from skfem_nem.parallel.petsc import check_replicated, csr_to_petsc, gather, row_range, vector
+from agreement import rel
 
 # agreement asked of the PETSc solution with scipy's direct one (relative, 2-norm),
 # PETSc converged to RTOL
@@ -17,10 +18,6 @@ AGREEMENT = 1e-8
 RTOL = 1e-12
 # a product with the distributed matrix against scipy's: round-off only
 PRODUCT_RTOL = 1e-14
-
-
-def rel(a, b):
-    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,7 @@ from skfem_nem import delaunay_mesh
 from skfem_nem.geometry.nodesets import box_nodes, polyline_nodes
 from skfem_nem.models.analytic import SolCx
 from skfem_nem.models.stokes import outline_flux, solve_stokes, stokes_spaces
+from agreement import rel
 
 # agreement asked of the PETSc solution with the serial one (velocity and pressure,
 # relative in the 2-norm); both solved to relative residuals far below it
@@ -28,10 +29,6 @@ RESIDUAL = 1e-9
 # (the serial "schur" and the PETSc solves differ from it by 4e-7 on this mesh, from
 # each other by 2e-10): velocity is compared with AGREEMENT, pressure with this
 DIRECT_PRESSURE_RTOL = 1e-5
-
-
-def rel(a, b):
-    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
 @pytest.fixture(scope="module")

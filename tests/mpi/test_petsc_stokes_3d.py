@@ -9,15 +9,12 @@ import pytest
 from skfem_nem import delaunay_mesh
 from skfem_nem.models.analytic3d import Manufactured3D
 from skfem_nem.models.stokes import solve_stokes, stokes_spaces
+from agreement import rel
 
 # agreement asked of the divided solve with the serial direct one (velocity and
 # pressure, relative in the 2-norm): the PETSc solve's tolerance is far below it
 AGREEMENT = 1e-8
 PETSC_TOL = 1e-12
-
-
-def rel(a, b):
-    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
 @pytest.fixture(scope="module")

@@ -134,9 +134,15 @@ def test_each_rank_assembles_its_part_of_the_triangles(square, comm, agree):
                  given.info["assembled_triangles"], rel(s.u, given.u), rel(s.p, given.p)))
     owned = [g[0] for g in got]
     assert sorted(sum(owned, [])) == list(range(mesh.nelements))  # a partition
+    # the cuts balance the nodes (to a few: the interface's nodes share x = 0.5, where two
+    # ranks are cut); the cells follow them (on this graded mesh within 12% on three
+    # ranks, the most uneven split tried)
+    cuts = Bisection(mesh.p, len(owned))
+    nodes = np.bincount(cuts.part(mesh.p), minlength=len(owned))
+    assert np.abs(nodes / (mesh.p.shape[1] / len(owned)) - 1).max() <= 0.05, nodes
     sizes = [len(a) for a in owned]
-    assert max(sizes) - min(sizes) <= 0.1 * mesh.nelements / len(owned)
-    part = Bisection(mesh.p, len(owned)).part(mesh.p[:, mesh.t].mean(axis=1))
+    assert max(sizes) - min(sizes) <= 0.15 * mesh.nelements / len(owned)
+    part = cuts.part(mesh.p[:, mesh.t].mean(axis=1))
     for rank, (a, n, n_given, du, dp) in enumerate(got):
         assert np.array_equal(np.flatnonzero(part == rank), a)
         assert n == len(a) and n_given == 0

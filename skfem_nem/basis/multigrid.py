@@ -22,7 +22,8 @@ import numpy as np
 from ..vectors import dot, norm
 
 __all__ = ["K_CYCLE_TOL", "AMG_SEED", "flexible_cg", "k_cycle", "level_step",
-           "seeded_global_random", "smoothed_aggregation", "v_cycle"]
+           "scalar_levels_as_csr", "seeded_global_random", "smoothed_aggregation",
+           "v_cycle"]
 
 # a K-cycle's coarse correction stops after its first CG step where that step has reduced
 # the coarse residual below this fraction (Notay's threshold)
@@ -150,6 +151,23 @@ def smoothed_aggregation(A, modes: Optional[np.ndarray] = None, **options):
     restored afterwards); ``options`` go to pyamg (strength, smoothers, ...)."""
     import pyamg
     with seeded_global_random():
-        return pyamg.smoothed_aggregation_solver(
+        ml = pyamg.smoothed_aggregation_solver(
             A, B=modes, symmetry="symmetric", max_coarse=MAX_COARSE, coarse_solver="splu",
             **options)
+    return scalar_levels_as_csr(ml)
+
+
+def scalar_levels_as_csr(ml):
+    """``ml`` with its levels of 1 x 1 blocks as CSR matrices, in place. With one near
+    null vector pyamg's aggregation makes the coarse levels BSR of 1 x 1 blocks, and its
+    relaxation then runs the block kernels: a symmetric Gauss-Seidel sweep on the second
+    level of the quadratic Poisson solver at 127,961 unknowns (6,856 rows, 109 entries a
+    row) took 3.9 ms as BSR and 0.24 ms as CSR. The smoothers read each level's matrix
+    when called, so they follow."""
+    import scipy.sparse as sp
+    for lv in ml.levels:
+        for name in ("A", "P", "R"):
+            M = getattr(lv, name, None)
+            if sp.issparse(M) and M.format == "bsr" and M.blocksize == (1, 1):
+                setattr(lv, name, sp.csr_matrix(M))
+    return ml

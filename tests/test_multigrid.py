@@ -113,6 +113,34 @@ def test_smoothed_aggregation_is_the_same_every_time_and_leaves_numpy_alone():
         assert (la.A != lb.A).nnz == 0
 
 
+def test_scalar_levels_are_csr_and_cycle_as_pyamgs_bsr_ones():
+    """With the constants as near null space pyamg makes the coarse levels BSR of 1 x 1
+    blocks; smoothed_aggregation hands them back as CSR with the same entries, and a cycle
+    (Gauss-Seidel and Chebyshev smoothers) on them is pyamg's own on the BSR levels to
+    rounding. Levels of larger blocks (rigid modes) stay BSR."""
+    A = pyamg.gallery.poisson((100, 100), format="csr")
+    b = np.random.default_rng(8).standard_normal(A.shape[0])
+    for smoother in (("gauss_seidel", {"sweep": "symmetric"}), CHEBYSHEV):
+        # (copies: pyamg keeps a matrix's spectral radius on it, and the second hierarchy
+        # would then draw fewer random starts)
+        ours = mg.smoothed_aggregation(A.copy(), presmoother=smoother,
+                                       postsmoother=smoother, max_levels=4)
+        with mg.seeded_global_random():
+            theirs = pyamg.smoothed_aggregation_solver(
+                A.copy(), symmetry="symmetric", max_coarse=mg.MAX_COARSE, coarse_solver="splu",
+                presmoother=smoother, postsmoother=smoother, max_levels=4)
+        assert len(ours.levels) == len(theirs.levels) >= 3
+        assert any(lv.A.format == "bsr" for lv in theirs.levels)
+        for lo, lt in zip(ours.levels, theirs.levels):
+            assert lo.A.format == "csr"
+            assert abs(lo.A - lt.A.tocsr()).max() == 0
+        np.testing.assert_allclose(mg.k_cycle(ours, b), mg.k_cycle(theirs, b), rtol=1e-10,
+                                   atol=1e-12 * np.abs(b).max())
+    E, modes = pyamg.gallery.linear_elasticity((40, 40), format="bsr")
+    vector = mg.smoothed_aggregation(E.tocsr(), modes)
+    assert vector.levels[1].A.format == "bsr" and vector.levels[1].A.blocksize == (3, 3)
+
+
 @pytest.fixture(scope="module")
 def mesh():
     return delaunay_mesh(box_nodes(600, seed=4))

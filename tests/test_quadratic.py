@@ -16,7 +16,7 @@ from skfem.element import ElementVector
 from skfem.helpers import dot, grad
 
 from skfem_nem import ElementNaturalNeighbour2, NaturalNeighbourBasis, delaunay_mesh
-from skfem_nem.basis.quadratic import lift
+from skfem_nem.basis.quadratic import distinct_pairs, lift
 from skfem_nem.coordinates import natural_neighbour_coordinates
 from skfem_nem.models.stokes import solve_stokes, stokes_spaces
 
@@ -198,3 +198,23 @@ def test_subdomain_bases_add_up_to_the_whole():
     parts = sum(diffusion.assemble(basis.with_elements(e), k=np.ones((e.size, 3)))
                 for e in (left, right))
     assert abs(whole - parts).max() < 1e-12 * abs(whole).max()
+
+
+@settings(max_examples=40, deadline=None)
+@given(rows=st.lists(st.lists(st.integers(0, 40), min_size=0, max_size=8), min_size=1,
+                     max_size=30))
+def test_distinct_pairs_are_numpys_unique(rows):
+    """The node pairs of every two entries of each row of a coordinates matrix, numbered
+    as np.unique numbers their keys lo * nodes + hi (the inverse too), rows of any length,
+    repeated columns across rows."""
+    nv = 41
+    indptr = np.r_[0, np.cumsum([len(r) for r in rows])].astype(np.int64)
+    indices = np.array([c for r in rows for c in r], dtype=np.int64)
+    first, second = (np.array(e, dtype=np.int64).reshape(-1) for e in zip(
+        *[(a, b) for r in range(len(rows)) for a in range(indptr[r], indptr[r + 1])
+          for b in range(a, indptr[r + 1])] or [((), ())]))
+    i, j = indices[first], indices[second]
+    keys, inverse = distinct_pairs(indices, first, second, nv)
+    want, want_inverse = np.unique(np.minimum(i, j) * nv + np.maximum(i, j),
+                                   return_inverse=True)
+    assert np.array_equal(keys, want) and np.array_equal(inverse, want_inverse)

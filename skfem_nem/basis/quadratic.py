@@ -48,7 +48,7 @@ from numba import njit, prange
 
 from ..jit import sort_with
 
-__all__ = ["lift", "pair_matrix", "edge_index", "n_functions"]
+__all__ = ["lift", "pair_matrix", "edge_index", "n_functions", "distinct_pairs"]
 
 #: a direction on the boundary of a triangle's angle at i (round-off) still counts as
 #: inside it: barycentric weights above -SECTOR_TOL select the triangle
@@ -71,7 +71,7 @@ def lift(mesh, Phi, D=None):
     Phi = sp.csr_matrix(Phi)
     nv = mesh.p.shape[1]
     term_ptr, first, second = _pair_entries(Phi.indptr.astype(np.int64))
-    keys, pair = _distinct_pairs(Phi.indices.astype(np.int64), first, second, nv)
+    keys, pair = distinct_pairs(Phi.indices.astype(np.int64), first, second, nv)
     C = pair_matrix(mesh, keys)
     dim = 0 if D is None else len(D)
     grads = (np.zeros((0, Phi.nnz)) if D is None
@@ -104,7 +104,7 @@ def _pair_entries(indptr):
     return term_ptr, first, second
 
 
-def _distinct_pairs(indices, first, second, nv):
+def distinct_pairs(indices, first, second, nv):
     """The node pairs ``lo <= hi`` of the entries ``(first[k], second[k])`` (columns
     ``indices``), as ``np.unique(lo * nv + hi, return_inverse=True)`` would give them:
     the pairs grouped by ``lo`` (a counting sort) and each group's few ``hi`` sorted

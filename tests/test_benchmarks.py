@@ -4,6 +4,8 @@ Each fixture runs a study at its default size (the convergence studies take
 about 20 s each on two cores); the numbers in the comments are the measured
 values that docs/verification.md, docs/ndim.md and docs/evolution.md report.
 """
+import itertools
+
 import numpy as np
 import pytest
 
@@ -765,3 +767,30 @@ def test_solver_scaling_prints_iterations_and_their_ratio():
     basis, A, b, D = bench.problem("linear-elasticity", 3000, dim=3)
     assert basis.mesh.dim() == 3 and A.shape[0] == basis.N - D.size == b.size
     assert 2000 < A.shape[0] < 6000      # (box_nodes_3d adds the boundary nodes)
+
+
+def test_quadratic_cost_prints_the_fastest_run_and_the_ratio_at_equal_error(capsys,
+                                                                             monkeypatch):
+    """benchmarks/quadratic_cost.py: a row per size and method, each the fastest of
+    --repeat runs, and NEM2's ratio to P2's time interpolated at NEM2's error as printed;
+    a --repeat below 1 and a single size are refused."""
+    bench = load_benchmark("quadratic_cost")
+    out = bench.main(["--nodes", "300", "600", "--repeat", "1"])
+    rows = [[c.strip() for c in line.strip("|").split("|")]
+            for line in capsys.readouterr().out.splitlines()[2:]]
+    assert [r[1] for r in rows] == [r["method"] for r in out] == ["NEM2", "P2", "NEM2", "P2"]
+    p2 = [r for r in out if r["method"] == "P2"]
+    for line, r in zip(rows[::2], out[::2]):
+        assert float(line[9]) == pytest.approx(r["total"] / bench.p2_time_at(r["error"], p2),
+                                               abs=0.006)
+    totals = itertools.cycle([5.0, 3.0, 4.0, 2.0, 1.0, 6.0])
+    monkeypatch.setattr(bench, "run", lambda n, m: {
+        "n": n, "method": m, "dofs": n, "error": 1.0 / n, "its": 1, "basis": 0.0,
+        "assembly": 0.0, "solve": 0.0, "total": next(totals)})
+    bench.main(["--nodes", "300", "600", "--repeat", "3"])
+    printed = [float(line.split("|")[9]) for line in capsys.readouterr().out.splitlines()[2:]]
+    assert printed == [1.0, 3.0, 1.0, 3.0]      # after the warm-up's 5 and 3: 4 2 1, 6 5 3
+    for bad in (["--nodes", "300", "600", "--repeat", "0"], ["--nodes", "300"]):
+        with pytest.raises(SystemExit) as e:
+            bench.main(bad)
+        assert e.value.code == 2

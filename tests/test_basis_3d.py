@@ -313,3 +313,26 @@ def test_gradient_rows_assembly_equals_the_element_matrices(mesh, monkeypatch):
         B = form.assemble(b)
         assert abs(A - B).max() <= 1e-12 * abs(B).max()
     assert len(calls) == 3
+
+
+def test_one_set_of_watson_records_a_tetrahedralisation(monkeypatch):
+    """The smoothed 3D basis takes its face points' values from Watson's records; the
+    points those flag go to the triangulation's coordinates, which read records too. On a
+    mesh of the package's (its triangulation holds its tetrahedra in their order) both
+    read one set, made once, and the basis is the one built with two."""
+    import skfem_nem.coordinates.watson3d as watson
+    rng = np.random.default_rng(11)
+    mesh = delaunay_mesh(rng.random((400, 3)))
+    before = NaturalNeighbourBasis(delaunay_mesh(mesh.p.T.copy()))  # its own records
+    made = []
+    real = watson.TetrahedraRecords.__init__
+
+    def counted(self, *args):
+        made.append(self)
+        real(self, *args)
+    monkeypatch.setattr(watson.TetrahedraRecords, "__init__", counted)
+    basis = NaturalNeighbourBasis(mesh)
+    assert len(made) == 1 and watson.records_of(basis.triangulation) is made[0]
+    A = BilinearForm(lambda u, v, w: dot(u.grad, v.grad)).assemble(basis)
+    B = BilinearForm(lambda u, v, w: dot(u.grad, v.grad)).assemble(before)
+    assert abs(A - B).max() == 0

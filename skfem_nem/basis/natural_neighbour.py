@@ -38,7 +38,8 @@ from skfem.element import DiscreteField, Element, ElementVector
 
 from . import assembly, nonlinear, plotting
 from ..coordinates import natural_neighbour_coordinates
-from ..coordinates.watson3d import TetrahedraRecords
+from ..coordinates.watson3d import TetrahedraRecords, records_of
+from ..geometry.delaunay3d import Delaunay3D
 from ..geometry.meshes import adopt, own_triangulation, tetrahedron_neighbours
 from .domain import check_used_nodes, into_domain
 from .elements import (coordinate_method, element_for, element_order, gauss_rule,
@@ -87,14 +88,21 @@ class NaturalNeighbourBasisBase(AbstractBasis, assembly.StencilBasis):
             undefined=undefined, method=self.method, **kw)
 
     def _tetrahedra_records(self):
-        """The mesh's :class:`~skfem_nem.coordinates.watson3d.TetrahedraRecords` (cached on
-        the mesh, whose tetrahedra the adoption checked to be Delaunay), None where a flat
-        tetrahedron rules Watson's decomposition out."""
-        rec = getattr(self.mesh, "_skfem_nem_watson", None)
-        if rec is None or not rec.describes(self.mesh.p.T, self.mesh.t.T):
-            rec = TetrahedraRecords(self.mesh.p.T, self.mesh.t.T,
-                                    tetrahedron_neighbours(self.mesh))
-            self.mesh._skfem_nem_watson = rec
+        """The mesh's :class:`~skfem_nem.coordinates.watson3d.TetrahedraRecords` (the
+        adoption checked its tetrahedra to be Delaunay), None where a flat tetrahedron rules
+        Watson's decomposition out. Where the triangulation holds the mesh's own tetrahedra
+        in their order (a mesh of the package's), they are the triangulation's records, which
+        the coordinates of other points read too; else they are cached on the mesh."""
+        p, t = self.mesh.p.T, self.mesh.t.T
+        tri = self.triangulation
+        if (isinstance(tri, Delaunay3D) and tri.simplices.shape == t.shape
+                and np.array_equal(tri.simplices, t) and np.array_equal(tri.points, p)):
+            rec = records_of(tri)
+        else:
+            rec = getattr(self.mesh, "_skfem_nem_watson", None)
+            if rec is None or not rec.describes(p, t):
+                rec = TetrahedraRecords(p, t, tetrahedron_neighbours(self.mesh))
+                self.mesh._skfem_nem_watson = rec
         return rec if rec.usable else None
 
     def _hints_valid(self) -> bool:

@@ -489,3 +489,27 @@ def test_the_nodes_are_numbered_along_the_z_order_curve():
     drawn = np.random.default_rng(0).permutation(p.shape[0])   # any order but a local one
     gap = np.median(np.abs(edges[0] - edges[1]))
     assert gap < 0.05 * np.median(np.abs(drawn[edges[0]] - drawn[edges[1]]))
+
+
+def test_the_slices_share_one_tetrahedralisation_a_node_set(run3d, monkeypatch):
+    """The figures' slices interpolate on one Delaunay tetrahedralisation of each node set
+    (the start's and now's, two for the slices, one for the plastic strain's 17), and draw
+    what a tetrahedralisation of their own for each slice draws."""
+    import skfem_nem.apps.plate3d_figures as figures
+    from skfem_nem.apps.sinking_plate_3d import SinkingPlate3D
+    from skfem_nem.geometry.delaunay_nd import delaunay_of
+    sim = SinkingPlate3D.restart(run3d)
+    built = []
+
+    def counted(nodes):
+        built.append(nodes.shape)
+        return delaunay_of(nodes)
+    monkeypatch.setattr(figures, "delaunay_of", counted)
+    shared = figures.slices(sim) + figures.plastic_slices(sim)
+    assert len(built) == 3
+    monkeypatch.setattr(figures, "delaunay_of", lambda nodes: nodes)   # raw nodes: one each
+    own = figures.slices(sim) + figures.plastic_slices(sim)
+    assert len(shared) == len(own) == 6
+    for (t1, p1, a, e1), (t2, p2, b, e2) in zip(shared, own):
+        assert (t1, p1, e1) == (t2, p2, e2)
+        np.testing.assert_array_equal(a, b)

@@ -15,6 +15,7 @@ import warnings
 import numpy as np
 
 from ..coordinates import sibson_coordinates
+from ..geometry.delaunay_nd import delaunay_of
 from .output import read_csv_columns
 from .plate3d_config import plate_box
 
@@ -49,7 +50,8 @@ def slice_material(nodes, plate, start_z, interface_z, plane, level, box, n=SLIC
     """The material (0 upper fluid, 1 lower fluid, 2 plate) on a grid in a plane
     (:func:`slice_grid`): ``(image (rows, columns), extent)``. Sibson interpolation of
     the nodes' plate indicator and initial height; plate where the indicator exceeds
-    1/2."""
+    1/2. ``nodes``: (n, 3), or their Delaunay tetrahedralisation (``delaunay_of``), which
+    several slices of one node set then share."""
     pts, shape, extent = slice_grid(plane, level, box, n)
     Phi = sibson_coordinates(nodes, pts)
     s = (Phi @ plate).reshape(shape)
@@ -59,7 +61,8 @@ def slice_material(nodes, plate, start_z, interface_z, plane, level, box, n=SLIC
 
 def slice_plastic_strain(nodes, plate, strain, plane, level, box, n=SLICE_RESOLUTION):
     """The nodes' plastic strain on a grid in a plane (:func:`slice_grid`), NaN outside
-    the plate (interpolated indicator below 1/2): ``(image, extent)``."""
+    the plate (interpolated indicator below 1/2): ``(image, extent)``. ``nodes`` as in
+    :func:`slice_material`."""
     pts, shape, extent = slice_grid(plane, level, box, n)
     Phi = sibson_coordinates(nodes, pts)
     s = (Phi @ plate).reshape(shape)
@@ -125,9 +128,10 @@ def slices(sim):
                            (sim.lm.time, slice(None), sim.lm.nodes)):
         plate, start_z = f["plate"][keep], f["start"][keep, 2]
         zc = float(nodes[plate > 0.5, 2].mean()) if (plate > 0.5).any() else c.plate_z
+        tri = delaunay_of(nodes)            # one tetrahedralisation for both slices
         for plane, level, label in (("xz", c.plate_y, f"y = {c.plate_y:g}"),
                                     ("xy", zc, f"z = {zc:.3f}")):
-            image, extent = slice_material(nodes, plate, start_z, c.interface_z, plane,
+            image, extent = slice_material(tri, plate, start_z, c.interface_z, plane,
                                            level, box)
             out.append((f"t = {t:.4g}, {label}", plane, image, extent))
     return out
@@ -162,10 +166,13 @@ def plastic_slices(sim, levels=PLAN_LEVELS):
     c, lm = sim.cfg, sim.lm
     plate, box = lm.node_fields["plate"], (c.width, c.depth, c.height)
     strain = lm.ip_at_nodes("plastic_strain")
-    image, extent = slice_plastic_strain(lm.nodes, plate, strain, "xz", c.plate_y, box)
+    # one tetrahedralisation of the nodes for all the slices (a build each took 0.6 s of
+    # the figures at 98,601 nodes, 17 times)
+    tri = delaunay_of(lm.nodes)
+    image, extent = slice_plastic_strain(tri, plate, strain, "xz", c.plate_y, box)
     out = [(f"plastic strain, t = {lm.time:.4g}, y = {c.plate_y:g}", "xz", image, extent)]
     z = lm.nodes[plate > 0.5, 2] if (plate > 0.5).any() else np.array([c.plate_z])
-    plan = [slice_plastic_strain(lm.nodes, plate, strain, "xy", level, box,
+    plan = [slice_plastic_strain(tri, plate, strain, "xy", level, box,
                                  n=PLAN_RESOLUTION)[0]
             for level in np.linspace(z.min(), z.max(), levels)]
     with np.errstate(all="ignore"), warnings.catch_warnings():

@@ -43,10 +43,10 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-import numba
 from numba import njit, prange
 
 from ..jit import sort_with
+from .summation import blocks
 
 __all__ = ["lift", "pair_matrix", "edge_index", "n_functions", "distinct_pairs"]
 
@@ -78,7 +78,7 @@ def lift(mesh, Phi, D=None):
              else np.stack([np.asarray(Dk.data, dtype=float) for Dk in D]))
     args = (term_ptr, first, second, pair, Phi.data.astype(float), grads,
             C.indptr.astype(np.int64), C.indices.astype(np.int64), C.data, n_functions(mesh),
-            max(1, min(Phi.shape[0] // 256, 4 * numba.get_num_threads())))
+            blocks(Phi.shape[0]))
     count = np.zeros(Phi.shape[0], np.int64)
     _lift_rows(*args, count, np.empty(0, np.int64), np.empty(0), np.empty((dim, 0)), False)
     ptr = np.zeros(Phi.shape[0] + 1, np.int64)
@@ -165,8 +165,8 @@ def _lift_rows(term_ptr, first, second, pair, lam, grads, c_ptr, c_idx, c_val, n
     """Row by row (Gustavson's sparse product): each pair term lambda_a lambda_b
     (twice for a != b) spread over the functions of its pair's polar value. First
     pass (``fill`` False) counts each row's functions into ``ptr``; the second writes
-    them at ``ptr[r]``. ``nb`` blocks of rows run in parallel, each with a slot array of
-    its own (8 bytes a function)."""
+    them at ``ptr[r]``. ``nb`` blocks of rows (:func:`~.summation.blocks`) run in parallel,
+    each with a slot array of its own (8 bytes a function)."""
     m = term_ptr.shape[0] - 1
     for blk in prange(nb):
         slot = np.full(nfun, -1, np.int64)

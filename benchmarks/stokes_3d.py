@@ -16,8 +16,10 @@ Three tables, each printed as markdown:
    Schur complement) against the node count: viscosity ratio 1 and the "sinker"
    (``Sinker``: 8 spheres, contrast 1e4, no slip).
 4. With ``--sphere``, the **settling sphere** of ``examples/ex22_settling_sphere.py`` at
-   the spacings ``(hs, hw)`` given: its velocity against Haberman & Sayre's, the error's
-   order between resolutions and the Richardson estimate of the limit from the last two.
+   the spacings ``(hs, hw)`` given: its velocity against Haberman & Sayre's with the
+   sphere's triangles as walls, the error's order between resolutions, the Richardson
+   estimate of the limit from the last two, the volume of the triangles' polyhedron over
+   the sphere's, and the velocity on the same nodes without walls.
 
 Times are warm: a first small solve loads the numba kernels before any is timed (the
 one-time load is printed apart). Best of ``--repeat`` for the times.
@@ -117,16 +119,20 @@ def iterations_table(sizes, repeat) -> str:
 
 
 def sphere_table(spacings) -> str:
-    """The settling sphere at each ``(hs, hw)``: velocity / reference, the order of the
-    error between successive resolutions (in hs) and the Richardson limit."""
+    """The settling sphere at each ``(hs, hw)``, its surface's triangles walls: velocity /
+    reference, the order of the error between successive resolutions (in hs), the
+    Richardson limit, the volume of the polyhedron of the surface's triangles over the
+    sphere's, and the velocity on the same nodes without walls."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
     import ex22_settling_sphere as ex
     rows = ["| hs | hw | nodes | FGMRES its | seconds | v / reference | order | "
-            "Richardson limit |", "|---|---|---|---|---|---|---|---|"]
+            "Richardson limit | polyhedron / sphere volume | without walls |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     last = []
     for hs, hw in spacings:
         t0 = time.perf_counter()
         sol, mesh, v = ex.settle(hs, hw)
+        seconds = time.perf_counter() - t0
         r = v / ex.REFERENCE
         order = limit = ""
         if len(last) >= 1:
@@ -136,17 +142,24 @@ def sphere_table(spacings) -> str:
             f = (hs / hs0) ** order_k
             limit = f"{(r - f * r0) / (1 - f):.3f}" if order_k > 0 else ""
         last.append((hs, r))
+        s, faces = ex.surface(hs)
+        volume = np.abs(np.einsum("ij,ij->i", s[faces[:, 0]], np.cross(
+            s[faces[:, 1]], s[faces[:, 2]]))).sum() / 6 / (4 / 3 * np.pi * ex.A ** 3)
+        plain = ex.settle(hs, hw, walls=False)[2] / ex.REFERENCE
         rows.append(f"| {hs} | {hw} | {mesh.p.shape[1]:,} | {sol.iterations} | "
-                    f"{time.perf_counter() - t0:.1f} | {r:.4f} | {order} | {limit} |")
+                    f"{seconds:.1f} | {r:.4f} | {order} | {limit} | {volume:.4f} | "
+                    f"{plain:.4f} |")
         print(rows[-1], flush=True)
     return "\n".join(rows)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[1000, 3000, 10000])
+    ap.add_argument("--sizes", type=int, nargs="*", default=[1000, 3000, 10000],
+                    help="interior node counts of the rates table (none: skipped)")
     ap.add_argument("--baseline-max", type=int, default=3000)
-    ap.add_argument("--iteration-sizes", type=int, nargs="+", default=[1000, 10000])
+    ap.add_argument("--iteration-sizes", type=int, nargs="*", default=[1000, 10000],
+                    help="interior node counts of the iterations table (none: skipped)")
     ap.add_argument("--inf-sup", type=int, nargs="*", default=[30, 90, 250, 500],
                     help="interior node counts of the inf-sup table (none: skipped)")
     ap.add_argument("--ratio", type=float, default=20.0)
@@ -161,11 +174,12 @@ def main(argv=None):
     for method in METHODS:      # load the kernels once
         timed_solve(delaunay_mesh(box_nodes_3d(30, seed=0)), method, ms.viscosity, ms.force)
     print(f"one-time kernel load: {time.perf_counter() - t0:.1f} s\n")
-    out = {"rates": rates_table(a.sizes, a.ratio, a.baseline_max, a.repeat)}
+    out = {"rates": rates_table(a.sizes, a.ratio, a.baseline_max, a.repeat) if a.sizes else ""}
     print()
     out["inf_sup"] = inf_sup_table(a.inf_sup) if a.inf_sup else ""
     print()
-    out["iterations"] = iterations_table(a.iteration_sizes, a.repeat)
+    out["iterations"] = iterations_table(a.iteration_sizes, a.repeat) if a.iteration_sizes \
+        else ""
     print()
     pairs = list(zip(a.sphere[::2], a.sphere[1::2]))
     out["sphere"] = sphere_table(pairs) if pairs else ""

@@ -615,6 +615,22 @@ def test_stokes_3d_prints_its_three_tables(capsys):
     assert "one-time kernel load" in text and "### FGMRES iterations" in text
 
 
+def test_stokes_3d_settling_sphere_study_alone(capsys):
+    """Only the sphere study (the other tables skipped): two coarse resolutions, the
+    error's order and limit from the second, the walls ahead of the run without them."""
+    bench = load_benchmark("stokes_3d")
+    out = bench.main(["--sizes", "--iteration-sizes", "--inf-sup",
+                      "--sphere", "0.12", "0.4", "0.1", "0.35"])
+    assert out["rates"] == out["iterations"] == out["inf_sup"] == ""
+    rows = [r.split("|") for r in out["sphere"].splitlines()[2:]]
+    assert len(rows) == 2 and rows[0][7].strip() == "" and float(rows[1][7]) > 0
+    for r in rows:
+        walls, volume, plain = float(r[6]), float(r[9]), float(r[10])
+        assert 0.85 < volume < 1 and walls > plain + 0.1 and walls < 1.0
+    text = capsys.readouterr().out
+    assert "### Settling sphere" in text and "### Manufactured" not in text
+
+
 # --------------------------------------------------------------------------
 # sibson_3d: our 3D Sibson coordinates against natinterp3d (optional peer)
 # --------------------------------------------------------------------------

@@ -60,6 +60,7 @@ from ..geometry.delaunay_nd import (check_delaunay, check_nodes, delaunay_of, se
 from ..geometry.delaunay3d import Delaunay3D
 from ..geometry.nodesets import morton_order
 from ..geometry.simplices_nd import FLAT, circumcentre_cache, facet_planes
+from ..geometry.walls3d import WALL
 from .lasserre_query import query_batch, query_batch_serial
 from .watson3d import coordinates_3d
 
@@ -106,7 +107,8 @@ _SORT_MIN = 4096
 
 # 3D Sibson values (no gradient) of at least WATSON_MIN queries on the package's own
 # tetrahedralisation come from Watson's decomposition (watson3d: a third of the time), the
-# queries it flags from Box 1 (below, the records it builds cost a few hundred queries)
+# queries it flags from Box 1 (below, the records it builds cost a few hundred queries).
+# On walls (geometry.walls3d) every batch: the walled coordinates are Watson's
 WATSON_MIN = 1000
 
 
@@ -231,6 +233,40 @@ def _on_hull(p, tri, Q, facets):
     return R
 
 
+def _on_boundary(p, tri, NB, Q, facets):
+    """:func:`_on_hull` for the points on hull facets, :func:`_on_wall` for those on walls
+    (``facets`` as there, ``NB`` the adjacency the kernel read)."""
+    d = p.shape[1]
+    wall = NB[facets // (d + 1), facets % (d + 1)] <= WALL
+    if not wall.any():
+        return _on_hull(p, tri, Q, facets)
+    out = sp.lil_matrix((Q.shape[0], p.shape[0]))
+    for rows, rule in ((wall, _on_wall), (~wall, _on_hull)):
+        if rows.any():
+            out[np.flatnonzero(rows)] = rule(p, tri, Q[rows], facets[rows])
+    return out.tocsr()
+
+
+def _on_wall(p, tri, Q, facets):
+    """Coordinates of points on wall faces (:mod:`~skfem_nem.geometry.walls3d`): the face's
+    barycentric coordinates, the limit from either side. ``facets[r] = s * 4 + k``: the face
+    of tetrahedron s opposite slot k."""
+    S = np.asarray(tri.simplices, dtype=np.int64)
+    s, k = facets // 4, facets % 4
+    F = np.stack([S[s, (k + j) % 4] for j in (1, 2, 3)], axis=1)         # (m, 3)
+    A = p[F]                                                             # (m, 3, 3)
+    e1, e2, r = A[:, 1] - A[:, 0], A[:, 2] - A[:, 0], Q - A[:, 0]
+    G = np.stack([np.einsum("md,md->m", e1, e1), np.einsum("md,md->m", e1, e2),
+                  np.einsum("md,md->m", e2, e2)], axis=1)
+    b1, b2 = np.einsum("md,md->m", r, e1), np.einsum("md,md->m", r, e2)
+    det = G[:, 0] * G[:, 2] - G[:, 1] ** 2
+    l1, l2 = (G[:, 2] * b1 - G[:, 1] * b2) / det, (G[:, 0] * b2 - G[:, 1] * b1) / det
+    lam = np.clip(np.c_[1.0 - l1 - l2, l1, l2], 0.0, None)
+    lam /= lam.sum(axis=1, keepdims=True)
+    rows = np.repeat(np.arange(Q.shape[0]), 3)
+    return sp.csr_matrix((lam.ravel(), (rows, F.ravel())), shape=(Q.shape[0], p.shape[0]))
+
+
 def _linear_on_line(u, t):
     """Linear interpolation weights at t between the nodes u on a line (CSR)."""
     order = np.argsort(u)
@@ -312,7 +348,7 @@ def _coordinates(p, q, gradient, tri, undefined, kind, hull_status=False, chunk=
             f"first is x[{bad[0]}] = {q[bad[0]].tolist()}")
     hull = np.flatnonzero(status == ON_HULL)
     if hull.size and not hull_status:
-        H = _on_hull(p, tri, q[hull], info[hull]).tocoo()
+        H = _on_boundary(p, tri, NB, q[hull], info[hull]).tocoo()
         parts.append((hull[H.row], H.col, H.data, np.full((d, H.nnz), np.nan)))
     # one COO -> CSR conversion per matrix from the same (row, col) arrays:
     # all matrices get the same pattern, rows sorted by column index
@@ -417,7 +453,13 @@ def sibson_coordinates_nd(nodes, x, gradient: bool = False, delaunay=None,
         tri = delaunay_of(p)
     if not (isinstance(chunk, (int, np.integer)) and chunk > 0):
         raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
-    if not gradient and not _raw and isinstance(tri, Delaunay3D) and q.shape[0] >= WATSON_MIN:
+    walls = getattr(tri, "walled_neighbors", None) is not None
+    if walls and (gradient or _raw):
+        raise ValueError("the tetrahedralisation has walls (Delaunay3D.wall_off): their "
+                         "coordinates are Watson's values on regions cut at the walls, "
+                         "without gradients (the smoothed 3D basis needs none)")
+    if not gradient and not _raw and isinstance(tri, Delaunay3D) and (
+            q.shape[0] >= WATSON_MIN or walls):
         try:
             return coordinates_3d(tri, q, lambda x: _coordinates(p, x, False, tri, undefined,
                                                                   0, chunk=int(chunk)))

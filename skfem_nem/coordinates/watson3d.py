@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..geometry.nodesets import morton_order
+from ..geometry.walls3d import WALL, through
 from ..jit import sort_with
 
 __all__ = ["RECORD_VALUES", "DEN_MIN", "ENTRY_MIN", "HULL_LAMBDA", "CAVITY_SLACK", "CAVITY_CAP",
@@ -246,7 +247,7 @@ def walk(R, NB, x, y, z, t):
             k, lo = 3, l3
         if lo >= 0:
             return t if D > 0 else -2
-        t = NB[t, k]
+        t = through(NB[t, k])           # (walks cross walls)
         if t < 0:
             return -1
     return -3
@@ -338,12 +339,34 @@ def _pair(R, T, NB, t1, k1, x, y, z, sc, mark, m, where, oi, ov, oa, cnt):
 
 
 @njit(cache=True, error_model="numpy")
+def _wall_row(R, T, t, k, x, y, z, oi, ov):
+    """The row of a query on the wall face of tetrahedron t opposite slot k: the limit of
+    the terms from either side, the face's barycentric coordinates (t's term divides by
+    its volume with x in place of the vertex off the face, which vanishes there)."""
+    D, e0, e1, e2, e3 = power_and_volumes(R, t, x, y, z)
+    e = (e0, e1, e2, e3)
+    total = 0.0
+    for i in range(4):
+        if i != k:
+            total += max(e[i], 0.0)
+    c = 0
+    for i in range(4):
+        if i != k:
+            oi[c] = T[t, i]
+            ov[c] = max(e[i], 0.0) / total
+            c += 1
+    return c
+
+
+@njit(cache=True, error_model="numpy")
 def _row(R, T, NB, x, y, z, t0, k0, stamp, m, tets, E, mark, where, oi, ov, oa):
     """The row of coordinates of the query (x, y, z) in tetrahedron t0 (on its face opposite
     slot k0 if k0 >= 0): its length, entries unnormalised in ``oi``, ``ov``; -1 if flagged."""
     if t0 < 0:
         return -1                      # not placed by a walk
     t2 = NB[t0, k0] if k0 >= 0 else -1
+    if t2 <= WALL:
+        return _wall_row(R, T, t0, k0, x, y, z, oi, ov)
     if k0 >= 0 and t2 < 0:
         return -1                      # on the hull
     sc = (0.0, 0.0, 0.0, 0.0)          # the shift to the plane of the face (c, n)
@@ -366,7 +389,14 @@ def _row(R, T, NB, x, y, z, t0, k0, stamp, m, tets, E, mark, where, oi, ov, oa):
         W = E[c, 0] ** 3 * S * S / (E[c, 1] * E[c, 2] * E[c, 3] * E[c, 4])
         s = 0.0
         for k in range(4):
-            if NB[t, k] < 0 and E[c, 1 + k] <= HULL_LAMBDA * S:
+            if NB[t, k] <= WALL and abs(E[c, 1 + k]) <= HULL_LAMBDA * S:
+                # on (or next to) a wall face of its own tetrahedron: that face's limit;
+                # next to the plane of another wall face (beside a fold of the wall),
+                # where the terms of the two faces cancel: flagged
+                if t == t0:
+                    return _wall_row(R, T, t0, k, x, y, z, oi, ov)
+                return -1
+            if -1 <= NB[t, k] < 0 and E[c, 1 + k] <= HULL_LAMBDA * S:
                 return -1
             term = W * E[c, 1 + k]
             cnt = _add(T[t, k], term, abs(term), mark, m, where, oi, ov, oa, cnt)
@@ -510,8 +540,9 @@ FLAT_SHAPE = 1e-9
 class TetrahedraRecords:
     """The state of Watson's decomposition on a Delaunay tetrahedralisation: the tetrahedra T
     (nt, 4) of the nodes p (n, 3), their neighbours ``NB`` across the face opposite each
-    vertex slot (the triangulation's, or the mesh's) and records; ``usable`` is False where a
-    tetrahedron is flat (``FLAT_SHAPE``)."""
+    vertex slot (the triangulation's, walls marked as in :mod:`~skfem_nem.geometry.walls3d`,
+    or the mesh's) and records; ``usable`` is False where a tetrahedron is flat
+    (``FLAT_SHAPE``)."""
 
     def __init__(self, p, T, NB):
         self.p = np.ascontiguousarray(p, dtype=np.float64)
@@ -519,6 +550,7 @@ class TetrahedraRecords:
         self.NB = np.ascontiguousarray(NB, np.int64)
         self.R = records(self.p, self.T, np.empty((self.p.shape[0], 0)))
         self.usable = _flat(self.p, self.T, self.R[:, 30], FLAT_SHAPE) == 0
+        self.source = None          # the neighbour array these were made from (records_of)
 
     def describes(self, p, T) -> bool:
         """Are these the records of the nodes p and tetrahedra T (a mesh whose nodes moved
@@ -571,10 +603,13 @@ def records_of(tri) -> TetrahedraRecords:
     """The :class:`TetrahedraRecords` of the package's
     :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D` ``tri``, made once and kept while
     ``tri`` lives: one set of records a tetrahedralisation, whoever asks (some 40 numbers a
-    tetrahedron, 210 MB at 100,000 nodes)."""
+    tetrahedron, 210 MB at 100,000 nodes), its walls (``walled_neighbors``) included."""
     rec = _RECORDS.get(tri)
-    if rec is None:
-        rec = _RECORDS[tri] = TetrahedraRecords(tri.points, tri.simplices, tri.neighbors)
+    nb = getattr(tri, "walled_neighbors", None)
+    nb = tri.neighbors if nb is None else nb
+    if rec is None or rec.source is not nb:         # (none yet, or walls set since)
+        rec = _RECORDS[tri] = TetrahedraRecords(tri.points, tri.simplices, nb)
+        rec.source = nb
     return rec
 
 

@@ -22,6 +22,7 @@ from .delaunay3d_repair import COINCIDENT, LOST, remove_points, repair, working
 from .entities import unique_ints
 from .nodesets import morton_order
 from .predicates3d import orient3d_sign
+from .walls3d import check_faces, wall_slots, walled
 
 __all__ = ["Delaunay3D", "insertion_order"]
 
@@ -100,6 +101,7 @@ class Delaunay3D:
         self.npoints = p.shape[0]
         self.nsimplex = self.simplices.shape[0]
         self._v2s = None
+        self.walled_neighbors = None
 
     def moved(self, points):
         """The Delaunay tetrahedralisation of the same nodes at new positions ``points``
@@ -181,6 +183,20 @@ class Delaunay3D:
         out = Delaunay3D.__new__(Delaunay3D)
         out._adopt(np.ascontiguousarray(self.points[keep]), T, N, ntet)
         return out
+
+    def wall_off(self, faces: dict) -> np.ndarray:
+        """Make the triangles ``faces`` (name -> (k, 3) node indices) walls that natural
+        neighbours do not see through (:mod:`.walls3d`): ``walled_neighbors`` becomes
+        ``neighbors`` with ``WALL - t`` across them, which the coordinates read. Returns the
+        (m, 4) wall slots. Raises :class:`~.walls3d.MissingFace` (a ``ValueError``) for a
+        triangle that is no face of the tetrahedra, naming it; the walls stay as they were.
+        The tetrahedralisations :meth:`moved`, :meth:`inserted` and :meth:`removed` make
+        have none."""
+        checked = {name: check_faces(f, self.npoints, name=f"faces[{name!r}]")
+                   for name, f in faces.items()}
+        slots = wall_slots(self.simplices, self.npoints, checked)
+        self.walled_neighbors = walled(self.neighbors, slots) if slots.any() else None
+        return slots
 
     @property
     def vertex_to_simplex(self):

@@ -127,7 +127,12 @@ def hull_plane_flats(p: np.ndarray, simplices: np.ndarray, hull_nodes: np.ndarra
 def sealed_neighbours(p: np.ndarray, tri) -> np.ndarray:
     """``tri.neighbors`` with the flat simplices in hull planes (:func:`hull_plane_flats`)
     replaced by -1: their neighbours' faces there are hull facets. Kept per triangulation (a
-    3D time step queries one many times: 24 ms at 10,000 nodes); callers must not write it."""
+    3D time step queries one many times: 24 ms at 10,000 nodes); callers must not write it.
+    A :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D` with walls gives its
+    ``walled_neighbors`` (:mod:`~skfem_nem.geometry.walls3d`)."""
+    walls = getattr(tri, "walled_neighbors", None)
+    if walls is not None:
+        return walls
     NB = _SEALED.get(tri)
     if NB is None:
         NB = np.array(tri.neighbors, dtype=np.int64)

@@ -37,8 +37,8 @@ __all__ = ["adopt", "delaunay_mesh", "outside_domain", "tetrahedron_neighbours",
 # the mesh's (nodes, triangles), kept while a mesh holds them (weakly referenced: the cache
 # on each mesh is the strong reference), and the named boundaries (segment facets) that a
 # mesh must carry to be given one: a plain mesh with the same nodes and triangles is not
-_BY_DIGEST: "weakref.WeakValueDictionary[str, Triangulation]" = weakref.WeakValueDictionary()
-_NAMED: "weakref.WeakKeyDictionary[Triangulation, dict]" = weakref.WeakKeyDictionary()
+_BY_DIGEST: "weakref.WeakValueDictionary[str, object]" = weakref.WeakValueDictionary()
+_NAMED: "weakref.WeakKeyDictionary[object, dict]" = weakref.WeakKeyDictionary()
 # the triangles of a mesh's triangulation that lie outside the mesh (holes, the notch of a
 # non-convex domain): walls for the coordinates, outside for point queries
 _VOID: "weakref.WeakKeyDictionary[Triangulation, np.ndarray]" = weakref.WeakKeyDictionary()
@@ -58,12 +58,11 @@ def _cache(mesh, tri, void=None, named=None):
     the mesh's segment boundaries (name -> facets), which identify meshes derived from
     it by scikit-fem (``with_boundaries``, ``with_subdomains``)."""
     mesh._skfem_nem_triangulation = tri
-    if isinstance(tri, Triangulation):
-        if void is not None and void.any():
-            _VOID[tri] = void
-        if named:
-            _BY_DIGEST[_digest(mesh.p, mesh.t)] = tri
-            _NAMED[tri] = named
+    if isinstance(tri, Triangulation) and void is not None and void.any():
+        _VOID[tri] = void
+    if named:
+        _BY_DIGEST[_digest(mesh.p, mesh.t)] = tri
+        _NAMED[tri] = named
     return mesh
 
 
@@ -110,7 +109,7 @@ def _on_domain(tri, void, t, x):
     return False
 
 
-def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
+def delaunay_mesh(points, segments=None, holes=None, faces=None) -> MeshTri | MeshTet:
     """The Delaunay triangulation of points as a scikit-fem mesh.
 
     (n, 2) points give a ``MeshTri`` (robust 2D triangulation,
@@ -142,6 +141,16 @@ def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
         left out of the mesh (the notch of an L-shaped domain, a slit), but stay in
         the triangulation the coordinates are computed on, as walls.
 
+    Faces (3D)
+        ``faces``: (k, 3) triples of node indices, or a dict of such arrays by name,
+        that are walls for natural neighbours (:mod:`~skfem_nem.geometry.walls3d`): the
+        conflict region of a point stops at them, so functions kink across a material
+        interface and are linear on it. Each triangle must already be a face of the
+        Delaunay tetrahedra (sample the surface more finely than the nodes beside it);
+        the first that is not raises :class:`~skfem_nem.geometry.walls3d.MissingFace`
+        (a ``ValueError``) naming it. Each name (``"faces"`` for an array) becomes a named
+        boundary of the mesh, ``mesh.boundaries[name]``: the facets of its triangles.
+
     Examples
     --------
     >>> import numpy as np
@@ -168,11 +177,15 @@ def delaunay_mesh(points, segments=None, holes=None) -> MeshTri | MeshTet:
     shape = np.shape(points)
     if (segments is not None or holes is not None) and not (len(shape) == 2 and shape[1] == 2):
         raise ValueError("segments and holes are supported for 2D points only")
+    if faces is not None and not (len(shape) == 2 and shape[1] == 3):
+        raise ValueError("faces are supported for 3D points only (2D: segments)")
     if len(shape) == 2 and shape[1] == 2 and (segments is not None or holes is not None):
         return _constrained_mesh(points, segments, holes)
     if len(shape) == 2 and shape[1] == 3:
         p = validate_nodes(points, dim=3, name="points")
         tri = delaunay_of(p)
+        if faces is not None:
+            return _walled_mesh(p, tri, faces)
         return _cache(_tet_mesh(p, tri.simplices), tri)
     tri = Triangulation(points)
     return MeshTri(np.ascontiguousarray(tri.nodes.T), np.ascontiguousarray(tri.triangles.T))
@@ -200,6 +213,26 @@ def _tet_mesh(p: np.ndarray, simplices: np.ndarray) -> MeshTet:
     mesh = MeshTet(np.ascontiguousarray(p.T), np.ascontiguousarray(simplices.T, dtype=np.int64))
     prime_facets(mesh)
     return mesh
+
+
+def _walled_mesh(p, tri, faces):
+    """:func:`delaunay_mesh` with walls (3D): the mesh named by its walls' facets."""
+    named = faces if isinstance(faces, dict) else {"faces": faces}
+    for name in named:
+        if not isinstance(name, str):
+            raise ValueError(f"face names must be strings, got {name!r}")
+    slots = tri.wall_off(named)
+    mesh = _tet_mesh(p, tri.simplices)
+    n = p.shape[0]
+    key = lambda f: (f[:, 0] * n + f[:, 1]) * n + f[:, 2]      # noqa: E731
+    fk = key(np.sort(mesh.facets.T.astype(np.int64), axis=1))
+    order = np.argsort(fk)
+    facets = {name: np.sort(order[np.searchsorted(fk[order], key(np.sort(
+        np.asarray(f, dtype=np.int64).reshape(-1, 3), axis=1)))]) for name, f in named.items()}
+    if slots.any():
+        mesh = mesh.with_boundaries(facets)
+        prime_facets(mesh)
+    return _cache(mesh, tri, named=facets)
 
 
 def _named(segments, n):
@@ -331,7 +364,7 @@ def triangulation_of(mesh: MeshTri | MeshTet) -> Triangulation | Delaunay3D:
     nodes with its boundary facets as segments, so that no natural neighbour is
     seen through the outside."""
     cached = getattr(mesh, "_skfem_nem_triangulation", None)
-    if cached is None and isinstance(mesh, MeshTri):
+    if cached is None and isinstance(mesh, (MeshTri, MeshTet)):
         cached = _registered(mesh)
         if cached is not None:
             mesh._skfem_nem_triangulation = cached

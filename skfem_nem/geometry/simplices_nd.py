@@ -41,6 +41,7 @@ from numba import njit, prange
 
 from ..jit import serial_twin
 from .status import AT_NODE, OK, ON_HULL, OUTSIDE, OVERFLOW
+from .walls3d import WALL, through
 
 __all__ = ["det_small", "circumcentre", "circumcentres", "in_conflict", "hull_distance",
            "barycentric", "locate_simplex", "locate_brute", "conflict_region",
@@ -330,7 +331,7 @@ def locate_simplex(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol, flat_tol)
             # nothing (co-spherical nodes, slivers on the hull): step on
             k = step % (d + 1)
             for kk in range(d + 1):
-                t = NB[s, (k + kk) % (d + 1)]
+                t = through(NB[s, (k + kk) % (d + 1)])
                 if t >= 0 and t != prev:
                     break
             if t < 0:
@@ -344,7 +345,7 @@ def locate_simplex(P, S, NB, x, s, d, ctr, E, Mn, rhs, lam, tol, htol, flat_tol)
                 k = j
         if lam[k] >= -tol:
             return s, OK
-        t = NB[s, k]
+        t = through(NB[s, k])           # (walks cross walls)
         if t < 0:
             dist, L = hull_distance(P, S, s, k, x, d, ctr, E, Mn)
             if dist == np.inf:
@@ -443,6 +444,15 @@ def conflict_region(P, S, NB, ctr, x, hint, d, stamp_q, itol, flat, htol, wtol, 
         head += 1
         for k in range(d + 1):
             t = NB[s, k]
+            if t <= WALL:
+                # the region stops at a wall; x on a wall face of its own simplex is on
+                # the wall (the caller's wall rule), beyond the plane of another is not
+                # outside (the far side of a curved wall)
+                if s == cav[0]:
+                    dist, L = hull_distance(P, S, s, k, x, d, ctr, E, Mn)
+                    if abs(dist) <= htol * L:
+                        return ON_HULL, s * (d + 1) + k, 0, 0, 0, False
+                continue
             if t < 0:
                 dist, L = hull_distance(P, S, s, k, x, d, ctr, E, Mn)
                 if dist < -htol * L:

@@ -153,3 +153,33 @@ def test_delaunay_mesh_names_the_walls_and_refuses_them_in_2d():
         delaunay_mesh(np.random.default_rng(0).random((10, 2)), faces=[[0, 1, 2]])
     with pytest.raises(MissingFace):
         delaunay_mesh(P, faces=np.array([[0, 1, len(P) - 1]]))
+
+
+def test_the_interpolator_refuses_a_walled_tetrahedralisation(walled):
+    from skfem_nem.coordinates.interpolator import NaturalNeighbourInterpolator
+    P, F, tri, _ = walled
+    with pytest.raises(ValueError, match="has walls"):
+        NaturalNeighbourInterpolator(tri, P[:, 0])
+    plain = NaturalNeighbourInterpolator(Delaunay3D(P), P[:, 0])
+    assert plain([[0.1, 0.2, 0.3]])[0] == pytest.approx(0.1)
+
+
+def test_a_basis_on_walls_passes_the_patch_test_and_sees_nothing_through():
+    """The smoothed basis of a walled mesh: a linear field exact in every gradient; a field
+    zero on the sphere and inside it (x outside) has a zero gradient in every tetrahedron
+    inside, where without walls the outside's values leak in."""
+    from skfem_nem import NaturalNeighbourBasis
+    P, F = sphere_nodes(7, n=2500)
+    mesh = delaunay_mesh(P, faces={"sphere": F})
+    basis = NaturalNeighbourBasis(mesh)
+    g = np.array([0.3, -1.2, 0.7])
+    G = basis.interpolate(P @ g).grad
+    # (7.5e-11 at worst, in small tetrahedra at the cube's corners, with or without walls)
+    assert np.abs(G - g[:, None, None]).max() < 1e-9
+    u = np.where(np.linalg.norm(P, axis=1) > A + 1e-9, P[:, 0], 0.0)
+    inside = np.linalg.norm(P[mesh.t.T].mean(axis=1), axis=1) < A
+    assert np.abs(basis.interpolate(u).grad[:, inside]).max() < 1e-11
+    plain = NaturalNeighbourBasis(delaunay_mesh(P))
+    assert np.abs(plain.interpolate(u).grad[:, inside]).max() > 0.1
+    with pytest.raises(ValueError, match="has walls"):
+        NaturalNeighbourBasis(mesh, integration="gauss")

@@ -155,13 +155,31 @@ def test_delaunay_mesh_names_the_walls_and_refuses_them_in_2d():
         delaunay_mesh(P, faces=np.array([[0, 1, len(P) - 1]]))
 
 
-def test_the_interpolator_refuses_a_walled_tetrahedralisation(walled):
+def test_the_interpolator_keeps_the_walls(walled):
+    """Sibson's values on a walled tetrahedralisation are the walled coordinates times the
+    values, for a large batch (Watson's interpolant) and a small one (the coordinates); the
+    methods that cannot keep walls refuse them."""
     from skfem_nem.coordinates.interpolator import NaturalNeighbourInterpolator
     P, F, tri, _ = walled
+    values = np.c_[np.sin(3 * P[:, 0]) * P[:, 1], np.linalg.norm(P, axis=1)]
+    itp = NaturalNeighbourInterpolator(tri, values)
+    q = np.random.default_rng(6).uniform(-0.7, 0.7, (4000, 3))
+    Phi = sibson_coordinates_nd(P, q, delaunay=tri)
+    assert np.abs(itp(q) - Phi @ values).max() < 1e-11
+    assert np.abs(itp(q[:7]) - Phi[:7] @ values).max() < 1e-11
+    # one outside the sphere, zero on and inside it: zero inside with the walls, not without
+    kinked = (np.linalg.norm(P, axis=1) > A + 1e-9).astype(float)
+    inside = np.linalg.norm(q, axis=1) < 0.95 * A
+    assert np.abs(NaturalNeighbourInterpolator(tri, kinked)(q)[inside]).max() < 1e-12
+    plain = NaturalNeighbourInterpolator(Delaunay3D(P), kinked)
+    assert np.abs(plain(q)[inside]).max() > 0.01
+    lin = NaturalNeighbourInterpolator(tri, values, method="linear")
+    assert np.isfinite(lin(q)).all()
+    for method in ("nearest", "sibson1", "farin"):
+        with pytest.raises(ValueError, match=f"method '{method}' does not keep them"):
+            NaturalNeighbourInterpolator(tri, values, method=method)
     with pytest.raises(ValueError, match="has walls"):
-        NaturalNeighbourInterpolator(tri, P[:, 0])
-    plain = NaturalNeighbourInterpolator(Delaunay3D(P), P[:, 0])
-    assert plain([[0.1, 0.2, 0.3]])[0] == pytest.approx(0.1)
+        itp.gradient(q[:3])
 
 
 def test_a_basis_on_walls_passes_the_patch_test_and_sees_nothing_through():

@@ -42,10 +42,6 @@ def triangulated(points, rescale: bool):
             return tri.nodes, tri, None, None
         if d != 3:
             raise ValueError(f"points must be 2- or 3-dimensional, got a {d}D Delaunay")
-        if getattr(points, "walled_neighbors", None) is not None:
-            raise ValueError("the tetrahedralisation has walls (Delaunay3D.wall_off), which "
-                             "the interpolator does not keep: interpolate on one without "
-                             "walls, or take sibson_coordinates_nd(..., delaunay=tri) @ values")
         p = validate_nodes(p, dim=3, name="points")
         check_delaunay(points, p)
         return p, points, None, None

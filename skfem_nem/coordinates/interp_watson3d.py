@@ -22,11 +22,12 @@ Watson's signed decomposition (1992) in 3D
         phi_i(x) = sum_T lambda_i^T(x) W_T(x) / sum_T W_T(x),
         f(x) = sum_T W_T(x) (sum_k lambda_k^T(x) f_k) / sum_T W_T(x),
 
-    over the tetrahedra whose circumsphere holds x. W_T vanishes as x reaches the sphere
-    (D = 0), so the in-sphere test is the sign of D in floating point. A query is walked to
-    the tetrahedron that holds it (a visibility walk) and its cavity traversed through
-    faces; the queries go in Morton order, each walk starting from the last query's
-    tetrahedron.
+    over the tetrahedra whose circumsphere holds x (on a tetrahedralisation with walls,
+    :mod:`~skfem_nem.geometry.walls3d`, those reached without crossing one). W_T vanishes
+    as x reaches the sphere (D = 0), so the in-sphere test is the sign of D in floating
+    point. A query is walked to the tetrahedron that holds it (a visibility walk) and its
+    cavity traversed through faces; the queries go in Morton order, each walk starting from
+    the last query's tetrahedron.
 
 Flagged queries
     The terms grow as 1 / lambda_k near the plane of a face and those of the two
@@ -43,6 +44,7 @@ from numba import njit, prange
 
 from ..geometry.delaunay3d import Delaunay3D
 from ..geometry.nodesets import morton_order
+from ..geometry.walls3d import WALL
 from .watson3d import (CAVITY_CAP, HULL_LAMBDA, RECORD_VALUES, conflict_tetrahedra, records,
                        walk)
 
@@ -79,7 +81,10 @@ def _cavity(R, NB, x, y, z, t0, stamp, mark, tets, E, acc):
         t = tets[i]
         D, l0, l1, l2, l3 = E[i, 0], E[i, 1], E[i, 2], E[i, 3], E[i, 4]
         for k in range(4):
-            if NB[t, k] < 0 and E[i, 1 + k] <= HULL_LAMBDA * R[t, 30]:
+            if NB[t, k] <= WALL:        # next to a wall face's plane: its terms explode
+                if abs(E[i, 1 + k]) <= HULL_LAMBDA * R[t, 30]:
+                    return False
+            elif NB[t, k] < 0 and E[i, 1 + k] <= HULL_LAMBDA * R[t, 30]:
                 return False
         S = R[t, 30]
         W = D * D * D * S * S / (l0 * l1 * l2 * l3)   # times e_i: the term of v_i
@@ -129,7 +134,9 @@ class SibsonWatson3D:
         self.width = V.shape[1]
         self.R = records(triangulation.points, triangulation.simplices,
                          np.ascontiguousarray(V, dtype=np.float64))
-        self.NB = np.ascontiguousarray(triangulation.neighbors, dtype=np.int64)
+        walled = getattr(triangulation, "walled_neighbors", None)   # (geometry.walls3d)
+        self.NB = np.ascontiguousarray(triangulation.neighbors if walled is None else walled,
+                                       dtype=np.int64)
         self.dtype = complex if self.complex else float
 
     @property

@@ -35,6 +35,10 @@ METHODS = {"sibson": (2, 3), "laplace": (2,), "sibson1": (2, 3), "farin": (2, 3)
            "linear": (2, 3), "nearest": (2, 3)}
 # methods that blend nodal gradients
 C1_METHODS = ("sibson1", "farin")
+# the methods that keep the walls of a 3D tetrahedralisation (geometry.walls3d): Sibson's
+# values on the regions cut at them (gradients refused), and the linear interpolant of the
+# tetrahedra, which no wall crosses; the C1 methods need gradients and "nearest" sees through
+WALLED_METHODS = ("sibson", "linear")
 # In 3D the gradients of the Sibson coordinates (Lasserre's method) lose accuracy within a
 # small distance of the hull (measured on random nodes: errors of sum_i x_i grad phi_i = I
 # 7e-10 at 1e-6 of the hull, 1e-2 at 1e-8, 1e2 at 1e-10): gradients there are NaN. Relative
@@ -52,6 +56,9 @@ class NaturalNeighbourInterpolator:
         :class:`~skfem_nem.Triangulation` (2D) or a ``scipy.spatial.Delaunay`` (2D or 3D) of
         them. The triangulation is built (or adopted) once, here; do not change a
         ``Triangulation`` while interpolators use it (one that gains nodes is an error).
+        The package's :class:`~skfem_nem.geometry.delaunay3d.Delaunay3D` with walls
+        (``wall_off``: faults, interfaces) keeps them for ``"sibson"`` (values only) and
+        ``"linear"``; the other methods refuse it.
     values
         (n, ...) data values, real or complex; trailing dimensions are interpolated together.
     method
@@ -131,6 +138,9 @@ class NaturalNeighbourInterpolator:
         if gradients is not None and method not in C1_METHODS:
             raise ValueError(f"gradients are used by the C1 method(s) {C1_METHODS} only, not "
                              f"by method={method!r}")
+        if getattr(tri, "walled_neighbors", None) is not None and method not in WALLED_METHODS:
+            raise ValueError(f"the tetrahedralisation has walls (Delaunay3D.wall_off): method "
+                             f"{method!r} does not keep them, {WALLED_METHODS} do")
         V, self._trailing = check_values(values, n)
         self.values = V.reshape((n,) + self._trailing).copy()
         self.method, self.rescale = method, bool(rescale)

@@ -165,18 +165,47 @@ def summed_rows(part: sp.spmatrix, comm, owned: Optional[Sequence[int]] = None,
     rank's share of a matrix assembled in parts (its own triangles): every rank sends
     each other rank the rows it owns and adds what it receives, so no rank ever holds
     more than its share and its own rows. ``order``: the unknowns renumbered first (new
-    ``i`` is old ``order[i]``, rows and columns), block by block as they are sent."""
+    ``i`` is old ``order[i]``, rows and columns; one copy of the share).
+
+    The rows go as raw arrays (MPI's ``Alltoallv`` of the row lengths, the column indices
+    and the values straight from the share's arrays, which hold each rank's rows in one
+    piece): no pickled copies. At 101,054 nodes on two ranks the exchange's peak was 375
+    MB above the share with Python's ``alltoall`` of the blocks."""
     part = sp.csr_matrix(part)
+    if order is not None:
+        part = renumbered(part, order, inverse_order(order))
     bounds = split_bounds(part.shape[0], comm.getSize(), owned)
-    if order is None:
-        blocks = [part[a:b] for a, b in bounds]
-    else:
-        new = inverse_order(order)
-        blocks = [renumbered(part, order[a:b], new) for a, b in bounds]
-    got = comm.tompi4py().alltoall(blocks)
-    total = got[0]
-    for b in got[1:]:
-        total = total + b
+    return _exchanged(part, bounds, comm.tompi4py())
+
+
+def _exchanged(K: sp.csr_matrix, bounds: list, mpi) -> sp.csr_matrix:
+    """The sum of the rows ``bounds[rank]`` of every rank's ``K`` (rows in the same
+    numbering on every rank), as this rank's CSR block."""
+    rank, size = mpi.Get_rank(), mpi.Get_size()
+    lo = np.array([a for a, _ in bounds], dtype=np.int64)
+    hi = np.array([b for _, b in bounds], dtype=np.int64)
+    lengths = np.diff(K.indptr).astype(np.int64)
+    nnz_out = K.indptr[hi] - K.indptr[lo]
+    nnz_in = np.empty(size, dtype=np.int64)
+    mpi.Alltoall(np.ascontiguousarray(nnz_out, dtype=np.int64), nnz_in)
+    mine = int(hi[rank] - lo[rank])
+    rows_in = np.empty(size * mine, dtype=np.int64)
+    mpi.Alltoallv([lengths, (hi - lo, lo)], [rows_in, (np.full(size, mine), mine * np.arange(
+        size))])
+    at = np.zeros(size + 1, dtype=np.int64)
+    np.cumsum(nnz_in, out=at[1:])
+    recv = []
+    for buf in (K.indices, K.data):
+        out = np.empty(int(at[-1]), dtype=buf.dtype)
+        mpi.Alltoallv([buf, (nnz_out, K.indptr[lo])], [out, (nnz_in, at[:-1])])
+        recv.append(out)
+    total = None
+    for s in range(size):
+        ptr = np.zeros(mine + 1, dtype=np.int64)
+        np.cumsum(rows_in[s * mine:(s + 1) * mine], out=ptr[1:])
+        block = sp.csr_matrix((recv[1][at[s]:at[s + 1]], recv[0][at[s]:at[s + 1]], ptr),
+                              shape=(mine, K.shape[1]))
+        total = block if total is None else total + block
     return sp.csr_matrix(total)
 
 

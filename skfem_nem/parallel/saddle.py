@@ -102,14 +102,17 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
         raise ValueError(f"order must be a permutation of the {n} unknowns")
     K = sp.bmat([[A, B.T], [B, C]], format="csr")
+    K = renumbered(K, perm, inverse_order(perm))      # (one copy of K held at a time)
     if summed:
         f, g, schur_diagonal = (summed_vector(v, comm) for v in (f, g, schur_diagonal))
-        Kmat = rows_to_petsc(summed_rows(K, comm, order=perm), n, comm)
+        rows = summed_rows(K, comm)
+        del K
+        Kmat = rows_to_petsc(rows, n, comm)
+        del rows
     else:
-        K = renumbered(K, perm, inverse_order(perm))
         check_replicated(K, comm, "saddle-point matrix")
         Kmat = csr_to_petsc(K, comm)
-    del K  # (PETSc holds the rows now)
+        del K  # (PETSc holds the rows now)
     velocity = perm < n1
     r0, r1 = row_range(n, comm)
     with destroying(Kmat, vector(np.concatenate([f, g])[perm], comm)) as objs:

@@ -9,7 +9,8 @@ from skfem.helpers import ddot, dot, grad, sym_grad, trace
 from skfem_nem import NaturalNeighbourBasis, delaunay_mesh
 from skfem_nem.geometry.nodesets import box_nodes
 from skfem_nem.parallel import solver_petsc
-from skfem_nem.parallel.petsc import check_replicated, csr_to_petsc, gather, row_range, vector
+from skfem_nem.parallel.petsc import (check_replicated, csr_to_petsc, gather, row_range,
+                                      split_bounds, summed_rows, vector)
 from agreement import rel
 
 # agreement asked of the PETSc solution with scipy's direct one (relative, 2-norm),
@@ -112,6 +113,33 @@ def test_rows_are_split_in_blocks_and_gathered(mesh, comm, agree):
         for obj in (y, v, M):
             obj.destroy()
     assert max(got) < PRODUCT_RTOL, got
+
+
+@pytest.mark.parametrize("renumber", [False, True])
+@pytest.mark.parametrize("owned", [None, "uneven"])
+def test_summed_rows_sum_every_ranks_share(comm, agree, renumber, owned):
+    """Each rank holds a different random share (some rows empty, one rank may own no
+    rows): its rows of the sum, renumbered or not and under an uneven split, are those of
+    the whole sum taken in one process."""
+    import scipy.sparse as sp
+    rank, size = comm.getRank(), comm.getSize()
+    n = 57
+    share = sp.random(n, n, density=0.15, format="csr", random_state=rank + 1)
+    share[rank::3] = 0.0
+    share.eliminate_zeros()
+    shares = agree(share)
+    order = np.random.default_rng(9).permutation(n) if renumber else None
+    split = None if owned is None else [n - 3 * (size - 1)] + [3] * (size - 1)
+    if split is not None and size > 1:
+        split[-1], split[0] = 0, split[0] + 3        # a rank without rows
+    whole = sum(shares[1:], shares[0]).tocsr()
+    if order is not None:
+        whole = whole[order][:, order]
+    a, b = split_bounds(n, size, split)[rank]
+    got = summed_rows(share, comm, owned=split, order=order)
+    assert got.shape == (b - a, n)
+    assert max(agree(abs(got - whole[a:b]).max() if got.nnz or whole[a:b].nnz else 0.0)) \
+        < 1e-15
 
 
 def test_ranks_holding_different_matrices_are_caught(comm, agree):

@@ -79,6 +79,11 @@ class SaddlePointProblem:
         Au = self.A @ xu if viscous is None else viscous(xu)
         r1 = self.whole(Au + self.B.T @ xp - self.f)
         r2 = self.whole(self.B @ xu - self.S @ xp - self.g)
+        return self.relative(r1, r2)
+
+    def relative(self, r1: np.ndarray, r2: np.ndarray) -> float:
+        """The relative residual of :meth:`residual` from the residuals ``r1``, ``r2``
+        of the two block rows (whole, summed over the ranks of a share)."""
         m = self.m
         if self.pressure_mean:
             r2 = r2 - m * ((m @ r2) / (m @ m))

@@ -519,14 +519,21 @@ def solve_petsc(problem: SaddlePointProblem, tol: float, maxiter: int,
     from ..parallel import solve_saddle_petsc
     from ..parallel.petsc import world
     pressure = problem.m != 0                       # not the constraint multipliers
+
+    def release():      # a block assembled for this solve alone: PETSc holds it now
+        if problem.owned:
+            problem.A = None
     res = solve_saddle_petsc(
         problem.A, problem.B, -problem.S, problem.f, problem.g, -problem.dp, tol, maxiter,
         modes=rigid_modes(problem.ubasis, problem.free),
         pressure_null=pressure.astype(float) if problem.pressure_mean else None,
-        order=part_order(problem, world()[1]), summed=problem.total is not None)
+        order=part_order(problem, world()[1]), summed=problem.total is not None,
+        release=release)
     info.update(ranks=res.ranks, ksp_reason=res.reason, viscous_pc=res.viscous_pc)
     p = problem.mean_free(res.p)
-    return SaddlePointSolution(res.u, p, res.krylov_iterations, problem.residual(res.u, p))
+    n1 = res.u.size     # (the mean shift of p is in the null space: the residual stays)
+    return SaddlePointSolution(res.u, p, res.krylov_iterations,
+                               problem.relative(res.residual[:n1], res.residual[n1:]))
 
 
 def part_order(problem: SaddlePointProblem, parts: int = 1) -> np.ndarray:

@@ -26,7 +26,7 @@ options database overrides: ``-stokes_fieldsplit_0_pc_type hypre``,
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Optional
+from typing import Callable, NamedTuple, Optional
 
 import numpy as np
 import scipy.sparse as sp
@@ -55,6 +55,7 @@ class SaddleResult(NamedTuple):
     reason: int
     ranks: int
     viscous_pc: str         # the preconditioner PETSc used on the first block
+    residual: np.ndarray    # K x - [f, g] of the whole system (summed), whole on every rank
 
 
 def saddle_defaults(tol: float, maxiter: int) -> dict:
@@ -77,7 +78,8 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
                        modes: Optional[np.ndarray] = None,
                        pressure_null: Optional[np.ndarray] = None,
                        order: Optional[np.ndarray] = None,
-                       prefix: str = "stokes_", summed: bool = False) -> SaddleResult:
+                       prefix: str = "stokes_", summed: bool = False,
+                       release: Optional[Callable[[], None]] = None) -> SaddleResult:
     """Solve the block system of the module docstring on PETSc's ``COMM_WORLD``.
 
     ``schur_diagonal`` (len(g),) approximates the Schur complement ``C - B A^-1 B^T``
@@ -90,6 +92,9 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     rows are gathered from the others' shares (:func:`summed_rows`); otherwise they are
     the whole system, the same on every rank. Stops on the relative residual ``tol`` of
     the whole system; ``RuntimeError`` naming PETSc's reason if it does not converge.
+    ``release``: called once the blocks are in one matrix here, for the caller to let its
+    references to ``A``, ``B`` and ``C`` go (their memory then serves PETSc's). The
+    result's ``residual`` is PETSc's ``K x - [f, g]``, so no block is needed after.
     """
     PETSc = import_petsc()
     comm = PETSc.COMM_WORLD
@@ -102,6 +107,9 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
         raise ValueError(f"order must be a permutation of the {n} unknowns")
     K = sp.bmat([[A, B.T], [B, C]], format="csr")
+    del A, B, C
+    if release is not None:
+        release()
     K = renumbered(K, perm, inverse_order(perm))      # (one copy of K held at a time)
     if summed:
         f, g, schur_diagonal = (summed_vector(v, comm) for v in (f, g, schur_diagonal))
@@ -133,7 +141,13 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
             if ksp.getPC().getType() == PETSc.PC.Type.FIELDSPLIT else ""
         whole = np.empty(n)
         whole[perm] = gather(x)
-    return SaddleResult(whole[:n1], whole[n1:], its, reason, comm.getSize(), pc0)
+        r = rhs.duplicate()
+        objs.append(r)
+        Kmat.mult(x, r)
+        r.axpy(-1.0, rhs)
+        residual = np.empty(n)
+        residual[perm] = gather(r)
+    return SaddleResult(whole[:n1], whole[n1:], its, reason, comm.getSize(), pc0, residual)
 
 
 def _fieldsplit_ksp(comm, Kmat, objs: list, prefix: str, rows0: np.ndarray,

@@ -7,15 +7,17 @@ walls and ends (each end 1.8 cylinder radii from the sphere, where its effect is
 velocity, 0.595 of the unbounded one. Nodes: rings on the wall, discs on the ends, a
 Fibonacci lattice on the sphere and random interior nodes graded from the sphere's
 spacing ``hs`` to the wall's ``hw``. Natural-neighbour velocity (Box 1, smoothed, with
-bubbles), P1 pressure, FGMRES with AMG.
+bubbles), P1 pressure, FGMRES with AMG. The sphere's surface triangles are walls
+(``delaunay_mesh(points, faces=...)``): no natural neighbour is seen through them, so
+the velocity kinks at the surface, and the sphere settles at 0.954 of the reference
+velocity on 2,481 nodes, 0.994 on 22,517.
 
-The sphere's surface triangles are walls (``delaunay_mesh(points, faces=...)``): no
-natural neighbour is seen through them, so the velocity kinks at the surface and the
-viscosity and weight belong to the tetrahedra inside. The nodes beside the surface keep
-a little further from it than its triangles' circumradius, which makes every triangle a
-Delaunay face. The sphere is then a polyhedron of slightly smaller volume, and the
-velocity converges to the reference like ``hs^2`` (``benchmarks/stokes_3d.py --sphere``;
-without walls the stiff sphere dragged a layer of fluid along and ran 30% slow).
+The viscosity and weight belong to the tetrahedra inside the walls. The nodes beside the
+surface keep a little further from it than its triangles' circumradius, which makes every
+triangle a Delaunay face. The sphere is then a polyhedron of slightly smaller volume, and
+the velocity converges to the reference like ``hs^2`` (``benchmarks/stokes_3d.py
+--sphere``; without walls the stiff sphere dragged a layer of fluid along and ran 30%
+slow).
 """
 from pathlib import Path
 

@@ -186,12 +186,12 @@ class Delaunay3D:
 
     def wall_off(self, faces: dict) -> np.ndarray:
         """Make the triangles ``faces`` (name -> (k, 3) node indices) walls that natural
-        neighbours do not see through (:mod:`.walls3d`): ``walled_neighbors`` becomes
-        ``neighbors`` with ``WALL - t`` across them, which the coordinates read. Returns the
-        (m, 4) wall slots. Raises :class:`~.walls3d.MissingFace` (a ``ValueError``) for a
-        triangle that is no face of the tetrahedra, naming it; the walls stay as they were.
-        The tetrahedralisations :meth:`moved`, :meth:`inserted` and :meth:`removed` make
-        have none."""
+        neighbours do not see through (:mod:`.walls3d`), in place of any set before:
+        ``walled_neighbors`` becomes ``neighbors`` with ``WALL - t`` across them, which the
+        coordinates read. Returns the (m, 4) wall slots. Raises
+        :class:`~.walls3d.MissingFace` (a ``ValueError``) for a triangle that is no face of
+        the tetrahedra, naming it; the walls stay as they were. The tetrahedralisations
+        :meth:`moved`, :meth:`inserted` and :meth:`removed` make have none."""
         checked = {name: check_faces(f, self.npoints, name=f"faces[{name!r}]")
                    for name, f in faces.items()}
         slots = wall_slots(self.simplices, self.npoints, checked)

@@ -201,3 +201,22 @@ def test_a_basis_on_walls_passes_the_patch_test_and_sees_nothing_through():
     assert np.abs(plain.interpolate(u).grad[:, inside]).max() > 0.1
     with pytest.raises(ValueError, match="has walls"):
         NaturalNeighbourBasis(mesh, integration="gauss")
+
+
+def test_box1_on_walls_and_on_the_hull_at_once(walled):
+    """The Box 1 coordinates (the fallback of Watson's flagged queries) of points on wall
+    faces are the faces' barycentric coordinates, beside points on the hull, which keep
+    the hull's rule."""
+    from skfem_nem.coordinates.lasserre import _coordinates
+    P, F, tri, _ = walled
+    w = np.random.default_rng(8).dirichlet([1, 1, 1], 30)
+    on = np.einsum("fk,fkd->fd", w, P[F[:30]])
+    bary = sp.csr_matrix((w.ravel(), (np.repeat(np.arange(30), 3), F[:30].ravel())),
+                         shape=(30, len(P))).toarray()
+    H = np.asarray(tri.convex_hull)[:5]
+    hull = P[H].mean(axis=1)                      # centroids of hull triangles
+    got = _coordinates(P, np.vstack([on, hull]), False, tri, "raise", 0).toarray()
+    assert np.abs(got[:30] - bary).max() < 1e-12
+    plain = Delaunay3D(P)
+    expect = _coordinates(P, hull, False, plain, "raise", 0).toarray()
+    assert np.abs(got[30:] - expect).max() < 1e-12

@@ -17,7 +17,7 @@ from skfem_nem import delaunay_mesh
 from skfem_nem.coordinates.lasserre import sibson_coordinates_nd
 from skfem_nem.coordinates.watson3d import coordinates_3d
 from skfem_nem.geometry.delaunay3d import Delaunay3D
-from skfem_nem.geometry.walls3d import WALL, MissingFace, wall_regions
+from skfem_nem.geometry.walls3d import WALL, MissingFace, face_keys
 
 A = 0.5
 
@@ -57,16 +57,20 @@ def watson(tri, q):
     return W, np.asarray(W.sum(axis=1)).ravel() > 0.5
 
 
-def test_the_sphere_walls_off_two_regions(walled):
+def test_the_sphere_walls_off_its_inside(walled):
+    """Every wall face joins a tetrahedron inside the sphere to one outside, every other
+    face two on one side; the walls are encoded as ``WALL - t``."""
     P, F, tri, slots = walled
     assert slots.sum() == 2 * len(F)                 # each triangle: a face of two tets
-    label = wall_regions(tri.walled_neighbors)
     inside = np.linalg.norm(P[tri.simplices].mean(axis=1), axis=1) < A
-    assert set(label[inside]) == {label[inside][0]} and set(label[~inside]) == {label[~inside][0]}
-    assert label[inside][0] != label[~inside][0]
+    t, k = np.nonzero(tri.neighbors >= 0)
+    across = inside[t] != inside[tri.neighbors[t, k]]
+    assert np.array_equal(across, slots[t, k])
     t, k = np.nonzero(slots)
     assert (tri.walled_neighbors[t, k] == WALL - tri.neighbors[t, k]).all()
     assert (tri.walled_neighbors[~slots] == tri.neighbors[~slots]).all()
+    with pytest.raises(ValueError, match="walls need at most 2,097,151 nodes"):
+        face_keys(F, 3_000_000)
 
 
 def test_a_missing_face_is_named_and_the_walls_stay():

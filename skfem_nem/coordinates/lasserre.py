@@ -62,7 +62,7 @@ from ..geometry.nodesets import morton_order
 from ..geometry.simplices_nd import FLAT, circumcentre_cache, facet_planes
 from ..geometry.walls3d import WALL
 from .lasserre_query import query_batch, query_batch_serial
-from .watson3d import coordinates_3d
+from .watson3d import coordinates_3d, records_of, rows_3d
 
 __all__ = ["sibson_coordinates_nd"]
 
@@ -249,22 +249,12 @@ def _on_boundary(p, tri, NB, Q, facets):
 
 def _on_wall(p, tri, Q, facets):
     """Coordinates of points on wall faces (:mod:`~skfem_nem.geometry.walls3d`): the face's
-    barycentric coordinates, the limit from either side. ``facets[r] = s * 4 + k``: the face
-    of tetrahedron s opposite slot k."""
-    S = np.asarray(tri.simplices, dtype=np.int64)
-    s, k = facets // 4, facets % 4
-    F = np.stack([S[s, (k + j) % 4] for j in (1, 2, 3)], axis=1)         # (m, 3)
-    A = p[F]                                                             # (m, 3, 3)
-    e1, e2, r = A[:, 1] - A[:, 0], A[:, 2] - A[:, 0], Q - A[:, 0]
-    G = np.stack([np.einsum("md,md->m", e1, e1), np.einsum("md,md->m", e1, e2),
-                  np.einsum("md,md->m", e2, e2)], axis=1)
-    b1, b2 = np.einsum("md,md->m", r, e1), np.einsum("md,md->m", r, e2)
-    det = G[:, 0] * G[:, 2] - G[:, 1] ** 2
-    l1, l2 = (G[:, 2] * b1 - G[:, 1] * b2) / det, (G[:, 0] * b2 - G[:, 1] * b1) / det
-    lam = np.clip(np.c_[1.0 - l1 - l2, l1, l2], 0.0, None)
-    lam /= lam.sum(axis=1, keepdims=True)
-    rows = np.repeat(np.arange(Q.shape[0]), 3)
-    return sp.csr_matrix((lam.ravel(), (rows, F.ravel())), shape=(Q.shape[0], p.shape[0]))
+    barycentric coordinates, the limit from either side, as Watson's rows give them there.
+    ``facets[r] = s * 4 + k``: the face of tetrahedron s opposite slot k."""
+    rec = records_of(tri)
+    ptr, idx, val, _ = rows_3d(rec.R, rec.T, rec.NB, p.shape[0], Q, facets // 4,
+                               facets % 4)
+    return sp.csr_matrix((val, idx, ptr), shape=(Q.shape[0], p.shape[0]))
 
 
 def _linear_on_line(u, t):

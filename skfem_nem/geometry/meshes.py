@@ -28,6 +28,7 @@ from .delaunay_nd import delaunay_of
 from .entities import prime_facets
 from .predicates import orient2d
 from .triangulation import Triangulation, unused_nodes, validate_nodes
+from .walls3d import face_keys
 
 __all__ = ["adopt", "delaunay_mesh", "outside_domain", "tetrahedron_neighbours",
            "triangulation_mesh", "triangulation_of"]
@@ -224,11 +225,10 @@ def _walled_mesh(p, tri, faces):
     slots = tri.wall_off(named)
     mesh = _tet_mesh(p, tri.simplices)
     n = p.shape[0]
-    key = lambda f: (f[:, 0] * n + f[:, 1]) * n + f[:, 2]      # noqa: E731
-    fk = key(np.sort(mesh.facets.T.astype(np.int64), axis=1))
+    fk = face_keys(mesh.facets.T, n)
     order = np.argsort(fk)
-    facets = {name: np.sort(order[np.searchsorted(fk[order], key(np.sort(
-        np.asarray(f, dtype=np.int64).reshape(-1, 3), axis=1)))]) for name, f in named.items()}
+    facets = {name: np.sort(order[np.searchsorted(fk[order], face_keys(
+        np.asarray(f).reshape(-1, 3), n))]) for name, f in named.items()}
     if slots.any():
         mesh = mesh.with_boundaries(facets)
         prime_facets(mesh)

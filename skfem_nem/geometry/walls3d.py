@@ -29,7 +29,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["WALL", "through", "check_faces", "wall_slots", "walled", "wall_regions", "MissingFace"]
+from .entities import MAX_KEYED_NODES
+
+__all__ = ["WALL", "through", "check_faces", "face_keys", "wall_slots", "walled",
+           "MissingFace"]
 
 #: neighbour entries at or below this mark a wall: ``WALL - t`` for the tetrahedron t beyond
 WALL = -2
@@ -53,9 +56,14 @@ def through(nb):
     return WALL - nb if nb <= WALL else nb
 
 
-def _keys(tri_nodes: np.ndarray, n: int) -> np.ndarray:
-    """One int64 key per triangle of (..., 3) node indices, whatever their order."""
-    s = np.sort(tri_nodes, axis=-1).astype(np.int64)
+def face_keys(tri_nodes: np.ndarray, n: int) -> np.ndarray:
+    """One int64 key per triangle of (..., 3) node indices below n, whatever their order;
+    ``ValueError`` past :data:`~.entities.MAX_KEYED_NODES` nodes, where keys would
+    overflow."""
+    if n > MAX_KEYED_NODES:
+        raise ValueError(f"walls need at most {MAX_KEYED_NODES:,} nodes (their triangles' "
+                         f"int64 keys), got {n:,}")
+    s = np.sort(np.asarray(tri_nodes), axis=-1).astype(np.int64)
     return (s[..., 0] * n + s[..., 1]) * n + s[..., 2]
 
 
@@ -84,12 +92,12 @@ def wall_slots(simplices: np.ndarray, n: int, faces: dict) -> np.ndarray:
     checked node triples); :class:`MissingFace` for the first triangle that is no face of
     the tetrahedra."""
     T = np.asarray(simplices, dtype=np.int64)
-    K = _keys(T[:, _FACES], n)                              # (m, 4)
+    K = face_keys(T[:, _FACES], n)                              # (m, 4)
     order = np.argsort(K, axis=None)
     flat = K.ravel()[order]
     slots = np.zeros(T.shape, dtype=bool)
     for name, f in faces.items():
-        want = _keys(f, n)
+        want = face_keys(f, n)
         at = np.minimum(np.searchsorted(flat, want), flat.size - 1)
         found = flat[at] == want
         if not found.all():
@@ -109,35 +117,3 @@ def walled(neighbors: np.ndarray, slots: np.ndarray) -> np.ndarray:
     NB = np.array(neighbors, dtype=np.int64)
     NB[slots] = WALL - NB[slots]
     return NB
-
-
-@njit(cache=True)
-def _flood(NB, label):
-    """Connected regions of tetrahedra through faces that are not walls (or the hull)."""
-    stack = np.empty(NB.shape[0], np.int64)
-    region = 0
-    for seed in range(NB.shape[0]):
-        if label[seed] >= 0:
-            continue
-        label[seed] = region
-        top = 1
-        stack[0] = seed
-        while top:
-            top -= 1
-            t = stack[top]
-            for k in range(4):
-                u = NB[t, k]
-                if u >= 0 and label[u] < 0:
-                    label[u] = region
-                    stack[top] = u
-                    top += 1
-        region += 1
-    return region
-
-
-def wall_regions(walled_neighbors: np.ndarray) -> np.ndarray:
-    """(m,) the region of each tetrahedron: regions are connected through faces that are
-    no walls, numbered in the order of their first tetrahedron."""
-    label = np.full(walled_neighbors.shape[0], -1, np.int64)
-    _flood(np.ascontiguousarray(walled_neighbors, dtype=np.int64), label)
-    return label

@@ -22,7 +22,9 @@ that a point is located wherever it is. Watson's signed decomposition over a con
 region cut at walls keeps its partition of unity and linear precision exactly (each
 tetrahedron's terms satisfy both on their own), and on a wall face its limit from either
 side is the face's barycentric coordinates: the functions are continuous across the wall,
-linear on it, and kink there.
+linear on it, and kink there. Not cut: the rule on the hull (a point on a hull facet takes
+the weights of the facet's plane, which see across the edge where a wall meets the hull;
+docs/stokes_3d.md measures it).
 """
 from __future__ import annotations
 

@@ -66,6 +66,10 @@ from ..parallel.petsc import joined, maximum, ranks_differing, summed, world
 __all__ = ["SinkingPlate", "StepStalled", "run"]
 
 
+# the integration-point fields a step writes anew (new arrays) after its Picard iterations
+STEP_FIELDS = ("stress", "plastic_strain", "log_eta_eff")
+
+
 class StepStalled(RuntimeError):
     """A step that fails (a move the mesh cannot follow, an unconverged iteration) even
     when shortened below the configuration's ``min_dt``: the run stops there, its outputs
@@ -274,7 +278,10 @@ class SinkingPlate:
         material lines goes back to :meth:`step` after ``retries`` halvings (or where the
         next would go below ``min_dt``), anything else stops the run below ``min_dt``
         (:class:`StepStalled`)."""
-        saved = {k: v.copy() for k, v in self.lm.ip_fields.items()}
+        # the fields the step replaces by new arrays before the evolution changes them in
+        # place are kept by reference (a copy of each is whole-mesh memory on every rank);
+        # any other field is copied
+        saved = {k: v if k in STEP_FIELDS else v.copy() for k, v in self.lm.ip_fields.items()}
         attempt = 0
         while True:
             try:

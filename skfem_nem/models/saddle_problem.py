@@ -44,7 +44,8 @@ class SaddlePointProblem:
     # problem); None: all whole
     total: Optional[Callable[[np.ndarray], np.ndarray]] = None
     # A was assembled for this solve alone: a solver may write over its values ("fgmres"
-    # makes its AMG over them, then reads the block through the hierarchy's product)
+    # makes its AMG over them, then reads the block through the hierarchy's product;
+    # "petsc" lets A, B and S go once PETSc holds them)
     owned: bool = False
 
     def whole(self, v: np.ndarray) -> np.ndarray:

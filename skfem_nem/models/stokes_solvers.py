@@ -520,9 +520,9 @@ def solve_petsc(problem: SaddlePointProblem, tol: float, maxiter: int,
     from ..parallel.petsc import world
     pressure = problem.m != 0                       # not the constraint multipliers
 
-    def release():      # a block assembled for this solve alone: PETSc holds it now
+    def release():      # blocks assembled for this solve alone: PETSc holds them now
         if problem.owned:
-            problem.A = None
+            problem.A = problem.B = problem.S = None
     res = solve_saddle_petsc(
         problem.A, problem.B, -problem.S, problem.f, problem.g, -problem.dp, tol, maxiter,
         modes=rigid_modes(problem.ubasis, problem.free),

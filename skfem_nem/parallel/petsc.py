@@ -37,7 +37,7 @@ __all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debia
            "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
            "default_options", "default_split", "split_bounds", "row_range", "ranks_differing",
            "world", "rows_to_petsc", "summed_rows", "summed", "maximum", "joined",
-           "inverse_order", "renumbered",
+           "inverse_order", "renumbered", "first_block_first", "nest_from_rows",
            "owned_elements"]
 
 PETSC_INSTALL_HINT = (
@@ -148,13 +148,63 @@ def rows_to_petsc(block: sp.spmatrix, n: int, comm):
     """This rank's block of rows (``block``, in CSR, all ``n`` columns) of an ``n`` by
     ``n`` matrix as a PETSc AIJ matrix, preallocated exactly from the block's pattern;
     the columns are split like the rows."""
+    k = block.shape[0]
+    return _aij(block, ((k, n), (k, n)), comm)
+
+
+def first_block_first(order: np.ndarray, first: np.ndarray, bounds: list) -> np.ndarray:
+    """``order`` (new ``i`` is old ``order[i]``) with each rank's rows (``bounds``) put
+    first-block first, each block keeping its order: ``first`` marks the old unknowns of
+    the first block. A matrix so numbered is a PETSc nest (:func:`nest_from_rows`)."""
+    order = np.asarray(order)
+    out = np.empty_like(order)
+    for a, b in bounds:
+        mine = order[a:b]
+        lead = first[mine]
+        k = a + int(np.count_nonzero(lead))
+        out[a:k], out[k:b] = mine[lead], mine[~lead]
+    return out
+
+
+def nest_from_rows(rows: sp.csr_matrix, first: np.ndarray, start: int, comm):
+    """This rank's rows ``rows`` (CSR, all columns, from row ``start`` on) of a matrix
+    whose unknowns ``first`` marks as the first block's, as a PETSc nest of four MPIAIJ
+    blocks, and its two row index sets. Each rank's rows must hold the first block's
+    unknowns first (:func:`first_block_first`), so the nest numbers the unknowns as the
+    rows do and vectors split like the rows serve it.
+
+    Why a nest: PCFIELDSPLIT takes a nest's blocks as they are, where it copies them out
+    of one AIJ matrix (the viscous block, most of the entries, twice in memory)."""
+    PETSc = import_petsc()
+    k, n = rows.shape
+    mine = first[start:start + k]
+    nv = int(np.count_nonzero(mine))
+    if not mine[:nv].all():
+        raise ValueError(f"rows {start}..{start + k - 1}: the first block's unknowns must "
+                         f"come first on every rank (first_block_first)")
+    cols = (np.flatnonzero(first), np.flatnonzero(~first))
+    local = ((nv, cols[0].size), (k - nv, cols[1].size))
+    blocks = []
+    for i, part in enumerate((rows[:nv], rows[nv:])):
+        blocks.append([_aij(part[:, c], (local[i], local[j]), comm)
+                       for j, c in enumerate(cols)])
+    del rows
+    K = PETSc.Mat().createNest(blocks, comm=comm)
+    for row in blocks:
+        for b in row:
+            b.destroy()   # (the nest holds them)
+    return K, K.getNestISs()[0]
+
+
+def _aij(block: sp.csr_matrix, size: tuple, comm):
+    """A CSR block of rows as a PETSc AIJ matrix of local and global ``size``
+    ((rows), (columns)), preallocated exactly."""
     PETSc = import_petsc()
     block = sp.csr_matrix(block)
     block.sort_indices()
-    k = block.shape[0]
     csr = (block.indptr.astype(PETSc.IntType), block.indices.astype(PETSc.IntType),
            np.asarray(block.data, dtype=PETSc.ScalarType))
-    M = PETSc.Mat().createAIJ(size=((k, n), (k, n)), csr=csr, comm=comm)
+    M = PETSc.Mat().createAIJ(size=size, csr=csr, comm=comm)
     M.assemble()
     return M
 

@@ -31,9 +31,9 @@ from typing import Callable, NamedTuple, Optional
 import numpy as np
 import scipy.sparse as sp
 
-from .petsc import (check_replicated, csr_to_petsc, default_options, destroying, gather,
-                    import_petsc, inverse_order, renumbered, row_range, rows_to_petsc,
-                    split_bounds, summed_rows, vector)
+from .petsc import (check_replicated, csr_to_petsc, default_options, destroying,
+                    first_block_first, gather, import_petsc, inverse_order, nest_from_rows,
+                    renumbered, rows_to_petsc, split_bounds, summed_rows, vector)
 from .petsc import summed as summed_vector
 from .solver import converged_or_raise, null_space
 
@@ -110,28 +110,32 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     del A, B, C
     if release is not None:
         release()
+    bounds = split_bounds(n, comm.getSize())
+    nested = _nested(prefix)
+    if nested:
+        perm = first_block_first(perm, np.arange(n) < n1, bounds)
     K = renumbered(K, perm, inverse_order(perm))      # (one copy of K held at a time)
     if summed:
         f, g, schur_diagonal = (summed_vector(v, comm) for v in (f, g, schur_diagonal))
         rows = summed_rows(K, comm)
-        del K
-        Kmat = rows_to_petsc(rows, n, comm)
-        del rows
     else:
         check_replicated(K, comm, "saddle-point matrix")
-        Kmat = csr_to_petsc(K, comm)
-        del K  # (PETSc holds the rows now)
+        rows = K[slice(*bounds[comm.getRank()])]
+    del K
     velocity = perm < n1
-    r0, r1 = row_range(n, comm)
-    with destroying(Kmat, vector(np.concatenate([f, g])[perm], comm)) as objs:
-        Kmat, rhs = objs
+    r0, r1 = bounds[comm.getRank()]
+    if nested:
+        Kmat, sets = nest_from_rows(rows, velocity, r0, comm)
+    else:
+        Kmat, sets = rows_to_petsc(rows, n, comm), _index_sets(comm, velocity, r0, r1)
+    del rows  # (PETSc holds the rows now)
+    with destroying(Kmat, vector(np.concatenate([f, g])[perm], comm), *sets) as objs:
+        Kmat, rhs = objs[:2]
         x = rhs.duplicate()
         objs.append(x)
-        ksp, is0 = _fieldsplit_ksp(comm, Kmat, objs, prefix,
-                                   r0 + np.flatnonzero(velocity[r0:r1]),
-                                   r0 + np.flatnonzero(~velocity[r0:r1]))
-        _attach_spaces(Kmat, ksp.getPC(), is0, objs, perm, velocity, schur_diagonal, modes,
-                       pressure_null, comm.getSize())
+        ksp = _fieldsplit_ksp(comm, Kmat, objs, prefix, sets)
+        _attach_spaces(Kmat, ksp.getPC(), sets[0], objs, perm, velocity, schur_diagonal,
+                       modes, pressure_null, comm.getSize())
         with default_options(prefix, saddle_defaults(tol, maxiter)):
             ksp.setFromOptions()
             ksp.solve(rhs, x)
@@ -150,23 +154,36 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     return SaddleResult(whole[:n1], whole[n1:], its, reason, comm.getSize(), pc0, residual)
 
 
-def _fieldsplit_ksp(comm, Kmat, objs: list, prefix: str, rows0: np.ndarray,
-                    rows1: np.ndarray):
-    """The KSP with the Schur fieldsplit on the owned rows of both blocks, and the index
-    set of the first block (both kept in ``objs`` for destruction)."""
+def _nested(prefix: str) -> bool:
+    """Whether the preconditioner is a fieldsplit (the default), whose blocks then come
+    to PETSc as a nest (:func:`~skfem_nem.parallel.petsc.nest_from_rows`: no copies of
+    them); another (``-stokes_pc_type lu``) takes one AIJ matrix."""
     PETSc = import_petsc()
-    is0 = PETSc.IS().createGeneral(rows0.astype(PETSc.IntType), comm=comm)
-    is1 = PETSc.IS().createGeneral(rows1.astype(PETSc.IntType), comm=comm)
+    return PETSc.Options().getString(prefix + "pc_type", "fieldsplit") == "fieldsplit"
+
+
+def _index_sets(comm, velocity: np.ndarray, r0: int, r1: int) -> list:
+    """The index sets of this rank's rows ``[r0, r1)`` of both blocks."""
+    PETSc = import_petsc()
+    return [PETSc.IS().createGeneral((r0 + np.flatnonzero(m)).astype(PETSc.IntType),
+                                     comm=comm)
+            for m in (velocity[r0:r1], ~velocity[r0:r1])]
+
+
+def _fieldsplit_ksp(comm, Kmat, objs: list, prefix: str, sets):
+    """The KSP with the Schur fieldsplit on the two blocks' index sets ``sets`` (kept
+    in ``objs`` for destruction)."""
+    PETSc = import_petsc()
     ksp = PETSc.KSP().create(comm=comm)
-    objs += [is0, is1, ksp]
+    objs.append(ksp)
     ksp.setOptionsPrefix(prefix)
     ksp.setOperators(Kmat)
     pc = ksp.getPC()
     pc.setType(PETSc.PC.Type.FIELDSPLIT)
-    pc.setFieldSplitIS(("0", is0), ("1", is1))
+    pc.setFieldSplitIS(("0", sets[0]), ("1", sets[1]))
     pc.setFieldSplitType(PETSc.PC.CompositeType.SCHUR)
     pc.setFieldSplitSchurFactType(PETSc.PC.SchurFactType.UPPER)
-    return ksp, is0
+    return ksp
 
 
 def _attach_spaces(Kmat, pc, is0, objs: list, perm: np.ndarray, velocity: np.ndarray,

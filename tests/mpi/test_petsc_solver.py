@@ -9,8 +9,9 @@ from skfem.helpers import ddot, dot, grad, sym_grad, trace
 from skfem_nem import NaturalNeighbourBasis, delaunay_mesh
 from skfem_nem.geometry.nodesets import box_nodes
 from skfem_nem.parallel import solver_petsc
-from skfem_nem.parallel.petsc import (check_replicated, csr_to_petsc, gather, row_range,
-                                      split_bounds, summed_rows, vector)
+from skfem_nem.parallel.petsc import (check_replicated, csr_to_petsc, first_block_first,
+                                      gather, nest_from_rows, row_range, split_bounds,
+                                      summed_rows, vector)
 from agreement import rel
 
 # agreement asked of the PETSc solution with scipy's direct one (relative, 2-norm),
@@ -150,3 +151,43 @@ def test_ranks_holding_different_matrices_are_caught(comm, agree):
     A = sp.eye(4).tocsr() * (1.0 + (comm.getRank() == 1))   # rank 1 alone differs
     with pytest.raises(ValueError, match=r"differs between rank 0 and rank\(s\) \[1\]"):
         check_replicated(A, comm)
+
+
+@pytest.mark.parametrize("uneven", [False, True])
+def test_a_nest_from_rows_is_the_matrix(PETSc, comm, agree, uneven):
+    """A matrix renumbered first-block first on every rank (first_block_first; with
+    ``uneven`` one rank holds none of the first block) is, as a nest of four blocks, the
+    same operator as the whole matrix: its products and its blocks are scipy's."""
+    import scipy.sparse as sp
+    rank, size = comm.getRank(), comm.getSize()
+    n, n1 = 40, 26
+    K = sp.random(n, n, density=0.2, format="csr", random_state=3) + sp.eye(n)
+    order = np.random.default_rng(4).permutation(n)
+    if uneven and size > 1:   # rank 0's rows all of the second block
+        order = np.r_[np.arange(n1, n), np.arange(n1)]
+    bounds = split_bounds(n, size)
+    order = first_block_first(order, np.arange(n) < n1, bounds)
+    first = order < n1
+    assert all(not (first[b:e][:-1] < first[b:e][1:]).any() for b, e in bounds)
+    Kp = K[order][:, order].tocsr()
+    a, b = bounds[rank]
+    M, sets = nest_from_rows(Kp[a:b], first, a, comm)
+    x = np.random.default_rng(5).standard_normal(n)
+    xv, yv = vector(x, comm), vector(np.zeros(n), comm)
+    try:
+        M.mult(xv, yv)
+        y = gather(yv)
+        A00 = M.getNestSubMatrix(0, 0)
+        ia = sets[0].getIndices()
+        local = A00.getValuesCSR()
+        rows00 = sp.csr_matrix((local[2], local[1], local[0]),
+                               shape=(ia.size, int(first.sum())))
+        want00 = Kp[ia][:, np.flatnonzero(first)]
+    finally:
+        for obj in (xv, yv, M, *sets):
+            obj.destroy()
+    assert max(agree(rel(y, Kp @ x))) < 1e-14
+    assert max(agree(abs(rows00 - want00).max() if want00.nnz else 0.0)) < 1e-15
+    # every rank holds at least three rows: alternating blocks are refused on each
+    with pytest.raises(ValueError, match="first block's unknowns must come first"):
+        nest_from_rows(Kp[a:b], np.arange(n) % 2 == 1, a, comm)

@@ -179,3 +179,37 @@ def test_divided_spaces_must_partition_the_mesh(square, comm):
         solve_stokes(half, 1.0, solver="petsc")
     with pytest.raises(ValueError, match="solve them with solver='petsc'"):
         solve_stokes(half, 1.0, solver="fgmres")
+
+
+def test_the_fieldsplit_takes_the_nest_blocks_as_they_are(square, PETSc, agree, monkeypatch):
+    """The default fieldsplit solves on a nest whose viscous block is the very matrix
+    GAMG works on (no copy of it); ``-stokes_pc_type lu`` (MUMPS) takes one AIJ matrix
+    and gives the same solution."""
+    import skfem_nem.parallel.saddle as saddle
+    spaces, _ = square
+    ex = SolCx(1.0, 1e6)
+    seen = []
+    checked = saddle.converged_or_raise
+
+    def spy(ksp, what):     # (called after the solve, before the objects are destroyed)
+        K = ksp.getOperators()[0]
+        if K.getType() == "nest":
+            sub = ksp.getPC().getFieldSplitSubKSP()[0].getOperators()[0]
+            seen.append(("nest", sub.handle == K.getNestSubMatrix(0, 0).handle))
+        else:
+            seen.append((K.getType(), ksp.getPC().getType()))
+        return checked(ksp, what)
+    monkeypatch.setattr(saddle, "converged_or_raise", spy)
+    s = solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL)
+    opts = PETSc.Options()
+    opts.setValue("stokes_pc_type", "lu")
+    opts.setValue("stokes_pc_factor_mat_solver_type", "mumps")
+    try:
+        lu = solve_stokes(spaces, ex.viscosity, ex.force, solver="petsc", tol=PETSC_TOL)
+    finally:
+        opts.delValue("stokes_pc_type")
+        opts.delValue("stokes_pc_factor_mat_solver_type")
+    got = agree((seen, rel(lu.u, s.u), lu.iterations))
+    for kinds, du, its in got:
+        assert kinds[0] == ("nest", True) and kinds[1][1] == "lu", kinds
+        assert kinds[1][0] in ("seqaij", "mpiaij") and du < AGREEMENT and its < 5, (du, its)

@@ -103,7 +103,9 @@ def plate_step(nodes: int, out: str, comm):
 def worker(name: str, nodes: int, divided: bool, repeat: int, out: str) -> None:
     """Runs on every rank: times spaces, assembly and solve; rank 0 writes the JSON
     summary and the solution to ``out``."""
+    from skfem_nem.parallel.heap import map_large_blocks
     from skfem_nem.parallel.petsc import import_petsc
+    map_large_blocks()   # (as the sinking plate over MPI does; on every rank count)
     comm = import_petsc().COMM_WORLD.tompi4py()
     best = sol = None
     for _ in range(repeat):

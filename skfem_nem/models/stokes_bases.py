@@ -55,7 +55,6 @@ class StokesSpaces:
     method: str
     ubasis: object
     pbasis: Basis
-    p0basis: Basis
     # the condensed bubbles of method "nem" (models.bubbles), else None
     bubbles: Optional[Bubbles] = None
     # the triangles these bases integrate over (None: all), see restricted()
@@ -80,6 +79,21 @@ class StokesSpaces:
     def stabilised(self) -> bool:
         """True where the pressure projection stabilisation is used."""
         return self.method == "nem-projection"
+
+    @property
+    def p0basis(self) -> Basis:
+        """The piecewise-constant basis on the pressure's quadrature (the projection
+        stabilisation's): built on first use, as only ``"nem-projection"`` reads it."""
+        p0 = self.__dict__.get("_p0basis")
+        if p0 is None:
+            on = {} if self.elements is None else {"elements": self.elements}
+            tet = isinstance(self.mesh, MeshTet)
+            p0 = Basis(self.mesh, _ELEMENTS["tet" if tet else "tri"]["p0"](),
+                       quadrature=self.pbasis.quadrature, **on)
+            if tet:
+                _zero_flat_gradients(p0)
+            self.__dict__["_p0basis"] = p0
+        return p0
 
     @property
     def quadrature_points(self) -> np.ndarray:
@@ -108,7 +122,7 @@ class StokesSpaces:
             return out
 
         return StokesSpaces(self.mesh, self.method, sub(self.ubasis), sub(self.pbasis),
-                            sub(self.p0basis), sub(self.bubbles), elements)
+                            sub(self.bubbles), elements)
 
 
 def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optional[int] = None,
@@ -183,11 +197,10 @@ def stokes_spaces(mesh: MeshTri | MeshTet, method: str = "nem", npoints: Optiona
         ub = Basis(mesh, ElementVector(el["p2" if method == "taylor-hood" else "mini"]()),
                    quadrature=quad, **on)
     pb = Basis(mesh, el["p1"](), quadrature=quad, **on)
-    p0 = Basis(mesh, el["p0"](), quadrature=quad, **on)
     if tet:
-        for b in (ub, pb, p0, None if bb is None else bb.basis):
+        for b in (ub, pb, None if bb is None else bb.basis):
             _zero_flat_gradients(b)
-    return StokesSpaces(mesh, method, ub, pb, p0, bb, elements)
+    return StokesSpaces(mesh, method, ub, pb, bb, elements)
 
 
 def _checked_method(mesh, method: str, npoints) -> str:

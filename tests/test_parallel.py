@@ -239,21 +239,23 @@ def test_the_default_run_leaves_the_mpi_tests_to_the_mpi_step():
                          capture_output=True, text=True, cwd=ROOT).stdout
     assert "tests/mpi" not in out and "test_parallel.py" in out
     assert sorted(p.name for p in (ROOT / "tests" / "mpi").glob("test_*.py")) == \
-        ["test_petsc_failures.py", "test_petsc_plate.py", "test_petsc_solver.py",
-         "test_petsc_stokes.py", "test_petsc_stokes_3d.py"]
+        ["test_petsc_failures.py", "test_petsc_plate.py", "test_petsc_plate_3d.py",
+         "test_petsc_solver.py", "test_petsc_stokes.py", "test_petsc_stokes_3d.py"]
     ci = (ROOT / ".ci" / "run").read_text()
     for ranks in (1, 2, 4):
         assert f"mpiexec --allow-run-as-root -n {ranks} python -m pytest" in ci
     assert "tests/mpi" in ci
 
 
-def test_the_sinking_plate_without_petsc_is_a_user_error(no_petsc, tmp_path, capsys):
-    """``--solver petsc`` where petsc4py is missing: exit status 2 and one line naming
-    the installation route, no traceback, nothing written."""
+@pytest.mark.parametrize("dim", ["2", "3"])
+def test_the_sinking_plate_without_petsc_is_a_user_error(no_petsc, tmp_path, capsys, dim):
+    """``--solver petsc`` where petsc4py is missing, in 2D and in 3D: exit status 2 and
+    one line naming the installation route, no traceback, nothing written."""
     from skfem_nem.apps.cli import main
     out = tmp_path / "run"
     with pytest.raises(SystemExit) as stop:
-        main(["sinking-plate", "--solver", "petsc", "--nodes", "300", "-o", str(out)])
+        main(["sinking-plate", "--dim", dim, "--solver", "petsc", "--nodes", "300", "-o",
+              str(out)])
     err = capsys.readouterr().err.strip().splitlines()
     assert stop.value.code == 2 and len(err) == 1, err
     assert err[0].startswith("skfem-nem: sinking-plate: ") and "apt-get install" in err[0]

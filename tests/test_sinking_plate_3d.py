@@ -261,9 +261,9 @@ def test_a_step_builds_its_spaces_with_the_last_steps_gone(tmp_path, monkeypatch
     seen, build, solve = [], app.stokes_spaces, app.vep_step
     kept = {}
 
-    def spy_build(mesh):
+    def spy_build(mesh, **kw):
         seen.append(all(r() is None for r in kept.values()))
-        return build(mesh)
+        return build(mesh, **kw)
 
     def spy_solve(spaces, *a, **kw):
         out = solve(spaces, *a, **kw)
@@ -439,7 +439,7 @@ def test_level_surface_of_a_linear_field_is_its_plane():
     (["--dim", "3", "--split-edges", "1"], "split_edges must be a number above 1 or inf"),
     (["--depth", "3"], "--depth is not a parameter of the 2D plate"),
     (["--dim", "3", "--plate-y", "1.9"], "plate_y / plate_width"),
-    (["--dim", "3", "--solver", "petsc"], "solver must be one of"),
+    (["--dim", "3", "--solver", "pets"], "solver must be one of"),
     (["--dim", "3", "--first-solve-tol", "1"],
      "first_solve_tol must be 0 (solver_tol's) or a number in (0, 1), got 1"),
 ])

@@ -140,8 +140,8 @@ class Plate3DConfig:
                 raise ValueError(f"{k} must be a positive integer, got {v!r}")
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
-        if self.solver not in SOLVERS or self.solver == "petsc":
-            choices = ", ".join(repr(s) for s in SOLVERS if s != "petsc")
+        if self.solver not in SOLVERS:
+            choices = ", ".join(repr(s) for s in SOLVERS)
             raise ValueError(f"solver must be one of {choices} in 3D, got {self.solver!r}")
         if not 0 < self.interface_z < self.height:
             raise ValueError(f"interface_z must lie inside the box (0, {self.height}), got "

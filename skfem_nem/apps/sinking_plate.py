@@ -61,7 +61,8 @@ from ..models.stokes import outline_flux, stokes_spaces
 from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
 from ..parallel.failures import FailureChannel
 from ..parallel.heap import map_large_blocks
-from ..parallel.petsc import joined, maximum, ranks_differing, summed, world
+from ..parallel.petsc import ranks_differing, world
+from .plate_parts import over_parts, part_rows, whole_rows
 
 # (PlateConfig, load_config and stored_config are re-exported from plate_config)
 __all__ = ["SinkingPlate", "StepStalled", "run"]
@@ -327,25 +328,25 @@ class SinkingPlate:
         mine, nt = spaces.elements, lm.triangles.shape[0]
         t_basis = _time.perf_counter() - t0
         mat, force, plate = self.materials(spaces)
-        tau_old = from_ip_field(_rows(lm.ip_fields["stress"], mine))
-        ps_old = _rows(lm.ip_fields["plastic_strain"], mine)
+        tau_old = from_ip_field(part_rows(lm.ip_fields["stress"], mine))
+        ps_old = part_rows(lm.ip_fields["plastic_strain"], mine)
         # the plate is incompressible as a whole: zero net flux of the nodal
         # velocities through its outline (the polygon's area is kept)
         # Picard iterations start from the effective viscosity of the previous
         # step, carried (as its logarithm) by the mesh like the stress
-        guess = _rows(lm.ip_fields.get("log_eta_eff"), mine)
+        guess = part_rows(lm.ip_fields.get("log_eta_eff"), mine)
         # the step's Picard iterations share a cache (what it kept is counted below)
         cache = StokesCache() if c.solver in CACHED_SOLVERS else None
         r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
                      tol=c.picard_tol, solver=c.solver,
                      constraints=self._area_constraint(spaces, dt),
                      eta_guess=None if guess is None else np.exp(guess), cache=cache)
-        lm.ip_fields["log_eta_eff"] = _whole(np.log(r.eta_eff), mine, nt)
-        lm.ip_fields["stress"] = _whole(to_ip_field(r.tau), mine, nt)
-        lm.ip_fields["plastic_strain"] = _whole(np.ascontiguousarray(r.plastic_strain),
+        lm.ip_fields["log_eta_eff"] = whole_rows(np.log(r.eta_eff), mine, nt)
+        lm.ip_fields["stress"] = whole_rows(to_ip_field(r.tau), mine, nt)
+        lm.ip_fields["plastic_strain"] = whole_rows(np.ascontiguousarray(r.plastic_strain),
                                                 mine, nt)
-        yielded = int(_total(np.count_nonzero(r.yielded), mine))
-        plate_stress = _total(float(second_invariant(r.tau)[plate].max()) if plate.any()
+        yielded = int(over_parts(np.count_nonzero(r.yielded), mine))
+        plate_stress = over_parts(float(second_invariant(r.tau)[plate].max()) if plate.any()
                               else 0.0, mine, largest=True)
         v = hold_off_walls(lm, r.solution.velocity_at_nodes(), c)
         t_solve = _time.perf_counter() - t0
@@ -596,26 +597,6 @@ class SinkingPlate:
         (:func:`~skfem_nem.apps.plate_figures.plate_figures`; rank 0 only); returns
         their paths."""
         return plate_figures(self) if self.root else []
-
-
-def _rows(field: Optional[np.ndarray], cells: Optional[np.ndarray]):
-    """An integration-point field (triangles first) at the triangles ``cells`` (this
-    rank's part; None: all of them)."""
-    return field if field is None or cells is None else field[cells]
-
-
-def _whole(part: np.ndarray, cells: Optional[np.ndarray], n: int) -> np.ndarray:
-    """The field of all ``n`` triangles from every rank's ``part`` on its ``cells``
-    (itself where ``cells`` is None: one process holds all)."""
-    return part if cells is None else joined(part, cells, n)
-
-
-def _total(value: float, cells: Optional[np.ndarray], largest: bool = False) -> float:
-    """The sum (or the largest) of ``value`` over the ranks holding parts of ``cells``
-    (itself where ``cells`` is None)."""
-    if cells is None:
-        return value
-    return float((maximum if largest else summed)(np.array([value], dtype=float))[0])
 
 
 def run(cfg: PlateConfig, out="out/sinking-plate", restart: bool = False,

@@ -41,12 +41,16 @@ from ..geometry.nodesets3d import box_nodes_3d
 from ..models.rheology import PicardNotConverged, second_invariant, vep_step
 from ..models.stokes import stokes_spaces
 from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
+from ..parallel.failures import FailureChannel
+from ..parallel.heap import map_large_blocks
+from ..parallel.petsc import ranks_differing, world
 from .output import (CSVLog, PVDWriter, atomic_write_text, next_output_time,
                      progress_bar, write_vtu)
 from .plate3d_config import Plate3DConfig, plate_box
 from .plate3d_figures import plate3d_figures
 from .plate3d_materials import plate_materials
 from .plate_config import stored_config
+from .plate_parts import over_parts, part_rows, whole_rows
 
 __all__ = ["SinkingPlate3D", "plate_box"]
 
@@ -119,11 +123,17 @@ class SinkingPlate3D:
     """A 3D sinking-plate run (see the module docstring); ``run()`` advances it."""
 
     dim = 3
-    root = True
 
     def __init__(self, cfg: Plate3DConfig, out, _state=None):
         cfg.validate()
         self.cfg = cfg
+        # over MPI (solver "petsc") every rank computes the whole run on its part of the
+        # tetrahedra and rank 0 writes, as in 2D (apps.plate_parts); a failure of one rank
+        # ends every rank (parallel.failures); freed arrays go back at once (parallel.heap)
+        self.rank, self.ranks = world() if cfg.solver == "petsc" else (0, 1)
+        self.failures = FailureChannel() if self.ranks > 1 else None
+        if cfg.solver == "petsc":
+            map_large_blocks()
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         self._last = None         # LastSolve of the last step
@@ -146,6 +156,20 @@ class SinkingPlate3D:
     @property
     def cells(self) -> str:
         return f"{self.lm.mesh.nelements} tetrahedra"
+
+    @property
+    def root(self) -> bool:
+        """True on the rank that writes outputs, checkpoints and figures (rank 0)."""
+        return self.rank == 0
+
+    def check_replicated(self) -> None:
+        """``RuntimeError`` if the ranks' meshes differ (nodes, tetrahedra or clock):
+        the replicated evolution must stay the same on every rank."""
+        lm = self.lm
+        differ = ranks_differing((lm.nodes, lm.mesh.t, np.array([lm.time])))
+        if differ:
+            raise RuntimeError(f"the mesh of rank(s) {differ} differs from rank 0's after "
+                               f"step {lm.step}: the evolution is no longer replicated")
 
     def plate_volume(self) -> float:
         """The volume of the plate: the integral of the nodes' plate indicator
@@ -213,7 +237,8 @@ class SinkingPlate3D:
         again at a shorter dt reuses them)."""
         if self._spaces_of is None or self._spaces_of[0] is not self.lm.mesh:
             self._release()
-            self._spaces_of = (self.lm.mesh, stokes_spaces(self.lm.mesh))
+            self._spaces_of = (self.lm.mesh, stokes_spaces(
+                self.lm.mesh, elements="owned" if self.ranks > 1 else None))
         return self._spaces_of[1]
 
     def _release(self) -> None:
@@ -240,11 +265,11 @@ class SinkingPlate3D:
         r, s, v, stable = self._solve(spaces, dt, self._guesses(spaces),
                                       self._first_iterate(dt), tol)
         if c.midpoint:
-            first = (r.solution.u, r.eta_eff)
+            first = (r.solution.u, r.eta_eff, spaces.elements)
             del r, s, spaces        # (the first spaces go before the second are built)
             return self._midpoint_step(dt, first, v, stable, (t_basis, t0))
         t_solve = _time.perf_counter() - t0
-        self._keep_stress(r)
+        self._keep_stress(r, spaces.elements)
         P, u = spaces.ubasis, r.solution.u
 
         def velocity(x):
@@ -253,7 +278,8 @@ class SinkingPlate3D:
         report = lm.advance(velocity, dt, tol=1e-8, inject=self._split())
         self._last = LastSolve.of(r.solution)
         self.dt_next = stable
-        return self._row(report, r, v, s, stable, seconds=(t_basis, t_solve, t0))
+        return self._row(report, r, v, s, stable, seconds=(t_basis, t_solve, t0),
+                         cells=spaces.elements)
 
     def _midpoint_step(self, dt: float, first, v, stable, times) -> dict:
         """The rest of a midpoint try: the nodes moved half a step with the first solve's
@@ -264,15 +290,16 @@ class SinkingPlate3D:
         start = lm.snapshot()
         try:
             # the first solve's viscosity goes along (the second solve's start)
-            u1, eta1 = first
-            lm.ip_fields = dict(lm.ip_fields, log_eta_eff=from_quadrature(np.log(eta1)))
+            u1, eta1, cells1 = first
+            lm.ip_fields = dict(lm.ip_fields, log_eta_eff=whole_rows(
+                from_quadrature(np.log(eta1)), cells1, lm.mesh.nelements))
             half = lm.advance(lambda x: v, 0.5 * dt, tol=1e-8)
             spaces = self._spaces()     # (the first spaces go first: 1 GB at 10,000 nodes)
-            guesses = {"u_guess": u1,
-                       "eta_guess": np.exp(to_quadrature(lm.ip_fields["log_eta_eff"]))}
+            guesses = {"u_guess": u1, "eta_guess": np.exp(to_quadrature(
+                part_rows(lm.ip_fields["log_eta_eff"], spaces.elements)))}
             r2, s2, v2, stable2 = self._solve(spaces, dt, guesses, None, self.cfg.picard_tol)
             t_solve = _time.perf_counter() - t0
-            self._keep_stress(r2)
+            self._keep_stress(r2, spaces.elements)
             w = 2.0 * v2 - v      # from the half-way nodes to x0 + dt v2
             report = lm.advance(lambda x: w, 0.5 * dt, tol=1e-8, inject=self._split())
         except BaseException:
@@ -284,17 +311,18 @@ class SinkingPlate3D:
         self._last = LastSolve.of(r2.solution)
         self.dt_next = min(stable, stable2)
         return self._row(report, r2, v2, s2, min(stable, stable2),
-                         seconds=(t_basis, t_solve, t0))
+                         seconds=(t_basis, t_solve, t0), cells=spaces.elements)
 
     def _solve(self, spaces, dt: float, guesses: dict, on_iterate, tol: float):
         """``vep_step`` on ``spaces`` with the mesh's stress history to the Picard tolerance
         ``tol``: ``(result, plate indicator, velocity at the nodes, its stable dt)``;
         :class:`_TooLong` if that dt is more than :data:`STABLE_SLACK` times shorter than
         ``dt``."""
-        c, f = self.cfg, self.lm.ip_fields
+        c, f, mine = self.cfg, self.lm.ip_fields, spaces.elements
         mat, force, s = self.materials(spaces)
-        r = vep_step(spaces, mat, to_quadrature(f["stress"]), dt, f=force,
-                     plastic_strain=to_quadrature(f["plastic_strain"]), tol=tol,
+        r = vep_step(spaces, mat, to_quadrature(part_rows(f["stress"], mine)), dt, f=force,
+                     plastic_strain=to_quadrature(part_rows(f["plastic_strain"], mine)),
+                     tol=tol,
                      solver=c.solver, cache=self._cache, linear_tol=c.solver_tol or None,
                      first_tol=c.first_solve_tol or None,
                      on_iterate=on_iterate, **guesses)
@@ -304,11 +332,14 @@ class SinkingPlate3D:
             raise _TooLong(stable)
         return r, s, v, stable
 
-    def _keep_stress(self, r) -> None:
-        """The step's new stress history on the mesh (the move carries it on)."""
-        self.lm.ip_fields = {"stress": from_quadrature(r.tau),
-                             "plastic_strain": from_quadrature(r.plastic_strain),
-                             "log_eta_eff": from_quadrature(np.log(r.eta_eff))}
+    def _keep_stress(self, r, cells) -> None:
+        """The step's new stress history on the mesh (the move carries it on), joined
+        from the ranks' parts ``cells`` over MPI."""
+        nt = self.lm.mesh.nelements
+        self.lm.ip_fields = {
+            k: whole_rows(from_quadrature(q), cells, nt)
+            for k, q in (("stress", r.tau), ("plastic_strain", r.plastic_strain),
+                         ("log_eta_eff", np.log(r.eta_eff)))}
 
     def _split(self):
         """``advance``'s ``inject``: the edges to split after a step (None: none)."""
@@ -332,13 +363,14 @@ class SinkingPlate3D:
         by the mesh) as the Picard iterations' start."""
         out = {}
         if "log_eta_eff" in self.lm.ip_fields:
-            out["eta_guess"] = np.exp(to_quadrature(self.lm.ip_fields["log_eta_eff"]))
+            out["eta_guess"] = np.exp(to_quadrature(part_rows(self.lm.ip_fields["log_eta_eff"],
+                                                              spaces.elements)))
         sol = self.solution()
         if sol is not None and sol.u.shape == (spaces.ubasis.N,):
             out["u_guess"] = sol.u
         return out
 
-    def _row(self, report, r, v, s, stable, seconds) -> dict:
+    def _row(self, report, r, v, s, stable, seconds, cells=None) -> dict:
         f = self.lm.node_fields
         plate = f["plate"] > 0.5
         z = self.lm.nodes[plate, 2]
@@ -353,9 +385,10 @@ class SinkingPlate3D:
                 "plate_volume_change": self.plate_volume() / self.volume0 - 1.0,
                 "max_speed": float(np.linalg.norm(v, axis=1).max()),
                 "plate_velocity": float(v[moving, 2].mean()),
-                "max_plastic_strain": float(r.plastic_strain.max()),
-                "yielded_points": int(r.yielded.sum()),
-                "max_plate_stress": float(tauII[in_plate].max()) if in_plate.any() else 0.0,
+                "max_plastic_strain": over_parts(float(r.plastic_strain.max()), cells, True),
+                "yielded_points": int(over_parts(int(r.yielded.sum()), cells)),
+                "max_plate_stress": over_parts(float(tauII[in_plate].max()) if in_plate.any()
+                                               else 0.0, cells, True),
                 "picard_iterations": r.iterations,
                 "solver_iterations": int(r.solution.iterations),
                 "move_iterations": report["iterations"], "flips": report["flips"],
@@ -371,7 +404,10 @@ class SinkingPlate3D:
     def write_output(self) -> str:
         """``plate_NNNNN.vtu`` of the current state (added to ``plate.pvd``): velocity
         and pressure of the last step (none before the first), the nodes' material and
-        plastic strain, the tetrahedra's stress invariant and plastic strain."""
+        plastic strain, the tetrahedra's stress invariant and plastic strain (rank 0 only;
+        other ranks return ``""``)."""
+        if not self.root:
+            return ""
         lm, f = self.lm, self.lm.node_fields
         name = f"plate_{self.outputs:05d}.vtu"
         pd = {"material": self._material(), "initial_height": f["start"][:, 2],
@@ -404,7 +440,9 @@ class SinkingPlate3D:
 
     def checkpoint(self) -> None:
         """``checkpoint.npz`` (the whole evolving mesh, its stress history included:
-        :meth:`~skfem_nem.LagrangianMesh3D.save`) and ``checkpoint.json``."""
+        :meth:`~skfem_nem.LagrangianMesh3D.save`) and ``checkpoint.json`` (rank 0 only)."""
+        if not self.root:
+            return
         self.lm.save(self.out / "checkpoint.npz")
         meta = {"dim": 3, "config": asdict(self.cfg), "next_output": self.next_output,
                 "dt_next": self.dt_next, "outputs": self.outputs, "volume0": self.volume0}
@@ -427,14 +465,14 @@ class SinkingPlate3D:
             raise ValueError(f"max_steps must be a non-negative integer, got {max_steps!r}")
         c, lm = self.cfg, self.lm
         keep = lm.time if lm.step else None
-        log = CSVLog(self.out / "diagnostics.csv", keep_until=keep)
-        self._pvd = PVDWriter(self.out / "plate.pvd", keep_until=keep)
+        log = CSVLog(self.out / "diagnostics.csv", keep_until=keep) if self.root else None
+        self._pvd = PVDWriter(self.out / "plate.pvd", keep_until=keep) if self.root else None
         if lm.step == 0:
             self.write_output()
             self.next_output = c.output_interval
             self.checkpoint()
         bar = None
-        if progress:
+        if progress and self.root:
             bar = progress_bar(c.end_time, lm.time, "sinking plate 3D")
         steps = 0
         try:
@@ -442,7 +480,10 @@ class SinkingPlate3D:
                 if max_steps is not None and steps >= max_steps:
                     break
                 row = self.step(self._next_dt())
-                log.append(row)
+                if self.ranks > 1:
+                    self.check_replicated()
+                if log is not None:
+                    log.append(row)
                 steps += 1
                 end = lm.time >= c.end_time * (1 - 1e-12)
                 if lm.time >= self.next_output * (1 - 1e-12) or end:
@@ -470,8 +511,8 @@ class SinkingPlate3D:
 
     def figures(self) -> list:
         """slices.png, plastic_strain.png and diagnostics.png in the output folder;
-        returns their paths."""
-        return plate3d_figures(self)
+        returns their paths (rank 0 only)."""
+        return plate3d_figures(self) if self.root else []
 
 
 def initial_ip_fields(ntetrahedra: int) -> dict:

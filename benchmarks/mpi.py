@@ -9,7 +9,9 @@ with ``solve_stokes(..., solver="petsc")`` under ``mpiexec -n R`` for each rank 
 ``R`` and node count; or (``--flow plate``) the first step of the sinking plate
 (``skfem-nem sinking-plate --solver petsc --nodes N`` for each size N, random nodes drawn
 before the outline's and thinning: the mesh has about 0.9 N nodes; its
-Picard iterations, the fields joined, the node motion and flips on every rank). Each run
+Picard iterations, the fields joined, the node motion and flips on every rank); or
+(``--flow plate3d``) the first step of the 3D plate (``skfem-nem sinking-plate --dim 3
+--solver petsc --nodes N``'s configuration: its midpoint step, two Picard solves). Each run
 is a fresh ``mpiexec`` of this script (``--worker``), so its peak memory is its own.
 Reported, the slowest rank's seconds (best of ``--repeat``):
 
@@ -100,6 +102,32 @@ def plate_step(nodes: int, out: str, comm):
     return times, sim.solution, n
 
 
+def plate3d_step(nodes: int, out: str, comm):
+    """The first (midpoint) step of the 3D plate drawing ``nodes`` nodes (the bases built
+    per part of the tetrahedra, the fields joined, the evolution on every rank): this
+    rank's seconds of its bases, assemblies and solves, the last solve (velocity and
+    pressure at the nodes) and the node count."""
+    from types import SimpleNamespace
+
+    from skfem_nem.apps.plate3d_config import Plate3DConfig
+    from skfem_nem.apps.sinking_plate_3d import SinkingPlate3D
+    from skfem_nem.parallel.petsc import owned_elements
+    sim = SinkingPlate3D(Plate3DConfig(nodes=nodes, solver="petsc"), Path(out) / "plate3d")
+    n = sim.lm.nodes.shape[0]
+    mine = owned_elements(sim.lm.mesh)
+    held = sim.lm.mesh.nelements if mine is None else mine.size
+    comm.Barrier()
+    row = sim.step(sim.dt_next)
+    if comm.Get_size() > 1:
+        sim.check_replicated()
+    times = [row["basis_seconds"], row["assembly_seconds"], row["solver_seconds"]]
+    last = sim.solution()
+    sol = SimpleNamespace(u=last.velocity.ravel(), p=last.pressure,
+                          iterations=row["solver_iterations"], residual=float("nan"),
+                          info={"assembled_triangles": held})
+    return times, sol, n
+
+
 def worker(name: str, nodes: int, divided: bool, repeat: int, out: str) -> None:
     """Runs on every rank: times spaces, assembly and solve; rank 0 writes the JSON
     summary and the solution to ``out``."""
@@ -110,7 +138,8 @@ def worker(name: str, nodes: int, divided: bool, repeat: int, out: str) -> None:
     best = sol = None
     for _ in range(repeat):
         sol = None  # (the last repetition's let go before the next is built)
-        times, sol, n = (plate_step(nodes, out, comm) if name == "plate"
+        step = {"plate": plate_step, "plate3d": plate3d_step}.get(name)
+        times, sol, n = (step(nodes, out, comm) if step is not None
                          else stokes_solve(name, nodes, divided, comm))
         slowest = np.array(comm.allgather(np.array(times))).max(axis=0)
         best = slowest if best is None else np.minimum(best, slowest)
@@ -150,9 +179,10 @@ def table(args) -> None:
     what = {"solcx": "SolCx, contrast 1e6, free slip",
             "donea-huerta": "Donea-Huerta, no slip",
             "sinker": "the 3D sinker, 8 spheres, ratio 1e4, no slip",
-            "plate": "the sinking plate's first step (last Picard solve's iterations)"
+            "plate": "the sinking plate's first step (last Picard solve's iterations)",
+            "plate3d": "the 3D plate's first (midpoint) step (last Picard solve's iterations)"
             }[args.flow]
-    tol = "the plate's tolerances" if args.flow == "plate" else "tol 1e-10"
+    tol = "the plate's tolerances" if args.flow.startswith("plate") else "tol 1e-10"
     print(f"{what}, spaces {args.spaces}, {tol}, seconds of the slowest rank "
           f"(best of {args.repeat})\n")
     print("| nodes | ranks | spaces s | assembly s | solve s | FGMRES its | cells per "
@@ -176,7 +206,7 @@ def main(argv=None) -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=[10000, 30000, 100000])
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2, 4])
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--flow", choices=["solcx", "donea-huerta", "sinker", "plate"],
+    ap.add_argument("--flow", choices=["solcx", "donea-huerta", "sinker", "plate", "plate3d"],
                     default="solcx")
     ap.add_argument("--spaces", choices=["divided", "whole"], default="divided",
                     help="bases on each rank's part (default) or whole on every rank")
@@ -184,7 +214,7 @@ def main(argv=None) -> None:
     ap.add_argument("--nodes", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--out", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.flow == "plate" and args.spaces == "whole":
+    if args.flow.startswith("plate") and args.spaces == "whole":
         ap.error("--spaces whole: the sinking plate over MPI always divides its bases")
     if args.worker:
         worker(args.flow, args.nodes, args.spaces == "divided", args.repeat, args.out)

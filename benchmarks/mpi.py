@@ -131,8 +131,8 @@ def worker(name: str, nodes: int, divided: bool, repeat: int, out: str) -> None:
     summary and the solution to ``out``."""
     from skfem_nem.parallel.heap import map_large_blocks
     from skfem_nem.parallel.petsc import import_petsc
-    map_large_blocks()   # (as the sinking plate over MPI does; on every rank count)
     comm = import_petsc().COMM_WORLD.tompi4py()
+    map_large_blocks()   # (once MPI has started, as the plate over MPI; every rank count)
     best = sol = None
     for _ in range(repeat):
         sol = None  # (the last repetition's let go before the next is built)

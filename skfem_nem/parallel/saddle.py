@@ -22,8 +22,8 @@ The unknowns may be renumbered (``order``) before the rows are split between the
 so that each rank owns a part of the domain with its velocity and pressure unknowns
 together, its velocities first: the blocks then reach PETSc as a nest, which the
 fieldsplit reads without copying them out (another outer preconditioner, such as
-``-stokes_pc_type lu``, gets one AIJ matrix). Every default is a PETSc option under the prefix (``-stokes_``), which the
-options database overrides: ``-stokes_fieldsplit_0_pc_type hypre``,
+``-stokes_pc_type lu``, gets one AIJ matrix). Every default is a PETSc option under the
+prefix (``-stokes_``), which the options database overrides: ``-stokes_fieldsplit_0_pc_type hypre``,
 ``-stokes_ksp_monitor``, ``-stokes_pc_type lu -stokes_pc_factor_mat_solver_type mumps``.
 """
 from __future__ import annotations

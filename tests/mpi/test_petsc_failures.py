@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from skfem_nem.apps.sinking_plate import SinkingPlate
+from skfem_nem.apps.sinking_plate_3d import SinkingPlate3D
 
 DRIVER = Path(__file__).with_name("plate_failures.py")
 # a run of 4 steps of 300 nodes takes well under a minute; a hang would take for ever
@@ -39,12 +40,13 @@ def failure_lines(stderr: str) -> list:
 
 @pytest.mark.parametrize("mode, rank, reason, lag", [
     ("output", 0, "OSError: [Errno 28] No space left on device", 1),
-    ("compute", 1, "RuntimeError: injected on rank 1", 0)])
+    ("compute", 1, "RuntimeError: injected on rank 1", 0),
+    ("compute3d", 1, "RuntimeError: injected on rank 1", 0)])
 def test_one_rank_failing_ends_every_rank(alone, tmp_path, mode, rank, reason, lag):
     """Exit status 1 (MPI_Abort) on a failure of one rank, no hang, one line naming the rank
     and the reason, and the last checkpoint kept (one every step): rank 0's snapshot fails
     after a step was logged and before its checkpoint (``lag`` 1), rank 1's third step
-    fails after the second step's checkpoint."""
+    fails after the second step's checkpoint (in 2D, and in 3D: ``compute3d``)."""
     r = run_two_ranks(mode, tmp_path)
     lines = failure_lines(r.stderr)
     assert r.returncode == 1, (r.returncode, r.stderr[-2000:])
@@ -54,7 +56,8 @@ def test_one_rank_failing_ends_every_rank(alone, tmp_path, mode, rank, reason, l
     with open(tmp_path / "diagnostics.csv") as fh:
         logged = len(fh.read().splitlines()) - 1
     assert logged >= 1
-    assert SinkingPlate.restart(tmp_path).lm.step == logged - lag
+    run = SinkingPlate3D if mode.endswith("3d") else SinkingPlate
+    assert run.restart(tmp_path).lm.step == logged - lag
 
 
 def test_a_step_stalled_on_every_rank_stops_as_in_serial(alone, tmp_path):

@@ -147,7 +147,7 @@ class SinkingPlate:
         cfg.validate()
         self.cfg = cfg
         # over MPI (solver "petsc") every rank computes the whole run, rank 0 writes;
-        # freed arrays go back to the system at once (parallel.heap: 7% less a rank)
+        # freed arrays go back to the system at once (parallel.heap: Open MPI turns that off)
         self.rank, self.ranks = world() if cfg.solver == "petsc" else (0, 1)
         if cfg.solver == "petsc":
             map_large_blocks()

@@ -9,7 +9,10 @@ process that imported petsc4py: 200 arrays of 1 MB, every other one freed, left 
 resident, where with mmap on again it fell to 314 MB. :func:`map_large_blocks` turns it
 back on, with a fixed threshold of 128 kB (glibc's initial one, which otherwise grows with
 the largest block freed): every array-sized block is a mapping of its own, returned when
-freed. A run over MPI, where memory per rank is the point, calls it once MPI has started
+freed. It costs time, as each fresh mapping is zeroed page by page: a step of the plate
+on four ranks (195,857 nodes) took 16% longer for 12% less memory a rank (48.4-48.9 s at
+1,360 MB against 41.4-42.1 s at 1,527-1,550 MB). A run over MPI, where memory per rank
+is the point, calls it once MPI has started
 (:class:`~skfem_nem.apps.sinking_plate.SinkingPlate` and the 3D plate with solver
 ``"petsc"``, ``benchmarks/mpi.py``); a script of one's own calls it after its first
 PETSc solve or import. On an RDMA network whose MPI caches registered memory without

@@ -1,4 +1,5 @@
-"""A plate run's cell fields between one process and the parts of MPI ranks.
+"""A plate run over MPI: its ranks, its cell fields between one process and the ranks'
+parts, and the check that the ranks' meshes agree.
 
 Why a module of its own: the 2D and the 3D sinking plate run over MPI the same way. Each
 rank builds the bases of its part of the cells (``stokes_spaces(..., elements="owned")``)
@@ -14,9 +15,32 @@ from typing import Optional
 
 import numpy as np
 
-from ..parallel.petsc import joined, maximum, summed
+from ..parallel.failures import FailureChannel
+from ..parallel.heap import map_large_blocks
+from ..parallel.petsc import joined, maximum, ranks_differing, summed, world
 
-__all__ = ["part_rows", "whole_rows", "over_parts"]
+__all__ = ["start_ranks", "check_same_mesh", "part_rows", "whole_rows", "over_parts"]
+
+
+def start_ranks(solver: str):
+    """``(rank, ranks, failures)`` of a run with ``solver``: over MPI (``"petsc"``) the
+    world's, with the channel by which a failure of one rank ends every rank (built by all
+    ranks here; None on one rank) and mmap of freed arrays back on (:mod:`..parallel.heap`);
+    otherwise ``(0, 1, None)``."""
+    if solver != "petsc":
+        return 0, 1, None
+    rank, ranks = world()
+    map_large_blocks()
+    return rank, ranks, FailureChannel() if ranks > 1 else None
+
+
+def check_same_mesh(nodes: np.ndarray, cells: np.ndarray, time: float, step: int) -> None:
+    """``RuntimeError`` if the ranks' meshes differ (nodes, cells or clock): the replicated
+    evolution must stay the same on every rank."""
+    differ = ranks_differing((nodes, cells, np.array([time])))
+    if differ:
+        raise RuntimeError(f"the mesh of rank(s) {differ} differs from rank 0's after "
+                           f"step {step}: the evolution is no longer replicated")
 
 
 def part_rows(field: Optional[np.ndarray], cells: Optional[np.ndarray]):

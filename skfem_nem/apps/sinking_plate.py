@@ -59,10 +59,7 @@ from ..models.rheology import (Material, PicardNotConverged, from_ip_field, seco
                                to_ip_field, vep_step)
 from ..models.stokes import outline_flux, stokes_spaces
 from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
-from ..parallel.failures import FailureChannel
-from ..parallel.heap import map_large_blocks
-from ..parallel.petsc import ranks_differing, world
-from .plate_parts import over_parts, part_rows, whole_rows
+from .plate_parts import check_same_mesh, over_parts, part_rows, start_ranks, whole_rows
 
 # (PlateConfig, load_config and stored_config are re-exported from plate_config)
 __all__ = ["SinkingPlate", "StepStalled", "run"]
@@ -146,13 +143,8 @@ class SinkingPlate:
     def __init__(self, cfg: PlateConfig, out, _state=None):
         cfg.validate()
         self.cfg = cfg
-        # over MPI (solver "petsc") every rank computes the whole run, rank 0 writes;
-        # freed arrays go back to the system at once (parallel.heap: Open MPI turns that off)
-        self.rank, self.ranks = world() if cfg.solver == "petsc" else (0, 1)
-        if cfg.solver == "petsc":
-            map_large_blocks()
-        # a failure of one rank ends every rank (parallel.failures); built by all ranks here
-        self.failures = FailureChannel() if self.ranks > 1 else None
+        # over MPI (solver "petsc") every rank computes the whole run, rank 0 writes
+        self.rank, self.ranks, self.failures = start_ranks(cfg.solver)
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         # a film that closes within any step (_stable_dt), dealt with before the next
@@ -477,13 +469,8 @@ class SinkingPlate:
         return self.rank == 0
 
     def check_replicated(self) -> None:
-        """``RuntimeError`` if the ranks' meshes differ (nodes, triangles or clock):
-        the replicated evolution must stay the same on every rank."""
-        lm = self.lm
-        differ = ranks_differing((lm.nodes, lm.triangles, np.array([lm.time])))
-        if differ:
-            raise RuntimeError(f"the mesh of rank(s) {differ} differs from rank 0's after "
-                               f"step {lm.step}: the evolution is no longer replicated")
+        """``RuntimeError`` if the ranks' meshes differ (nodes, triangles or clock)."""
+        check_same_mesh(self.lm.nodes, self.lm.triangles, self.lm.time, self.lm.step)
 
     def write_output(self, spaces=None, r=None, plate=None) -> str:
         """Write the next ``plate_NNNNN.vtu`` and add it to ``plate.pvd`` (rank 0

@@ -41,16 +41,13 @@ from ..geometry.nodesets3d import box_nodes_3d
 from ..models.rheology import PicardNotConverged, second_invariant, vep_step
 from ..models.stokes import stokes_spaces
 from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
-from ..parallel.failures import FailureChannel
-from ..parallel.heap import map_large_blocks
-from ..parallel.petsc import ranks_differing, world
 from .output import (CSVLog, PVDWriter, atomic_write_text, next_output_time,
                      progress_bar, write_vtu)
 from .plate3d_config import Plate3DConfig, plate_box
 from .plate3d_figures import plate3d_figures
 from .plate3d_materials import plate_materials
 from .plate_config import stored_config
-from .plate_parts import over_parts, part_rows, whole_rows
+from .plate_parts import check_same_mesh, over_parts, part_rows, start_ranks, whole_rows
 
 __all__ = ["SinkingPlate3D", "plate_box"]
 
@@ -128,12 +125,8 @@ class SinkingPlate3D:
         cfg.validate()
         self.cfg = cfg
         # over MPI (solver "petsc") every rank computes the whole run on its part of the
-        # tetrahedra and rank 0 writes, as in 2D (apps.plate_parts); a failure of one rank
-        # ends every rank (parallel.failures); freed arrays go back at once (parallel.heap)
-        self.rank, self.ranks = world() if cfg.solver == "petsc" else (0, 1)
-        self.failures = FailureChannel() if self.ranks > 1 else None
-        if cfg.solver == "petsc":
-            map_large_blocks()
+        # tetrahedra and rank 0 writes, as in 2D (apps.plate_parts)
+        self.rank, self.ranks, self.failures = start_ranks(cfg.solver)
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         self._last = None         # LastSolve of the last step
@@ -163,13 +156,8 @@ class SinkingPlate3D:
         return self.rank == 0
 
     def check_replicated(self) -> None:
-        """``RuntimeError`` if the ranks' meshes differ (nodes, tetrahedra or clock):
-        the replicated evolution must stay the same on every rank."""
-        lm = self.lm
-        differ = ranks_differing((lm.nodes, lm.mesh.t, np.array([lm.time])))
-        if differ:
-            raise RuntimeError(f"the mesh of rank(s) {differ} differs from rank 0's after "
-                               f"step {lm.step}: the evolution is no longer replicated")
+        """``RuntimeError`` if the ranks' meshes differ (nodes, tetrahedra or clock)."""
+        check_same_mesh(self.lm.nodes, self.lm.mesh.t, self.lm.time, self.lm.step)
 
     def plate_volume(self) -> float:
         """The volume of the plate: the integral of the nodes' plate indicator

@@ -15,6 +15,7 @@ smoothing cell per tetrahedron (:class:`~skfem_nem.NaturalNeighbourBasis`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Optional
 
 import numpy as np
@@ -80,19 +81,16 @@ class StokesSpaces:
         """True where the pressure projection stabilisation is used."""
         return self.method == "nem-projection"
 
-    @property
+    @cached_property
     def p0basis(self) -> Basis:
         """The piecewise-constant basis on the pressure's quadrature (the projection
         stabilisation's): built on first use, as only ``"nem-projection"`` reads it."""
-        p0 = self.__dict__.get("_p0basis")
-        if p0 is None:
-            on = {} if self.elements is None else {"elements": self.elements}
-            tet = isinstance(self.mesh, MeshTet)
-            p0 = Basis(self.mesh, _ELEMENTS["tet" if tet else "tri"]["p0"](),
-                       quadrature=self.pbasis.quadrature, **on)
-            if tet:
-                _zero_flat_gradients(p0)
-            self.__dict__["_p0basis"] = p0
+        on = {} if self.elements is None else {"elements": self.elements}
+        tet = isinstance(self.mesh, MeshTet)
+        p0 = Basis(self.mesh, _ELEMENTS["tet" if tet else "tri"]["p0"](),
+                   quadrature=self.pbasis.quadrature, **on)
+        if tet:
+            _zero_flat_gradients(p0)
         return p0
 
     @property

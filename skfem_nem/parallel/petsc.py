@@ -188,7 +188,6 @@ def nest_from_rows(rows: sp.csr_matrix, first: np.ndarray, start: int, comm):
     for i, part in enumerate((rows[:nv], rows[nv:])):
         blocks.append([_aij(part[:, c], (local[i], local[j]), comm)
                        for j, c in enumerate(cols)])
-    del rows
     K = PETSc.Mat().createNest(blocks, comm=comm)
     for row in blocks:
         for b in row:

@@ -268,7 +268,7 @@ def test_renumbered_rows_are_scipys_double_fancy_indexing(n, seed, data):
     """The rows a rank sends under a renumbering: one copy of those rows, equal to
     ``A[order][:, order]``'s rows, in canonical form."""
     import scipy.sparse as sp
-    from skfem_nem.parallel.petsc import inverse_order, renumbered
+    from skfem_nem.basis.locality import inverse_order, renumbered
     rng = np.random.default_rng(seed)
     A = sp.random(n, n, density=0.3, format="csr", random_state=rng)
     order = rng.permutation(n)

@@ -27,6 +27,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from .locality import dof_locality_order, inverse_order, renumbered
 from .multigrid import k_cycle, smoothed_aggregation, v_cycle
 from .rigid_modes import rigid_modes
 
@@ -141,8 +142,8 @@ def star_smoother(A: sp.spmatrix, ptr: np.ndarray, idx: np.ndarray) -> sp.csr_ma
     nnz = int(np.sum(np.diff(ptr) ** 2))
     rows, cols = np.empty(nnz, np.int64), np.empty(nnz, np.int64)
     vals = np.empty(nnz)
-    _star_inverses(ptr, idx, A.indptr.astype(np.int64), A.indices.astype(np.int64),
-                   A.data.astype(np.float64), A.shape[0], rows, cols, vals)
+    _star_inverses(ptr, idx, A.indptr, A.indices, A.data.astype(np.float64, copy=False),
+                   A.shape[0], rows, cols, vals)
     return sp.csr_matrix((vals, (rows, cols)), shape=A.shape)
 
 
@@ -169,18 +170,21 @@ def _spectral_radius(A, B) -> float:
 
 
 class TwoLevelPreconditioner:
-    """Chebyshev smoothing on ``A`` (``degree``), preconditioned by ``smoother`` (a sparse
-    ``B``, e.g. :func:`star_smoother`; None: Jacobi), the coarse correction with ``P^T A P``
-    (``coarse``: ``"sa"``, pyamg's smoothed aggregation with ``modes`` as its near null space
-    and ``coarse_smoother`` on its levels, or ``"direct"``, a sparse LU), smoothing again.
-    ``cycle``: the aggregation's ``"V"``-cycle (a symmetric map, for CG) or its
-    ``"K"``-cycle (:func:`~skfem_nem.basis.multigrid.k_cycle`, for flexible methods). Call it
-    on a residual. ``renumber``: the products in a bandwidth-reducing order
-    (:meth:`_bandwidth_order`; ``order``, None without)."""
+    """Chebyshev smoothing (``degree``) preconditioned by ``smoother`` (a sparse ``B``, e.g.
+    :func:`star_smoother`; None: Jacobi), the coarse correction with ``P^T A P``
+    (``coarse``: ``"sa"``, pyamg's smoothed aggregation with ``modes`` as its near null
+    space and ``coarse_smoother`` on its levels, or ``"direct"``, a sparse LU), smoothing
+    again. ``cycle``: the aggregation's ``"V"``-cycle (a symmetric map, for CG) or its
+    ``"K"``-cycle (:func:`~skfem_nem.basis.multigrid.k_cycle`, for flexible methods).
+
+    ``A``, ``P`` and ``smoother`` are numbered in one order, which
+    is the caller's order ``order`` (new ``i`` is the caller's ``order[i]``; None: the
+    same): called on a residual in the caller's order the preconditioner answers in it,
+    and :meth:`renumbered` works in its own."""
 
     def __init__(self, A: sp.spmatrix, P: sp.spmatrix, degree: int = CHEBYSHEV_DEGREE,
                  coarse: str = "sa", smoother: Optional[sp.spmatrix] = None,
-                 modes: Optional[np.ndarray] = None, renumber: bool = True,
+                 modes: Optional[np.ndarray] = None, order: Optional[np.ndarray] = None,
                  cycle: str = "V", coarse_smoother=COARSE_SMOOTHER):
         from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
         if coarse not in ("sa", "direct"):
@@ -188,6 +192,10 @@ class TwoLevelPreconditioner:
         if cycle not in ("V", "K"):
             raise ValueError(f"cycle must be 'V' or 'K', got {cycle!r}")
         self.A, self.P = sp.csr_matrix(A), sp.csr_matrix(P)
+        if order is not None and np.asarray(order).shape != (self.A.shape[0],):
+            raise ValueError(f"order must number the matrix's {self.A.shape[0]} rows, got "
+                             f"shape {np.asarray(order).shape}")
+        self.order = None if order is None else np.asarray(order, dtype=np.int64)
         self.R = self.P.T.tocsr()
         d = self.A.diagonal()
         if not (d > 0).all():
@@ -203,25 +211,6 @@ class TwoLevelPreconditioner:
             self.coarse = spla.splu(Ac.tocsc()).solve
         else:
             self.coarse = self._coarse_cycle(Ac, modes, cycle, coarse_smoother)
-        self.order = None
-        if renumber:
-            self._bandwidth_order()
-
-    def _bandwidth_order(self) -> None:
-        """Renumber the fine dofs by reverse Cuthill-McKee (``order``; the products with
-        ``A``, ``B`` and ``P`` then work in that order): the basis numbers the edge dofs
-        after all nodal ones, so a row's entries lie far apart in memory. SolCx at 33,242
-        velocity unknowns (211 entries a row): a product with the viscous block took 9.5 ms
-        numbered by the basis, 4.9 ms renumbered; a scalar Laplacian at 31,969 unknowns
-        4.3 ms and 4.7 ms (its set-up spent 1.8 s of 8.3 s renumbering at 127,961), so
-        :class:`TwoLevelSpace` renumbers vector bases only."""
-        from scipy.sparse.csgraph import reverse_cuthill_mckee
-        order = reverse_cuthill_mckee(self.A, symmetric_mode=True)
-        self.order = order.astype(np.int64)
-        self.A = self.A[order][:, order].tocsr()
-        self.B = self.B[order][:, order].tocsr()
-        self.P = self.P[order].tocsr()
-        self.R = self.P.T.tocsr()
 
     def _coarse_cycle(self, Ac: sp.csr_matrix, modes: Optional[np.ndarray], cycle: str,
                       smoother):
@@ -263,22 +252,33 @@ class TwoLevelPreconditioner:
 
 class TwoLevelSpace:
     """What the two-level method takes from the quadratic natural-neighbour ``basis`` (scalar
-    or vector) with only the dofs ``free`` unknown: the nested prolongation from the nodal
-    values of the free nodal dofs (``prolongation``), the node stars (``stars``) and, for a
-    vector basis, the coarse level's near null space (``modes``: translations and rotations
-    of the nodal values; None for a scalar basis). :meth:`preconditioner` builds
+    or vector) with only the dofs ``free`` unknown, in the order of
+    :func:`~skfem_nem.basis.locality.dof_locality_order` (``order``, new ``i`` is the free
+    dof at position ``order[i]``): the nested prolongation from the nodal values of the free
+    nodal dofs (``prolongation``), the node stars (``stars``) and, for a vector basis, the
+    coarse level's near null space (``modes``: translations and rotations of the nodal
+    values; None for a scalar basis). :meth:`preconditioner` builds
     :class:`TwoLevelPreconditioner` for a matrix on those dofs; the space is kept while the
     matrix changes (Picard iterations, new viscosities)."""
 
     def __init__(self, basis, free: np.ndarray, degree: int = CHEBYSHEV_DEGREE):
         P = nested_prolongation(basis)
         self.free, self.degree = np.asarray(free, dtype=np.int64), degree
+        self.order = dof_locality_order(basis, self.free)
+        self.new = inverse_order(self.order)
         nodal = np.atleast_2d(basis.nodal_dofs).ravel()      # column c n + i's nodal dof
-        kept = np.isin(nodal, self.free)
-        self.prolongation = P[self.free][:, kept].tocsr()
-        self.stars = star_dofs(basis, self.free)
-        # column j of the prolongation is the nodal dof nodal[kept][j]: its rigid modes
-        self.modes = (rigid_modes(basis, nodal[kept]) if nodal.size > basis.mesh.p.shape[1]
+        where = np.full(basis.N, -1, np.int64)
+        where[self.free] = np.arange(self.free.size)
+        # the free nodal dofs, the coarse level's unknowns, in the fine level's order
+        coarse = nodal[where[nodal] >= 0]
+        coarse = coarse[np.argsort(self.new[where[coarse]])]
+        columns = np.full(basis.N, -1, np.int64)
+        columns[nodal] = np.arange(nodal.size)
+        self.prolongation = P[self.free[self.order]][:, columns[coarse]].tocsr()
+        ptr, idx = star_dofs(basis, self.free)
+        self.stars = (ptr, self.new[idx])
+        # column j of the prolongation is the nodal dof coarse[j]: its rigid modes
+        self.modes = (rigid_modes(basis, coarse) if nodal.size > basis.mesh.p.shape[1]
                       else None)
 
     @property
@@ -289,11 +289,13 @@ class TwoLevelSpace:
     def preconditioner(self, A: sp.spmatrix, cycle: str = "V",
                        coarse_smoother=COARSE_SMOOTHER) -> TwoLevelPreconditioner:
         """The two-level preconditioner of ``A`` (on the free dofs, in their order) with
-        ``cycle`` and ``coarse_smoother`` on its coarse level (:class:`TwoLevelPreconditioner`)."""
+        ``cycle`` and ``coarse_smoother`` on its coarse level
+        (:class:`TwoLevelPreconditioner`, numbered in ``order``)."""
         if A.shape != (self.size, self.size):
             raise ValueError(f"the matrix is {A.shape[0]} x {A.shape[1]}, the basis has "
                              f"{self.size} free dofs: condense it with the same D")
+        A = renumbered(A, self.order, self.new, sort=False)
         return TwoLevelPreconditioner(A, self.prolongation, self.degree,
-                                      smoother=star_smoother(A, *self.stars), modes=self.modes,
-                                      renumber=self.modes is not None, cycle=cycle,
+                                      smoother=star_smoother(A, *self.stars),
+                                      modes=self.modes, order=self.order, cycle=cycle,
                                       coarse_smoother=coarse_smoother)

@@ -31,13 +31,14 @@ from typing import Iterator, Optional, Sequence, Tuple
 import numpy as np
 import scipy.sparse as sp
 
+from ..basis.locality import inverse_order, renumbered
 from .partition import Bisection
 
 __all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debian_petsc_dir",
            "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
            "default_options", "default_split", "split_bounds", "row_range", "ranks_differing",
            "world", "rows_to_petsc", "summed_rows", "summed", "maximum", "joined",
-           "inverse_order", "renumbered", "first_block_first", "nest_from_rows",
+           "first_block_first", "nest_from_rows",
            "owned_elements"]
 
 PETSC_INSTALL_HINT = (
@@ -256,27 +257,6 @@ def _exchanged(K: sp.csr_matrix, bounds: list, mpi) -> sp.csr_matrix:
                               shape=(mine, K.shape[1]))
         total = block if total is None else total + block
     return sp.csr_matrix(total)
-
-
-def inverse_order(order: np.ndarray) -> np.ndarray:
-    """The new number of each old unknown under ``order`` (new ``i`` is old
-    ``order[i]``)."""
-    order = np.asarray(order)
-    new = np.empty_like(order)
-    new[order] = np.arange(order.size, dtype=order.dtype)
-    return new
-
-
-def renumbered(A: sp.csr_matrix, rows: np.ndarray, new: np.ndarray) -> sp.csr_matrix:
-    """The rows ``rows`` of ``A`` (old numbers, in their new order) with the columns
-    renumbered by ``new`` (:func:`inverse_order`): ``A[order][:, order]`` restricted to
-    those rows, made as one copy of the rows (scipy's two fancy indexings make two of
-    the whole matrix)."""
-    out = A[np.asarray(rows)]
-    out.indices = new[out.indices].astype(out.indices.dtype, copy=False)
-    out.has_sorted_indices = False
-    out.sort_indices()
-    return out
 
 
 def summed(values: np.ndarray, comm=None) -> np.ndarray:

@@ -33,9 +33,10 @@ from typing import Callable, NamedTuple, Optional
 import numpy as np
 import scipy.sparse as sp
 
+from ..basis.locality import inverse_order, renumbered
 from .petsc import (check_replicated, csr_to_petsc, default_options, destroying,
-                    first_block_first, gather, import_petsc, inverse_order, nest_from_rows,
-                    renumbered, rows_to_petsc, split_bounds, summed_rows, vector)
+                    first_block_first, gather, import_petsc, nest_from_rows, rows_to_petsc,
+                    split_bounds, summed_rows, vector)
 from .petsc import summed as summed_vector
 from .solver import converged_or_raise, null_space
 

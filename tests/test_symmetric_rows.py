@@ -1,5 +1,5 @@
 """Products with a symmetric matrix kept as its upper triangle
-(:class:`skfem_nem.models.symmetric_rows.SymmetricRows`), the Lanczos bound of the
+(:class:`skfem_nem.basis.symmetric_rows.SymmetricRows`), the Lanczos bound of the
 Chebyshev smoother (:func:`skfem_nem.models.krylov.largest_eigenvalue`) and the finest
 level of the viscous block's multigrid that uses both."""
 import numpy as np
@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from skfem_nem.models.krylov import largest_eigenvalue
 from skfem_nem.models.stokes_amg import ViscousAMG, scaled_block, unit_scale
-from skfem_nem.models.symmetric_rows import SymmetricRows
+from skfem_nem.basis.symmetric_rows import SymmetricRows
 
 
 def _symmetric(n, density, seed, diagonal=True):
@@ -186,7 +186,7 @@ def test_a_pattern_found_the_same_is_not_checked_again(monkeypatch):
     from it: the index array found the same is remembered (weakly), not read three times."""
     import gc
 
-    import skfem_nem.models.symmetric_rows as rows
+    import skfem_nem.basis.symmetric_rows as rows
     A = _symmetric(40, 0.3, 7)
     S = SymmetricRows(A)
     calls = []

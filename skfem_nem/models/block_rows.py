@@ -2,7 +2,7 @@
 upper triangle (:class:`BlockSymmetricRows`): the finest level of the 3D viscous block's
 multigrid.
 
-Why: :class:`~skfem_nem.models.symmetric_rows.SymmetricRows` keeps one column index (and one
+Why: :class:`~skfem_nem.basis.symmetric_rows.SymmetricRows` keeps one column index (and one
 position in the source matrix) beside every value. A 3D viscous block couples every
 component of a node with every component of its neighbours, so its entries come in dense
 3x3 blocks, and one index a block serves nine values. The products of a 3D plate step's
@@ -58,7 +58,7 @@ class BlockSymmetricRows:
     """The symmetric matrix ``A`` (CSR, square, on the unknowns placed by ``position``;
     only its upper triangle is read) as the 3x3 blocks of its nodes' upper triangle, for
     products ``A @ x`` on numba's threads. The interface of
-    :class:`~skfem_nem.models.symmetric_rows.SymmetricRows`: :meth:`refresh` takes new
+    :class:`~skfem_nem.basis.symmetric_rows.SymmetricRows`: :meth:`refresh` takes new
     values of a matrix whose entries fit the same blocks, :meth:`twin` keeps it in a
     second precision, :meth:`release_values` lets the values go.
 

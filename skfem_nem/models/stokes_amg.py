@@ -21,7 +21,7 @@ from ..basis.rigid_modes import rigid_modes, velocity_components
 from .amg_blocks import galerkin_of_blocks, hierarchy_of_blocks, plain_aggregation
 from .block_rows import BlockSymmetricRows, node_positions
 from .krylov import cg_steps, largest_eigenvalue
-from .symmetric_rows import SymmetricRows
+from ..basis.symmetric_rows import SymmetricRows
 
 __all__ = ["AMG_COARSE_SOLVER", "AMG_MAX_COARSE", "AMG_SEED", "AMG_SMOOTHER", "AMG_STRENGTH",
            "CHEBYSHEV_INTERVAL", "COARSE_KEPT", "FINE_VALUES", "K_CYCLE_3D", "K_CYCLE_TOL",
@@ -122,7 +122,7 @@ class ViscousAMG:
     couplings. The methods take and return vectors of the unscaled problem.
 
     The finest level's products (the Chebyshev smoothing, the residual, the CG steps of
-    :meth:`cg`) go through :class:`~skfem_nem.models.symmetric_rows.SymmetricRows`, the
+    :meth:`cg`) go through :class:`~skfem_nem.basis.symmetric_rows.SymmetricRows`, the
     block's upper triangle on numba's threads in single precision (:data:`FINE_VALUES`;
     in 3D its nodes' 3x3 blocks, :class:`~skfem_nem.models.block_rows.BlockSymmetricRows`),
     and its spectral radius is a Lanczos estimate
@@ -144,7 +144,7 @@ class ViscousAMG:
         3D vector field (:func:`~skfem_nem.models.block_rows.node_positions`): the finest
         level then keeps its nodes' 3x3 blocks
         (:class:`~skfem_nem.models.block_rows.BlockSymmetricRows`, :data:`FINE_BLOCKS_3D`);
-        None: its entries (:class:`~skfem_nem.models.symmetric_rows.SymmetricRows`).
+        None: its entries (:class:`~skfem_nem.basis.symmetric_rows.SymmetricRows`).
         ``options``: more keywords of pyamg's
         ``smoothed_aggregation_solver`` (for the 3D block the prolongator smoothing
         ``smooth``, :data:`AMG_SMOOTH_3D`, and ``improve_candidates``,

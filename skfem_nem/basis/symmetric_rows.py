@@ -1,5 +1,6 @@
 """Products with a symmetric sparse matrix kept as its upper triangle and computed on all of
-numba's threads (:class:`SymmetricRows`): the finest level of the viscous block's multigrid.
+numba's threads (:class:`SymmetricRows`): the finest level of the viscous block's multigrid
+and of the quadratic natural-neighbour functions' two-level method (:mod:`.two_level`).
 
 Why: a 3D natural-neighbour viscous block has some 460 entries a row (three components of
 some 150 neighbours), and the Stokes solves of the 3D plate spend most of their time in

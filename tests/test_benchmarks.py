@@ -783,6 +783,30 @@ def test_solver_scaling_prints_iterations_and_their_ratio():
     basis, A, b, D = bench.problem("linear-elasticity", 3000, dim=3)
     assert basis.mesh.dim() == 3 and A.shape[0] == basis.N - D.size == b.size
     assert 2000 < A.shape[0] < 6000      # (box_nodes_3d adds the boundary nodes)
+    with pytest.raises(SystemExit) as e:
+        bench.main(["--dim", "3", "--nodes", "jittered", "--cases", "linear-poisson"])
+    assert e.value.code == 2
+
+
+def test_solver_scaling_jittered_nodes_keep_one_spacing():
+    """--nodes jittered: a grid's nodes, each inner one within JITTER spacings of its grid
+    point, so that the closest pair stays a fixed fraction of the spacing at every size
+    (random nodes' closest pair shrinks as they grow in number)."""
+    from scipy.spatial import cKDTree
+    bench = load_benchmark("solver_scaling")
+    closest = []
+    for m in (400, 10000):
+        p = bench.jittered_nodes(m, seed=1)
+        k = int(round(np.sqrt(p.shape[0]))) - 1
+        assert (k + 1) ** 2 == p.shape[0] and abs(p.shape[0] - m) < 4 * np.sqrt(m)
+        grid = np.round(p * k) / k
+        assert np.abs(p - grid).max() <= bench.JITTER / k + 1e-12
+        assert ((p >= 0) & (p <= 1)).all()
+        d, _ = cKDTree(p).query(p, k=2)
+        closest.append(d[:, 1].min() * k)
+    assert min(closest) > 0.4 * (1 - 2 * bench.JITTER)
+    basis, A, b, D = bench.problem("quadratic-poisson", 3000, nodes="jittered")
+    assert A.shape[0] == basis.N - D.size and 2000 < A.shape[0] < 4000
 
 
 def test_quadratic_cost_prints_the_fastest_run_and_the_ratio_at_equal_error(capsys,

@@ -141,6 +141,41 @@ def test_scalar_levels_are_csr_and_cycle_as_pyamgs_bsr_ones():
     assert vector.levels[1].A.format == "bsr" and vector.levels[1].A.blocksize == (3, 3)
 
 
+def test_chebyshev_smoothers_are_pyamgs_without_its_blas_norm(monkeypatch):
+    """polynomial_smoothers replaces the Chebyshev smoothers of the levels the options name
+    (pyamg's list form: the last entry for the levels below) by the same polynomial, which
+    gives pyamg's result bit for bit from zero and from a start, without pyamg's norm (the
+    BLAS dot product); other smoothers and the levels given None are left as they were."""
+    import pyamg.relaxation.relaxation as relaxation
+    A = pyamg.gallery.poisson((60, 60), format="csr")
+    pre, post = [None, CHEBYSHEV], [("gauss_seidel", {"sweep": "symmetric"}), CHEBYSHEV]
+    with mg.seeded_global_random():
+        ml = pyamg.smoothed_aggregation_solver(A, symmetry="symmetric", max_coarse=50,
+                                               presmoother=pre, postsmoother=post)
+    theirs = [(lv.presmoother, lv.postsmoother) for lv in ml.levels[:-1]]
+    mg.polynomial_smoothers(ml, pre, post)
+    assert len(ml.levels) >= 3
+    assert ml.levels[0].presmoother is theirs[0][0]            # None: untouched
+    assert ml.levels[0].postsmoother is theirs[0][1]           # Gauss-Seidel: untouched
+    rng = np.random.default_rng(3)
+    for lv, (tpre, tpost) in list(zip(ml.levels, theirs))[1:]:
+        assert lv.presmoother is not tpre and lv.postsmoother is not tpost
+        b = rng.standard_normal(lv.A.shape[0])
+        for start in (np.zeros_like(b), rng.standard_normal(b.size)):
+            x_ours, x_theirs = start.copy(), start.copy()
+            lv.presmoother(lv.A, x_ours, b)
+            tpre(lv.A, x_theirs, b)
+            assert np.array_equal(x_ours, x_theirs)
+
+    def no_blas(*args, **kwargs):
+        raise AssertionError("pyamg's norm called")
+    monkeypatch.setattr(relaxation, "norm", no_blas)
+    x = np.zeros(ml.levels[1].A.shape[0])
+    ml.levels[1].postsmoother(ml.levels[1].A, x, np.ones_like(x))
+    with pytest.raises(AssertionError, match="norm called"):
+        theirs[1][1](ml.levels[1].A, x, np.ones_like(x))
+
+
 @pytest.fixture(scope="module")
 def mesh():
     return delaunay_mesh(box_nodes(600, seed=4))

@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
+from ..basis.multigrid import polynomial_smoothers
 from .block_rows import BlockSymmetricRows
 
 __all__ = ["GALERKIN_SLICE", "galerkin_of_blocks", "hierarchy_of_blocks", "plain_aggregation"]
@@ -125,6 +126,7 @@ def hierarchy_of_blocks(A: BlockSymmetricRows, B: np.ndarray, strength: tuple,
     coarse = pyamg.smoothed_aggregation_solver(
         galerkin_of_blocks(A, T), B=coarse_modes, symmetry="symmetric", strength=strength,
         coarse_solver=coarse_solver, **options)
+    polynomial_smoothers(coarse, options.get("presmoother"), options.get("postsmoother"))
     finest = MultilevelSolver.Level()
     finest.A, finest.B, finest.P, finest.R = None, B, T, T.T
     finest.presmoother = finest.postsmoother = setup_none(finest)

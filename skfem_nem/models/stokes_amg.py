@@ -16,7 +16,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit, prange
 
-from ..basis.multigrid import AMG_SEED, K_CYCLE_TOL, k_cycle, seeded_global_random, v_cycle
+from ..basis.multigrid import (AMG_SEED, K_CYCLE_TOL, k_cycle, polynomial_smoothers,
+                               seeded_global_random, v_cycle)
 from ..basis.rigid_modes import rigid_modes, velocity_components
 from .amg_blocks import galerkin_of_blocks, hierarchy_of_blocks, plain_aggregation
 from .block_rows import BlockSymmetricRows, node_positions
@@ -175,6 +176,7 @@ class ViscousAMG:
                 strength=AMG_STRENGTH, max_coarse=AMG_MAX_COARSE,
                 presmoother=[None, AMG_SMOOTHER], postsmoother=[None, AMG_SMOOTHER],
                 coarse_solver=AMG_COARSE_SOLVER, **options)
+        polynomial_smoothers(self.ml, [None, AMG_SMOOTHER], [None, AMG_SMOOTHER])
         self.fine = SymmetricRows(scaled, FINE_VALUES) if positions is None else \
             BlockSymmetricRows(scaled, positions, FINE_VALUES)
         self.exact = self.fine.twin(scaled)
@@ -306,6 +308,7 @@ class ViscousAMG:
                 coarse.A.format == "bsr" else sp.csr_matrix(Ac)
         with seeded_global_random():
             change_smoothers(self.ml, [None, AMG_SMOOTHER], [None, AMG_SMOOTHER])
+        polynomial_smoothers(self.ml, [None, AMG_SMOOTHER], [None, AMG_SMOOTHER])
         self.ml.coarse_solver = pyamg.coarse_grid_solver(AMG_COARSE_SOLVER)
 
     def _chebyshev(self) -> np.ndarray:

@@ -17,7 +17,13 @@ first loads numba's kernels (not timed). Each case runs ``--repeat`` times (on a
 same nodes each time), and the run of the smallest total counts: the machine's noise only
 slows a run down.
 
-Run ``python benchmarks/quadratic_cost.py [--nodes 2000 8000 32000] [--repeat 3]``.
+``--hilbert``: the nodes numbered along a Hilbert curve before the triangulation (as a mesher
+numbers them; the same triangles): the natural-neighbour basis and assembly read their
+stencils' nodes near each other in memory, where random numbering scatters them (P2's cost
+does not depend on it).
+
+Run ``python benchmarks/quadratic_cost.py [--nodes 2000 8000 32000] [--repeat 3]
+[--hilbert]``.
 """
 from __future__ import annotations
 
@@ -52,17 +58,19 @@ def forms():
     return laplace, load, h1_error
 
 
-def run(n: int, method: str) -> dict:
-    """One solve of the problem on n random nodes: unknowns, H1 error, seconds by stage."""
+def run(n: int, method: str, hilbert: bool = False) -> dict:
+    """One solve of the problem on n random nodes (``hilbert``: numbered along a Hilbert
+    curve): unknowns, H1 error, seconds by stage."""
     import pyamg
     from skfem import Basis, ElementTriP2, condense
 
     from skfem_nem import (ElementNaturalNeighbour2, NaturalNeighbourBasis, delaunay_mesh,
                            natural_neighbour_solver)
-    from skfem_nem.geometry.nodesets import box_nodes
+    from skfem_nem.geometry.nodesets import box_nodes, hilbert_order
 
     laplace, load, h1_error = forms()
-    mesh = delaunay_mesh(box_nodes(n, seed=0))
+    nodes = box_nodes(n, seed=0)
+    mesh = delaunay_mesh(nodes[hilbert_order(nodes)] if hilbert else nodes)
     t0 = time.perf_counter()
     basis = (NaturalNeighbourBasis(mesh, ElementNaturalNeighbour2()) if method == "NEM2"
              else Basis(mesh, ElementTriP2()))
@@ -104,6 +112,8 @@ def main(argv=None) -> list:
     ap.add_argument("--nodes", type=int, nargs="+", default=[2000, 8000, 32000])
     ap.add_argument("--repeat", type=int, default=3, help="runs of each case; the fastest "
                     "counts (default 3)")
+    ap.add_argument("--hilbert", action="store_true", help="number the nodes along a "
+                    "Hilbert curve first")
     a = ap.parse_args(argv)
     if len(a.nodes) < 2:
         ap.error("--nodes needs two sizes or more (P2's time is interpolated between them)")
@@ -111,7 +121,7 @@ def main(argv=None) -> list:
         ap.error(f"--repeat must be at least 1, got {a.repeat}")
     for m in ("NEM2", "P2"):
         run(200, m)                                   # warm-up: kernels loaded
-    rows = [min((run(n, m) for _ in range(a.repeat)), key=lambda r: r["total"])
+    rows = [min((run(n, m, a.hilbert) for _ in range(a.repeat)), key=lambda r: r["total"])
             for n in a.nodes for m in ("NEM2", "P2")]
     p2 = [r for r in rows if r["method"] == "P2"]
     print("| nodes | method | unknowns | H1 error | CG its | basis s | assembly s | solve s "

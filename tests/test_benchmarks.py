@@ -813,7 +813,8 @@ def test_quadratic_cost_prints_the_fastest_run_and_the_ratio_at_equal_error(caps
                                                                              monkeypatch):
     """benchmarks/quadratic_cost.py: a row per size and method, each the fastest of
     --repeat runs, and NEM2's ratio to P2's time interpolated at NEM2's error as printed;
-    a --repeat below 1 and a single size are refused."""
+    --hilbert numbers the same nodes otherwise (the same unknowns and errors); a --repeat
+    below 1 and a single size are refused."""
     bench = load_benchmark("quadratic_cost")
     out = bench.main(["--nodes", "300", "600", "--repeat", "1"])
     rows = [[c.strip() for c in line.strip("|").split("|")]
@@ -824,7 +825,11 @@ def test_quadratic_cost_prints_the_fastest_run_and_the_ratio_at_equal_error(caps
         assert float(line[9]) == pytest.approx(r["total"] / bench.p2_time_at(r["error"], p2),
                                                abs=0.006)
     totals = itertools.cycle([5.0, 3.0, 4.0, 2.0, 1.0, 6.0])
-    monkeypatch.setattr(bench, "run", lambda n, m: {
+    for m in ("NEM2", "P2"):        # --hilbert: the same triangles, numbered otherwise
+        plain, curve = bench.run(300, m), bench.run(300, m, hilbert=True)
+        assert plain["dofs"] == curve["dofs"]
+        assert curve["error"] == pytest.approx(plain["error"], rel=1e-9)
+    monkeypatch.setattr(bench, "run", lambda n, m, hilbert=False: {
         "n": n, "method": m, "dofs": n, "error": 1.0 / n, "its": 1, "basis": 0.0,
         "assembly": 0.0, "solve": 0.0, "total": next(totals)})
     bench.main(["--nodes", "300", "600", "--repeat", "3"])

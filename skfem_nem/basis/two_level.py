@@ -15,8 +15,11 @@ little cost in energy, so each node's star (its dof and its edges' dofs) is solv
 block (:func:`star_smoother`, overlapping additive Schwarz) inside Chebyshev.
 :class:`TwoLevelPreconditioner` combines the two, with a smoothed-aggregation V-cycle or
 K-cycle on the coarse matrix. As CG's preconditioner it takes fewer iterations than P2 with
-pyamg (docs/quadratic.md). :func:`skfem_nem.basis.solvers.natural_neighbour_solver` makes it
-a solver for scikit-fem's ``solve``.
+pyamg (docs/quadratic.md). Its products are bound by memory, so it works in the order of
+:func:`~skfem_nem.basis.locality.dof_locality_order` (a node's dofs together, the nodes along
+a Hilbert curve) and multiplies on the matrix's upper triangle on numba's threads.
+:func:`skfem_nem.basis.solvers.natural_neighbour_solver` makes it a solver for scikit-fem's
+``solve``.
 """
 from __future__ import annotations
 
@@ -196,10 +199,12 @@ class TwoLevelPreconditioner:
     again. ``cycle``: the aggregation's ``"V"``-cycle (a symmetric map, for CG) or its
     ``"K"``-cycle (:func:`~skfem_nem.basis.multigrid.k_cycle`, for flexible methods).
 
-    ``A``, ``P`` and ``smoother`` are numbered in one order, which
-    is the caller's order ``order`` (new ``i`` is the caller's ``order[i]``; None: the
-    same): called on a residual in the caller's order the preconditioner answers in it,
-    and :meth:`renumbered` works in its own."""
+    ``A``, ``P`` and ``smoother`` are numbered in one order, which is the caller's order
+    ``order`` (new ``i`` is the caller's ``order[i]``; None: the same): called on a
+    residual in the caller's order the preconditioner answers in it, and
+    :meth:`renumbered` works in its own. ``A`` is kept for products on its upper triangle
+    (``A``, a :class:`~skfem_nem.basis.symmetric_rows.SymmetricRows`), so a matrix whose
+    lower triangle differs is refused."""
 
     def __init__(self, A: sp.spmatrix, P: sp.spmatrix, degree: int = CHEBYSHEV_DEGREE,
                  coarse: str = "sa", smoother: Optional[sp.spmatrix] = None,

@@ -345,6 +345,15 @@ def test_batch_queries_on_a_side_straight_to_round_off(seed, k):
     assert np.allclose(batch.sum(axis=1), 1.0) and (batch >= -1e-12).all()
 
 
+@pytest.mark.xfail(strict=True, reason="known defect: on the draw (seed 506, k = 4) of the "
+                   "test above, found by a randomised run, the point between the side's "
+                   "first two nodes gets a coordinate of -0.09 (nodes 0, 1, 2: 0.891, 0.199, "
+                   "-0.090), where the others get 1/2 and 1/2. Qhull's start has flat "
+                   "triangles there and the thinned start is taken")
+def test_batch_queries_on_a_side_straight_to_round_off_known_draw():
+    test_batch_queries_on_a_side_straight_to_round_off.hypothesis.inner_test(506, 4)
+
+
 @settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2 ** 16), n=st.integers(30, 120), k=st.integers(1, 12))
 def test_stars_and_edges_stay_exact_through_vertex_removals(seed, n, k):

@@ -106,3 +106,50 @@ def test_a_matrix_not_symmetric_is_refused(quadratic):
     assert abs(skew - before).max() == 0
     with pytest.raises(ValueError, match="order must number"):
         TwoLevelPreconditioner(A, P, order=np.arange(3))
+
+
+@pytest.mark.parametrize("walls", [0, 1, 2])
+def test_a_vector_coarse_level_comes_in_whole_nodes(walls):
+    """The coarse unknowns of a vector basis clamped at x = 1: the nodes with both components
+    free first, a node's two together, then the single free components of the wall nodes
+    (x fixed on x = 0 with ``walls`` 1 or 2, y on y = 0 with 2). Blocks of two where the
+    wall unknowns are even in number, else none (``walls`` 2: the corner's node is fixed
+    whole); either way the V-cycle preconditioner is symmetric."""
+    mesh = delaunay_mesh(box_nodes(200, seed=5))
+    basis = NaturalNeighbourBasis(mesh, ElementVector(ElementNaturalNeighbour2()))
+    fixed = [basis.get_dofs(lambda x: x[0] > 1 - 1e-12).all()]      # clamped: whole nodes
+    if walls >= 1:
+        fixed.append(basis.get_dofs(lambda x: x[0] < 1e-12).nodal["u^1"])
+    if walls == 2:
+        fixed.append(basis.get_dofs(lambda x: x[1] < 1e-12).nodal["u^2"])
+    D = np.unique(np.concatenate(fixed))
+    free = np.setdiff1d(np.arange(basis.N), D)
+    space = TwoLevelSpace(basis, free)
+    nodal = basis.nodal_dofs
+    node_of = np.full(basis.N, -1)
+    node_of[nodal[0]] = node_of[nodal[1]] = np.arange(nodal.shape[1])
+    # the coarse unknowns are the prolongation's columns: each the nodal dof it copies
+    P = space.prolongation.tocsc()
+    rows = space.order[P.indices[P.indptr[:-1]][np.diff(P.indptr) > 0]]
+    first = np.array([free[space.order][P.indices[P.indptr[j]:P.indptr[j + 1]]][
+        np.isin(free[space.order][P.indices[P.indptr[j]:P.indptr[j + 1]]], nodal)][0]
+        for j in range(P.shape[1])])
+    nodes = node_of[first]
+    counts = np.bincount(nodes)[nodes]
+    k = np.count_nonzero(counts == 2)
+    assert (counts[:k] == 2).all() and (counts[k:] == 1).all()
+    assert (nodes[:k:2] == nodes[1:k:2]).all()
+    assert rows.size == P.shape[1]
+    expect = 2 if (P.shape[1] - k) % 2 == 0 else 1
+    assert space.blocksize == expect
+    assert walls == 0 or P.shape[1] > k                    # wall unknowns exist
+    A = linear_elasticity_matrix(basis)[free][:, free].tocsr()
+    M = space.preconditioner(A)
+    assert M.blocksize == expect
+    a, c = np.random.default_rng(1).normal(size=(2, free.size))
+    assert abs(M(a) @ c - a @ M(c)) < 1e-9 * abs(M(a) @ c)
+
+
+def linear_elasticity_matrix(basis):
+    from skfem.models.elasticity import linear_elasticity
+    return linear_elasticity(1.0, 0.3).assemble(basis)

@@ -165,9 +165,12 @@ AUTO_FGMRES_UNKNOWNS_3D = 6_000
 # The quadratic natural-neighbour viscous block (211 entries a row) factorises slowly, and
 # "fgmres" with the two-level method (models.stokes_two_level) needs no factors: SolCx at a
 # contrast of 1e6 (interface as segments), one solve to 1e-8, seconds and peak MB of
-# "schur" / "fgmres", other jobs on the two cores: 8,594 unknowns 2.9 / 3.1 s and 162 /
-# 108 MB, 33,242: 33.0 / 14.4 s and 1,062 / 473 MB (benchmarks/quadratic_stokes.py). So
-# "auto" takes "fgmres" for it from this many velocity unknowns on
+# "schur" / "fgmres" on quiet cores: 2,754 unknowns 0.22 / 0.24 s and 27 / 27 MB, 8,594:
+# 1.15 / 0.73 s and 145 / 105 MB, 16,830: 3.49 / 1.50 s and 392 / 240 MB
+# (benchmarks/quadratic_stokes.py). But asked for 1e-10, "fgmres" stalled at 1.04e-10 at
+# a contrast of 1e6 (benchmarks/constrained_interfaces.py's SolCx, below 20,000 unknowns),
+# where "schur" reaches it. So "auto" takes "fgmres" for it from this many velocity
+# unknowns on, where factorising is out of reach
 AUTO_FGMRES_UNKNOWNS_NEM2 = 20_000
 
 

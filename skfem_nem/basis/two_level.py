@@ -296,7 +296,10 @@ class TwoLevelSpace:
     dof at position ``order[i]``): the nested prolongation from the nodal values of the free
     nodal dofs (``prolongation``), the node stars (``stars``) and, for a vector basis, the
     coarse level's near null space (``modes``: translations and rotations of the nodal
-    values; None for a scalar basis). :meth:`preconditioner` builds
+    values; None for a scalar basis) and the size of the blocks in which the coarse
+    unknowns come, whole nodes first (``blocksize``: the components of a vector basis, 1
+    where the nodes with some fixed components leave a remainder). :meth:`preconditioner`
+    builds
     :class:`TwoLevelPreconditioner` for a matrix on those dofs; the space is kept while the
     matrix changes (Picard iterations, new viscosities)."""
 

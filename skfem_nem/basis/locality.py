@@ -5,10 +5,10 @@ where a row's columns lie. A scikit-fem basis numbers the nodal dofs first and t
 after them, and the nodes come in the order they were given (random nodes: at random), so a
 row of the quadratic Poisson matrix (111 entries) reads ``x`` all over the vector. Numbered
 along a Hilbert curve through the nodes, each node followed by its edges' dofs, the same
-product at 127,961 unknowns took 6.3 ms against 9.2 ms (``benchmarks/quadratic_solvers.py``
-measures the solver). :func:`renumbered` applies such an order to a matrix with one copy of
-its rows; the distributed assembly (:mod:`skfem_nem.parallel.petsc`) renumbers its rows with
-it too.
+product at 127,961 unknowns took 5.7 ms against 9.2 ms (docs/quadratic.md, "Products in a
+local order"). :func:`renumbered` applies such an order to a matrix with one copy of its
+rows; the distributed assembly (:mod:`skfem_nem.parallel.petsc`) renumbers its rows with it
+too.
 """
 from __future__ import annotations
 
@@ -70,10 +70,9 @@ def _renumbered_rows(indptr, indices, data, rows, new, ptr, out_indices, out_dat
 def dof_locality_order(basis, free: np.ndarray) -> np.ndarray:
     """An order of the dofs ``free`` of ``basis`` (positions in ``free``) in which each
     node's dofs come together along a Hilbert curve through the nodes (a Z-order curve in
-    3D): a node's dof of
-    every component, then the dofs of the edges it is the first node of (along the
-    curve). Scalar or vector (``ElementVector``), nodal and edge dofs (the edge dofs of
-    the quadratic basis; a basis without them orders its nodes)."""
+    3D): a node's dof of every component, then the dofs of the edges it is the first node
+    of (along the curve). Scalar or vector (``ElementVector``), nodal and edge dofs (the
+    edge dofs of the quadratic basis; a basis without them orders its nodes)."""
     free = np.asarray(free, dtype=np.int64)
     mesh = basis.mesh
     nodal = np.atleast_2d(basis.nodal_dofs)

@@ -102,12 +102,9 @@ def _solved(A, b, M, tol: float, maxiter: int) -> tuple:
     :mod:`.locality`): ``(x, iterations, converged)``."""
     if not isinstance(M, TwoLevelPreconditioner):
         return flexible_cg(A, b, M, tol, maxiter)
-    out = []
-
-    def run(b_new):
-        out.extend(flexible_cg(M.A, b_new, M.renumbered, tol, maxiter))
-        return out[0]
-    return (M.in_basis_order(run, np.asarray(b, dtype=float)),) + tuple(out[1:])
+    x, its, converged = flexible_cg(M.A, M.to_own_order(np.asarray(b, dtype=float)),
+                                    M.renumbered, tol, maxiter)
+    return M.to_callers_order(x), its, converged
 
 
 def natural_neighbour_solver(basis, D: Optional[np.ndarray] = None, tol: float = SOLVER_TOL,

@@ -282,10 +282,18 @@ class TwoLevelPreconditioner:
 
     def in_basis_order(self, f, b: np.ndarray) -> np.ndarray:
         """``f`` (a map of vectors in the renumbered order) on ``b`` in the basis's order."""
+        return self.to_callers_order(f(self.to_own_order(b)))
+
+    def to_own_order(self, b: np.ndarray) -> np.ndarray:
+        """``b``, numbered in the caller's order, in the preconditioner's (``b[order]``)."""
+        return b if self.order is None else b[self.order]
+
+    def to_callers_order(self, x: np.ndarray) -> np.ndarray:
+        """``x``, numbered in the preconditioner's order, in the caller's."""
         if self.order is None:
-            return f(b)
-        out = np.empty_like(b)
-        out[self.order] = f(b[self.order])
+            return x
+        out = np.empty_like(x)
+        out[self.order] = x
         return out
 
 
@@ -323,8 +331,7 @@ class TwoLevelSpace:
         ptr, idx = star_dofs(basis, self.free)
         self.stars = (ptr, self.new[idx])
         # column j of the prolongation is the nodal dof coarse[j]: its rigid modes
-        self.modes = (rigid_modes(basis, coarse) if nodal.size > basis.mesh.p.shape[1]
-                      else None)
+        self.modes = rigid_modes(basis, coarse) if ncomp > 1 else None
         self.blocksize = _node_blocks(columns[coarse] % nn, ncomp)
 
     @property

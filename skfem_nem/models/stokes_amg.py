@@ -19,10 +19,10 @@ from numba import njit, prange
 from ..basis.multigrid import (AMG_SEED, K_CYCLE_TOL, k_cycle, polynomial_smoothers,
                                seeded_global_random, v_cycle)
 from ..basis.rigid_modes import rigid_modes, velocity_components
+from ..basis.symmetric_rows import SymmetricRows
 from .amg_blocks import galerkin_of_blocks, hierarchy_of_blocks, plain_aggregation
 from .block_rows import BlockSymmetricRows, node_positions
 from .krylov import cg_steps, largest_eigenvalue
-from ..basis.symmetric_rows import SymmetricRows
 
 __all__ = ["AMG_COARSE_SOLVER", "AMG_MAX_COARSE", "AMG_SEED", "AMG_SMOOTHER", "AMG_STRENGTH",
            "CHEBYSHEV_INTERVAL", "COARSE_KEPT", "FINE_VALUES", "K_CYCLE_3D", "K_CYCLE_TOL",

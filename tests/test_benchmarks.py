@@ -839,3 +839,15 @@ def test_quadratic_cost_prints_the_fastest_run_and_the_ratio_at_equal_error(caps
         with pytest.raises(SystemExit) as e:
             bench.main(bad)
         assert e.value.code == 2
+
+
+@pytest.mark.parametrize("argv", [["--steps", "2"], ["--flow", "plate", "--steps", "0"],
+                                  ["--flow", "donea-huerta", "--steps", "3"]])
+def test_mpi_benchmark_refuses_steps_it_cannot_run(argv, capsys):
+    """``benchmarks/mpi.py --steps``: a positive number, and of a plate flow only (a
+    Stokes flow is one solve); refused before any MPI run starts."""
+    mpi = load_benchmark("mpi")
+    with pytest.raises(SystemExit) as err:
+        mpi.main(argv)
+    assert err.value.code == 2
+    assert "--steps" in capsys.readouterr().err

@@ -259,9 +259,10 @@ def test_a_step_builds_its_spaces_with_the_last_steps_gone(tmp_path, monkeypatch
 
     import skfem_nem.apps.sinking_plate_3d as app
     seen, build, solve = [], app.stokes_spaces, app.vep_step
-    kept = {}
+    kept, cells = {}, []
 
     def spy_build(mesh, **kw):
+        cells.append(mesh.nelements)
         seen.append(all(r() is None for r in kept.values()))
         return build(mesh, **kw)
 
@@ -277,8 +278,10 @@ def test_a_step_builds_its_spaces_with_the_last_steps_gone(tmp_path, monkeypatch
     sim.step(10.0)
     last = sim.solution()
     assert isinstance(last, app.LastSolve)
-    assert all(isinstance(a, np.ndarray) for a in last)
+    assert all(isinstance(a, np.ndarray) for a in (last.u, last.p, last.velocity,
+                                                    last.pressure))
     assert last.velocity.shape == (sim.lm.nodes.shape[0], 3)
+    assert last.cells == cells[-1] and last.ranks == 1
     sim.step(10.0)
     assert seen == [True, False, True, True]
 

@@ -59,6 +59,7 @@ from ..models.rheology import (Material, PicardNotConverged, from_ip_field, seco
                                to_ip_field, vep_step)
 from ..models.stokes import outline_flux, stokes_spaces
 from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
+from .last_solve import LastSolve
 from .plate_parts import check_same_mesh, over_parts, part_rows, start_ranks, whole_rows
 
 # (PlateConfig, load_config and stored_config are re-exported from plate_config)
@@ -311,36 +312,8 @@ class SinkingPlate:
         c = self.cfg
         lm = self.lm
         t0 = _time.perf_counter()
-        gauss = c.integration == "gauss"
-        # over MPI each rank builds the bases of its part of the triangles alone and updates
-        # the integration-point fields there; the fields are then joined on every rank
-        spaces = stokes_spaces(lm.mesh, "nem", npoints=3 if gauss else None,
-                               integration=c.integration,
-                               elements="owned" if self.ranks > 1 else None)
-        mine, nt = spaces.elements, lm.triangles.shape[0]
-        t_basis = _time.perf_counter() - t0
-        mat, force, plate = self.materials(spaces)
-        tau_old = from_ip_field(part_rows(lm.ip_fields["stress"], mine))
-        ps_old = part_rows(lm.ip_fields["plastic_strain"], mine)
-        # the plate is incompressible as a whole: zero net flux of the nodal
-        # velocities through its outline (the polygon's area is kept)
-        # Picard iterations start from the effective viscosity of the previous
-        # step, carried (as its logarithm) by the mesh like the stress
-        guess = part_rows(lm.ip_fields.get("log_eta_eff"), mine)
-        # the step's Picard iterations share a cache (what it kept is counted below)
-        cache = StokesCache() if c.solver in CACHED_SOLVERS else None
-        r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
-                     tol=c.picard_tol, solver=c.solver,
-                     constraints=self._area_constraint(spaces, dt),
-                     eta_guess=None if guess is None else np.exp(guess), cache=cache)
-        lm.ip_fields["log_eta_eff"] = whole_rows(np.log(r.eta_eff), mine, nt)
-        lm.ip_fields["stress"] = whole_rows(to_ip_field(r.tau), mine, nt)
-        lm.ip_fields["plastic_strain"] = whole_rows(np.ascontiguousarray(r.plastic_strain),
-                                                mine, nt)
-        yielded = int(over_parts(np.count_nonzero(r.yielded), mine))
-        plate_stress = over_parts(float(second_invariant(r.tau)[plate].max()) if plate.any()
-                              else 0.0, mine, largest=True)
-        v = hold_off_walls(lm, r.solution.velocity_at_nodes(), c)
+        last, solved = self._solve(dt)
+        v = hold_off_walls(lm, last.velocity, c)
         t_solve = _time.perf_counter() - t0
 
         def velocity(x):
@@ -367,7 +340,8 @@ class SinkingPlate:
                "inverted_triangles": int(np.count_nonzero(lm.triangulation.orientation() <= 0)),
                "non_delaunay_edges": lm.triangulation.non_delaunay_edges(),
                "max_plastic_strain": float(lm.ip_fields["plastic_strain"].max()),
-               "yielded_points": yielded, "max_plate_stress": plate_stress,
+               "yielded_points": solved["yielded_points"],
+               "max_plate_stress": solved["max_plate_stress"],
                "max_speed": float(np.hypot(*v.T).max()),
                "flips": rep["flips"], "injected": rep["injected"],
                "relocated": rep["relocated"], "substeps": rep["substeps"],
@@ -379,13 +353,58 @@ class SinkingPlate:
                "longest_edge": rep["longest_edge"], "edges_split": rep["edges_split"],
                "predictor_iterations": rep["iterations"],
                "predictor_converged": int(rep["converged"]),
-               "picard_iterations": r.iterations, "solver_iterations": r.solution.iterations,
-               "factorisations": 0 if cache is None else cache.factorisations,
-               "basis_seconds": t_basis, "assembly_seconds": r.seconds["assembly"],
-               "solver_seconds": r.seconds["solver"], "solve_seconds": t_solve,
+               "picard_iterations": solved["picard_iterations"],
+               "solver_iterations": solved["solver_iterations"],
+               "factorisations": solved["factorisations"],
+               "basis_seconds": solved["basis_seconds"],
+               "assembly_seconds": solved["assembly_seconds"],
+               "solver_seconds": solved["solver_seconds"], "solve_seconds": t_solve,
                "evolution_seconds": t_evolution, "step_seconds": _time.perf_counter() - t0}
-        self._last = (spaces, r, plate)
+        self._last = last
         return row
+
+    def _solve(self, dt: float):
+        """The step's Picard iterations on the current mesh: the fields updated, and what
+        the step keeps of the solve (:class:`LastSolve`) with its counts and sums. The
+        bases, the system and the solver's cache go when it returns, before the mesh
+        moves (the solution holds its spaces: kept to the next step, they stood beside
+        its own)."""
+        c, lm = self.cfg, self.lm
+        t0 = _time.perf_counter()
+        gauss = c.integration == "gauss"
+        # over MPI each rank builds the bases of its part of the triangles alone and updates
+        # the integration-point fields there; the fields are then joined on every rank
+        spaces = stokes_spaces(lm.mesh, "nem", npoints=3 if gauss else None,
+                               integration=c.integration,
+                               elements="owned" if self.ranks > 1 else None)
+        mine, nt = spaces.elements, lm.triangles.shape[0]
+        t_basis = _time.perf_counter() - t0
+        mat, force, plate = self.materials(spaces)
+        tau_old = from_ip_field(part_rows(lm.ip_fields["stress"], mine))
+        ps_old = part_rows(lm.ip_fields["plastic_strain"], mine)
+        # the plate is incompressible as a whole: zero net flux of the nodal
+        # velocities through its outline (the polygon's area is kept)
+        # Picard iterations start from the effective viscosity of the previous
+        # step, carried (as its logarithm) by the mesh like the stress
+        guess = part_rows(lm.ip_fields.get("log_eta_eff"), mine)
+        # the step's Picard iterations share a cache (what it kept is counted below)
+        cache = StokesCache() if c.solver in CACHED_SOLVERS else None
+        r = vep_step(spaces, mat, tau_old, dt, f=force, plastic_strain=ps_old,
+                     tol=c.picard_tol, solver=c.solver,
+                     constraints=self._area_constraint(spaces, dt),
+                     eta_guess=None if guess is None else np.exp(guess), cache=cache)
+        lm.ip_fields["log_eta_eff"] = whole_rows(np.log(r.eta_eff), mine, nt)
+        lm.ip_fields["stress"] = whole_rows(to_ip_field(r.tau), mine, nt)
+        lm.ip_fields["plastic_strain"] = whole_rows(np.ascontiguousarray(r.plastic_strain),
+                                                mine, nt)
+        stress = float(second_invariant(r.tau)[plate].max()) if plate.any() else 0.0
+        return LastSolve.of(r.solution, mine, nt), {
+            "yielded_points": int(over_parts(np.count_nonzero(r.yielded), mine)),
+            "max_plate_stress": over_parts(stress, mine, largest=True),
+            "picard_iterations": r.iterations, "solver_iterations": r.solution.iterations,
+            "factorisations": 0 if cache is None else cache.factorisations,
+            "basis_seconds": t_basis, "assembly_seconds": r.seconds["assembly"],
+            "solver_seconds": r.seconds["solver"]}
 
     def _area_constraint(self, spaces, dt: float):
         """The outline-flux constraint of a step: zero net flux, or with
@@ -458,10 +477,9 @@ class SinkingPlate:
 
     # -- outputs ----------------------------------------------------------------
     @property
-    def solution(self):
-        """The Stokes solution of the last step (None before the first step)."""
-        last = getattr(self, "_last", None)
-        return None if last is None else last[1].solution
+    def solution(self) -> Optional[LastSolve]:
+        """What the last step kept of its Stokes solve (None before the first step)."""
+        return getattr(self, "_last", None)
 
     @property
     def root(self) -> bool:
@@ -472,7 +490,7 @@ class SinkingPlate:
         """``RuntimeError`` if the ranks' meshes differ (nodes, triangles or clock)."""
         check_same_mesh(self.lm.nodes, self.lm.triangles, self.lm.time, self.lm.step)
 
-    def write_output(self, spaces=None, r=None, plate=None) -> str:
+    def write_output(self, last: Optional[LastSolve] = None) -> str:
         """Write the next ``plate_NNNNN.vtu`` and add it to ``plate.pvd`` (rank 0
         only; other ranks return ``""``); returns its name."""
         if not self.root:
@@ -491,9 +509,8 @@ class SinkingPlate:
         pd["viscosity"] = eta_n
         pd["density"] = np.where(on_plate, c.plate_density, 0.0)
         pd["material"] = on_plate.astype(float)
-        if r is not None and r.solution.u.size == 2 * P.shape[0]:
-            pd["velocity"] = r.solution.velocity_at_nodes()
-            pd["pressure"] = r.solution.pressure_at_nodes()
+        if last is not None and last.velocity.shape[0] == P.shape[0]:
+            pd["velocity"], pd["pressure"] = last.velocity, last.pressure
         S = lm.ip_fields["stress"]
         cd = {"stress_invariant": second_invariant(from_ip_field(S)).mean(axis=1),
               "plastic_strain": lm.ip_fields["plastic_strain"].mean(axis=1)}
@@ -564,7 +581,7 @@ class SinkingPlate:
                     log.append(row)
                 steps += 1
                 if lm.time >= self.next_output * (1 - 1e-12) or lm.time >= c.end_time * (1 - 1e-12):
-                    self.write_output(*self._last)
+                    self.write_output(self._last)
                     self.next_output = next_output_time(lm.time, c.output_interval)
                 if lm.step % c.checkpoint_every == 0:
                     self.checkpoint()

@@ -28,7 +28,7 @@ import json
 import time as _time
 from dataclasses import asdict
 from pathlib import Path
-from typing import NamedTuple, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -47,6 +47,7 @@ from .plate3d_config import Plate3DConfig, plate_box
 from .plate3d_figures import plate3d_figures
 from .plate3d_materials import plate_materials
 from .plate_config import stored_config
+from .last_solve import LastSolve
 from .plate_parts import check_same_mesh, over_parts, part_rows, start_ranks, whole_rows
 
 __all__ = ["SinkingPlate3D", "plate_box"]
@@ -93,20 +94,6 @@ def initial_nodes(c: Plate3DConfig) -> np.ndarray:
     p = box_nodes_3d(c.nodes, (c.width, c.depth, c.height), density=density, seed=c.seed,
                      boundary_spacing=WALL_SPACING * c.height)
     return p[morton_order(p)]
-
-
-class LastSolve(NamedTuple):
-    """What a step keeps of its Stokes solve: the velocity dofs ``u`` (the next step's
-    start) and the velocity (n, 3) and pressure (n,) at the nodes it was solved on. The
-    solution itself holds the spaces, a gigabyte at 30,000 nodes."""
-
-    u: np.ndarray
-    velocity: np.ndarray
-    pressure: np.ndarray
-
-    @classmethod
-    def of(cls, solution) -> "LastSolve":
-        return cls(solution.u, solution.velocity_at_nodes(), solution.pressure_at_nodes())
 
 
 class _TooLong(Exception):
@@ -264,7 +251,7 @@ class SinkingPlate3D:
             return (P.probes(x.T) @ u).reshape(3, -1).T
 
         report = lm.advance(velocity, dt, tol=1e-8, inject=self._split())
-        self._last = LastSolve.of(r.solution)
+        self._last = LastSolve.of(r.solution, spaces.elements, spaces.ubasis.mesh.nelements)
         self.dt_next = stable
         return self._row(report, r, v, s, stable, seconds=(t_basis, t_solve, t0),
                          cells=spaces.elements)
@@ -296,7 +283,7 @@ class SinkingPlate3D:
         lm.step -= 1              # two moves, one step, one report
         report.update(step=lm.step, dt=dt, **{k: report[k] + half[k] for k in MOVE_SUMS})
         lm.history[-2:] = [report]
-        self._last = LastSolve.of(r2.solution)
+        self._last = LastSolve.of(r2.solution, spaces.elements, spaces.ubasis.mesh.nelements)
         self.dt_next = min(stable, stable2)
         return self._row(report, r2, v2, s2, min(stable, stable2),
                          seconds=(t_basis, t_solve, t0), cells=spaces.elements)

@@ -11,7 +11,8 @@ matrix and inserts only its own block of rows (PETSc's default split of the rows
 split the caller gives); :func:`check_replicated` verifies that the ranks really hold the
 same matrix (a random node set drawn without a seed would differ). Distributed: every
 rank holds only its share (the part its own cells assembled, :func:`owned_elements`)
-and :func:`summed_rows` sends each rank the rows it owns from every other share; the
+and :func:`summed_rows` sends each rank the rows it owns from every other share (or
+:func:`sent_rows`, for a caller that lets its share go before the rows are added up); the
 owned rows then come in as one CSR block, which preallocates the MPIAIJ matrix exactly.
 The mesh itself is the same on every rank (:func:`ranks_differing` checks it).
 
@@ -30,6 +31,7 @@ from typing import Iterator, Optional, Sequence, Tuple
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from ..basis.locality import inverse_order, renumbered
 from .partition import Bisection
@@ -37,8 +39,8 @@ from .partition import Bisection
 __all__ = ["PETSC_INSTALL_HINT", "PetscUnavailableError", "import_petsc", "debian_petsc_dir",
            "csr_to_petsc", "vector", "gather", "destroying", "check_replicated",
            "default_options", "default_split", "split_bounds", "row_range", "ranks_differing",
-           "world", "rows_to_petsc", "summed_rows", "summed", "maximum", "joined",
-           "first_block_first", "nest_from_rows",
+           "world", "rows_to_petsc", "summed_rows", "sent_rows", "ReceivedRows", "summed",
+           "maximum", "joined", "first_block_first", "nest_from_rows", "nest_blocks", "nest_of",
            "owned_elements"]
 
 PETSC_INSTALL_HINT = (
@@ -172,10 +174,20 @@ def nest_from_rows(rows: sp.csr_matrix, first: np.ndarray, start: int, comm):
     whose unknowns ``first`` marks as the first block's, as a PETSc nest of four MPIAIJ
     blocks, and its two row index sets. Each rank's rows must hold the first block's
     unknowns first (:func:`first_block_first`), so the nest numbers the unknowns as the
-    rows do and vectors split like the rows serve it.
+    rows do and vectors split like the rows serve it. :func:`nest_blocks` and
+    :func:`nest_of` in one call; a caller that can let its rows go once they are split
+    calls them apart.
 
     Why a nest: PCFIELDSPLIT takes a nest's blocks as they are, where it copies them out
     of one AIJ matrix (the viscous block, most of the entries, twice in memory)."""
+    return nest_of(nest_blocks(rows, first, start), comm)
+
+
+def nest_blocks(rows: sp.csr_matrix, first: np.ndarray, start: int) -> list:
+    """The four blocks of :func:`nest_from_rows`' rows, rows by rows, each as
+    ``((indptr, indices, data), ((local, global) rows, (local, global) columns))`` in
+    PETSc's index type: one pass over the rows, one copy of them in all (slicing rows and
+    columns with scipy made two, and PETSc's index type a third of the indices)."""
     PETSc = import_petsc()
     k, n = rows.shape
     mine = first[start:start + k]
@@ -183,17 +195,67 @@ def nest_from_rows(rows: sp.csr_matrix, first: np.ndarray, start: int, comm):
     if not mine[:nv].all():
         raise ValueError(f"rows {start}..{start + k - 1}: the first block's unknowns must "
                          f"come first on every rank (first_block_first)")
-    cols = (np.flatnonzero(first), np.flatnonzero(~first))
-    local = ((nv, cols[0].size), (k - nv, cols[1].size))
-    blocks = []
-    for i, part in enumerate((rows[:nv], rows[nv:])):
-        blocks.append([_aij(part[:, c], (local[i], local[j]), comm)
-                       for j, c in enumerate(cols)])
-    K = PETSc.Mat().createNest(blocks, comm=comm)
-    for row in blocks:
-        for b in row:
-            b.destroy()   # (the nest holds them)
+    first = np.asarray(first, dtype=bool)
+    new = np.empty(n, dtype=np.int64)                  # a column's place in its block
+    new[first] = np.arange(np.count_nonzero(first))
+    new[~first] = np.arange(n - np.count_nonzero(first))
+    rows = sp.csr_matrix(rows)
+    if not rows.has_sorted_indices:
+        rows = rows.sorted_indices()
+    counts = np.zeros((k, 2), dtype=np.int64)
+    _block_counts(rows.indptr, rows.indices, first, counts)
+    nfirst = int(np.count_nonzero(first))
+    out, sizes = [], ((nv, nfirst), (k - nv, n - nfirst))   # (local, global) of each block
+    for i, (r0, r1) in enumerate(((0, nv), (nv, k))):
+        for j in range(2):
+            ptr = np.zeros(r1 - r0 + 1, dtype=PETSc.IntType)
+            np.cumsum(counts[r0:r1, j], out=ptr[1:])
+            idx = np.empty(int(ptr[-1]), dtype=PETSc.IntType)
+            val = np.empty(int(ptr[-1]), dtype=PETSc.ScalarType)
+            _block_fill(rows.indptr, rows.indices, rows.data, first, new, r0, r1, j == 0,
+                        ptr, idx, val)
+            out.append(((ptr, idx, val), (sizes[i], sizes[j])))
+    return out
+
+
+def nest_of(blocks: list, comm):
+    """The PETSc nest of :func:`nest_blocks`' four blocks (emptied as each becomes a
+    PETSc matrix, so its arrays go as PETSc's copy is made) and its two row index
+    sets."""
+    PETSc = import_petsc()
+    mats = []
+    while blocks:
+        csr, size = blocks.pop(0)
+        M = PETSc.Mat().createAIJ(size=size, csr=csr, comm=comm)
+        del csr
+        M.assemble()
+        mats.append(M)
+    K = PETSc.Mat().createNest([mats[:2], mats[2:]], comm=comm)
+    for M in mats:
+        M.destroy()   # (the nest holds them)
     return K, K.getNestISs()[0]
+
+
+@njit(cache=True)
+def _block_counts(indptr, indices, first, counts):
+    """Each row's entries in the first block's columns and in the others'."""
+    for r in range(indptr.size - 1):
+        for k in range(indptr[r], indptr[r + 1]):
+            counts[r, 0 if first[indices[k]] else 1] += 1
+
+
+@njit(cache=True)
+def _block_fill(indptr, indices, data, first, new, r0, r1, lead, ptr, out_indices, out_data):
+    """Rows ``r0 .. r1 - 1``' entries in the first block's columns (``lead``) or the
+    others', renumbered within the block (``new``), in order."""
+    for r in range(r0, r1):
+        f = ptr[r - r0]
+        for k in range(indptr[r], indptr[r + 1]):
+            c = indices[k]
+            if first[c] == lead:
+                out_indices[f] = new[c]
+                out_data[f] = data[k]
+                f += 1
 
 
 def _aij(block: sp.csr_matrix, size: tuple, comm):
@@ -216,6 +278,16 @@ def summed_rows(part: sp.spmatrix, comm, owned: Optional[Sequence[int]] = None,
     each other rank the rows it owns and adds what it receives, so no rank ever holds
     more than its share and its own rows. ``order``: the unknowns renumbered first (new
     ``i`` is old ``order[i]``, rows and columns; one copy of the share).
+    :func:`sent_rows` and :meth:`ReceivedRows.summed` in one call; a caller that can let
+    its share go once it is sent calls them apart."""
+    return sent_rows(part, comm, owned, order).summed()
+
+
+def sent_rows(part: sp.spmatrix, comm, owned: Optional[Sequence[int]] = None,
+              order: Optional[np.ndarray] = None) -> "ReceivedRows":
+    """Every rank's rows of this rank's ``part`` sent to it, and this rank's rows of every
+    rank's share received (``order`` as in :func:`summed_rows`); the share is not needed
+    after, so a caller lets it go before :meth:`ReceivedRows.summed` adds them up.
 
     The rows go as raw arrays (MPI's ``Alltoallv`` of the row lengths, the column indices
     and the values straight from the share's arrays, which hold each rank's rows in one
@@ -228,9 +300,56 @@ def summed_rows(part: sp.spmatrix, comm, owned: Optional[Sequence[int]] = None,
     return _exchanged(part, bounds, comm.tompi4py())
 
 
-def _exchanged(K: sp.csr_matrix, bounds: list, mpi) -> sp.csr_matrix:
-    """The sum of the rows ``bounds[rank]`` of every rank's ``K`` (rows in the same
-    numbering on every rank), as this rank's CSR block."""
+class ReceivedRows:
+    """This rank's rows as every rank's share holds them (:func:`sent_rows`): the row
+    lengths ``counts`` (sender by sender, ``mine`` rows each), and the column indices and
+    values one sender's piece after the other, from ``at[s]``."""
+
+    def __init__(self, counts, at, indices, data, mine: int, ncols: int):
+        self.counts, self.at, self.indices, self.data = counts, at, indices, data
+        self.mine, self.ncols = mine, ncols
+
+    def summed(self) -> sp.csr_matrix:
+        """The rows summed over the senders, as one CSR block with sorted columns. Once:
+        the received arrays are let go as the rows are laid out (a row's pieces side by
+        side, then added in place; scipy's sum of the senders' blocks one after the
+        other held three copies of the rows)."""
+        lengths = self.counts.reshape(self.at.size - 1, self.mine).sum(axis=0)
+        total = int(lengths.sum())
+        wide = self.indices.dtype != np.int32 or total > np.iinfo(np.int32).max
+        ptr = np.zeros(self.mine + 1, dtype=np.int64 if wide else np.int32)
+        np.cumsum(lengths, out=ptr[1:])
+        indices = np.empty(total, dtype=ptr.dtype)
+        data = np.empty(total, dtype=self.data.dtype)
+        _side_by_side(self.counts, self.at, self.indices, self.data, ptr, indices, data)
+        self.indices = self.data = None
+        rows = sp.csr_matrix((data, indices, ptr), shape=(self.mine, self.ncols))
+        rows.sum_duplicates()
+        rows.eliminate_zeros()      # (as a sum of scipy's blocks: the same pattern)
+        return rows
+
+
+@njit(cache=True)
+def _side_by_side(counts, at, indices, data, ptr, out_indices, out_data):
+    """Each row's pieces from the senders (``counts`` sender by sender, pieces from
+    ``at``) one after the other in the row ``ptr`` gives it."""
+    mine = ptr.size - 1
+    fill = ptr[:-1].astype(np.int64)
+    for s in range(at.size - 1):
+        o = at[s]
+        for i in range(mine):
+            n = counts[s * mine + i]
+            f = fill[i]
+            for k in range(n):
+                out_indices[f + k] = indices[o + k]
+                out_data[f + k] = data[o + k]
+            fill[i] = f + n
+            o += n
+
+
+def _exchanged(K: sp.csr_matrix, bounds: list, mpi) -> ReceivedRows:
+    """The rows ``bounds[rank]`` of every rank's ``K`` (rows in the same numbering on
+    every rank), received on this rank."""
     rank, size = mpi.Get_rank(), mpi.Get_size()
     lo = np.array([a for a, _ in bounds], dtype=np.int64)
     hi = np.array([b for _, b in bounds], dtype=np.int64)
@@ -249,14 +368,7 @@ def _exchanged(K: sp.csr_matrix, bounds: list, mpi) -> sp.csr_matrix:
         out = np.empty(int(at[-1]), dtype=buf.dtype)
         mpi.Alltoallv([buf, (nnz_out, K.indptr[lo])], [out, (nnz_in, at[:-1])])
         recv.append(out)
-    total = None
-    for s in range(size):
-        ptr = np.zeros(mine + 1, dtype=np.int64)
-        np.cumsum(rows_in[s * mine:(s + 1) * mine], out=ptr[1:])
-        block = sp.csr_matrix((recv[1][at[s]:at[s + 1]], recv[0][at[s]:at[s + 1]], ptr),
-                              shape=(mine, K.shape[1]))
-        total = block if total is None else total + block
-    return sp.csr_matrix(total)
+    return ReceivedRows(rows_in, at, recv[0], recv[1], mine, K.shape[1])
 
 
 def summed(values: np.ndarray, comm=None) -> np.ndarray:

@@ -35,8 +35,8 @@ import scipy.sparse as sp
 
 from ..basis.locality import inverse_order, renumbered
 from .petsc import (check_replicated, csr_to_petsc, default_options, destroying,
-                    first_block_first, gather, import_petsc, nest_from_rows, rows_to_petsc,
-                    split_bounds, summed_rows, vector)
+                    first_block_first, gather, import_petsc, nest_blocks, nest_of, rows_to_petsc,
+                    sent_rows, split_bounds, vector)
 from .petsc import summed as summed_vector
 from .solver import converged_or_raise, null_space
 
@@ -120,18 +120,23 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     K = renumbered(K, perm, inverse_order(perm))      # (one copy of K held at a time)
     if summed:
         f, g, schur_diagonal = (summed_vector(v, comm) for v in (f, g, schur_diagonal))
-        rows = summed_rows(K, comm)
+        received = sent_rows(K, comm)
+        del K           # (sent: the share goes before the received rows are added up)
+        rows = received.summed()
+        del received
     else:
         check_replicated(K, comm, "saddle-point matrix")
         rows = K[slice(*bounds[comm.getRank()])]
-    del K
+        del K
     velocity = perm < n1
     r0, r1 = bounds[comm.getRank()]
     if nested:
-        Kmat, sets = nest_from_rows(rows, velocity, r0, comm)
+        blocks = nest_blocks(rows, velocity, r0)
+        del rows        # (split: the rows go before PETSc copies the blocks)
+        Kmat, sets = nest_of(blocks, comm)
     else:
         Kmat, sets = rows_to_petsc(rows, n, comm), _index_sets(comm, velocity, r0, r1)
-    del rows  # (PETSc holds the rows now)
+        del rows  # (PETSc holds the rows now)
     with destroying(Kmat, vector(np.concatenate([f, g])[perm], comm), *sets) as objs:
         Kmat, rhs = objs[:2]
         x = rhs.duplicate()

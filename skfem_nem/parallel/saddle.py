@@ -109,7 +109,7 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     perm = np.arange(n) if order is None else np.asarray(order)
     if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
         raise ValueError(f"order must be a permutation of the {n} unknowns")
-    K = sp.bmat([[A, B.T], [B, C]], format="csr")
+    share = [sp.bmat([[A, B.T], [B, C]], format="csr")]     # (let go in _to_petsc)
     del A, B, C
     if release is not None:
         release()
@@ -117,26 +117,10 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
     nested = _nested(prefix)
     if nested:
         perm = first_block_first(perm, np.arange(n) < n1, bounds)
-    K = renumbered(K, perm, inverse_order(perm))      # (one copy of K held at a time)
     if summed:
         f, g, schur_diagonal = (summed_vector(v, comm) for v in (f, g, schur_diagonal))
-        received = sent_rows(K, comm)
-        del K           # (sent: the share goes before the received rows are added up)
-        rows = received.summed()
-        del received
-    else:
-        check_replicated(K, comm, "saddle-point matrix")
-        rows = K[slice(*bounds[comm.getRank()])]
-        del K
     velocity = perm < n1
-    r0, r1 = bounds[comm.getRank()]
-    if nested:
-        blocks = nest_blocks(rows, velocity, r0)
-        del rows        # (split: the rows go before PETSc copies the blocks)
-        Kmat, sets = nest_of(blocks, comm)
-    else:
-        Kmat, sets = rows_to_petsc(rows, n, comm), _index_sets(comm, velocity, r0, r1)
-        del rows  # (PETSc holds the rows now)
+    Kmat, sets = _to_petsc(share, perm, velocity, bounds, summed, nested, comm)
     with destroying(Kmat, vector(np.concatenate([f, g])[perm], comm), *sets) as objs:
         Kmat, rhs = objs[:2]
         x = rhs.duplicate()
@@ -160,6 +144,29 @@ def solve_saddle_petsc(A: sp.spmatrix, B: sp.spmatrix, C: sp.spmatrix, f: np.nda
         residual = np.empty(n)
         residual[perm] = gather(r)
     return SaddleResult(whole[:n1], whole[n1:], its, reason, comm.getSize(), pc0, residual)
+
+
+def _to_petsc(share: list, perm: np.ndarray, velocity: np.ndarray, bounds: list,
+              summed: bool, nested: bool, comm):
+    """The PETSc matrix of this rank's rows of the system (``share``: a list of the one
+    matrix, this rank's share or the whole, emptied here so that each copy goes as soon
+    as the next is made) renumbered by ``perm``, and its velocity and pressure row sets."""
+    K = renumbered(share.pop(), perm, inverse_order(perm))   # (one copy of K at a time)
+    if summed:
+        received = sent_rows(K, comm)
+        del K           # (sent: the share goes before the received rows are added up)
+        rows = received.summed()
+        del received
+    else:
+        check_replicated(K, comm, "saddle-point matrix")
+        rows = K[slice(*bounds[comm.getRank()])]
+        del K
+    r0, r1 = bounds[comm.getRank()]
+    if not nested:
+        return rows_to_petsc(rows, perm.size, comm), _index_sets(comm, velocity, r0, r1)
+    blocks = nest_blocks(rows, velocity, r0)
+    del rows            # (split: the rows go before PETSc copies the blocks)
+    return nest_of(blocks, comm)
 
 
 def _nested(prefix: str) -> bool:

@@ -81,6 +81,37 @@ def test_skfem_plot_draws_the_nem_field(mesh, basis):
     np.testing.assert_allclose(at_nodes, u, atol=ROUNDOFF)
 
 
+LATE_IMPORT = """
+import sys
+import numpy as np
+from skfem_nem import NaturalNeighbourBasis, delaunay_mesh
+from skfem_nem.geometry.nodesets import box_nodes
+mesh = delaunay_mesh(box_nodes(60, seed=3))
+basis = NaturalNeighbourBasis(mesh)
+print("matplotlib" in sys.modules)
+import matplotlib
+matplotlib.use("Agg")
+from skfem.visuals.matplotlib import plot
+ax = plot(basis, mesh.p[0] ** 2)
+M, v = basis.refinterp(mesh.p[0] ** 2)
+tp = [c for c in ax.collections if hasattr(c, "_triangulation")][0]
+print(tp._triangulation.triangles.shape[0] == 16 * mesh.nelements,
+      np.allclose(np.asarray(tp.get_array()), v))
+"""
+
+
+def test_a_basis_draws_with_scikit_fem_imported_after_it():
+    """A natural-neighbour basis imports no matplotlib (26 MB of every MPI rank's
+    memory); scikit-fem's ``plot`` imported afterwards still draws its field refined
+    (registered as its module is imported)."""
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-c", LATE_IMPORT], capture_output=True,
+                         text=True, check=True).stdout.split("\n")
+    assert out[0] == "False", out
+    assert out[1] == "True True", out
+
+
 def test_basis_plot_passes_scikit_fem_keywords(mesh, basis):
     u = field(*mesh.p)
     fig, ax = plt.subplots()

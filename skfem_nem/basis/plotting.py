@@ -17,6 +17,9 @@ neither scikit-fem's function for the refined mesh nor this module uses raises a
 from __future__ import annotations
 
 import importlib
+import importlib.abc
+import importlib.util
+import sys
 
 import numpy as np
 from skfem import MeshTri
@@ -42,6 +45,8 @@ DRAW_KEYWORDS = frozenset({
     "nrefs", "Nrefs"})
 
 _REGISTERED = set()
+#: the scikit-fem module whose dispatchers draw natural-neighbour fields
+MATPLOTLIB_VISUALS = "skfem.visuals.matplotlib"
 
 
 def _check_keywords(kwargs, allowed, who):
@@ -136,16 +141,50 @@ def _facet_refused(basis, *args, **kwargs):
 
 def install(cell_basis, facet_basis):
     """Register the natural-neighbour cell and facet basis classes with scikit-fem's
-    matplotlib ``plot``, ``plot3`` and ``draw`` (once)."""
+    matplotlib ``plot``, ``plot3`` and ``draw`` (once): at once if
+    ``skfem.visuals.matplotlib`` is imported, otherwise when it is (:class:`_OnImport`).
+    Importing it imports matplotlib's pyplot, 26 MB of every MPI rank's memory and a
+    few tenths of a second, which a run that draws nothing should not pay."""
     if (cell_basis, facet_basis) in _REGISTERED:
         return
-    import skfem.visuals.matplotlib as mpl
+    _REGISTERED.add((cell_basis, facet_basis))
+    module = sys.modules.get(MATPLOTLIB_VISUALS)
+    if module is not None:
+        _register(module, cell_basis, facet_basis)
+    elif not any(isinstance(f, _OnImport) for f in sys.meta_path):
+        sys.meta_path.insert(0, _OnImport())
+
+
+def _register(mpl, cell_basis, facet_basis) -> None:
+    """The bases' plots in the dispatchers of ``mpl`` (``skfem.visuals.matplotlib``)."""
     mpl.plot.register(cell_basis, plot_basis)
     mpl.plot3.register(cell_basis, plot3_basis)
     mpl.draw.register(cell_basis, draw_basis)
     for dispatcher in (mpl.plot, mpl.plot3, mpl.draw):
         dispatcher.register(facet_basis, _facet_refused)
-    _REGISTERED.add((cell_basis, facet_basis))
+
+
+class _OnImport(importlib.abc.MetaPathFinder):
+    """Registers the installed bases (:func:`_register`) once
+    ``skfem.visuals.matplotlib`` has been executed, whoever imports it: the module is
+    found as usual and its loader's ``exec_module`` runs the registration after the
+    module's own code. Leaves ``sys.meta_path`` at the first import of the module."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name != MATPLOTLIB_VISUALS:
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.loader is None:
+            return spec
+        run = spec.loader.exec_module
+
+        def exec_module(module):
+            run(module)
+            for bases in _REGISTERED:
+                _register(module, *bases)
+        spec.loader.exec_module = exec_module
+        return spec
 
 
 def visuals_call(basis, what, visuals, *args, **kwargs):

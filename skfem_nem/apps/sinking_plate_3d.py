@@ -41,13 +41,13 @@ from ..geometry.nodesets3d import box_nodes_3d
 from ..models.rheology import PicardNotConverged, second_invariant, vep_step
 from ..models.stokes import stokes_spaces
 from ..models.stokes_solvers import CACHED_SOLVERS, SolverNotConverged, StokesCache
+from .last_solve import LastSolve
 from .output import (CSVLog, PVDWriter, atomic_write_text, next_output_time,
                      progress_bar, write_vtu)
 from .plate3d_config import Plate3DConfig, plate_box
 from .plate3d_figures import plate3d_figures
 from .plate3d_materials import plate_materials
 from .plate_config import stored_config
-from .last_solve import LastSolve
 from .plate_parts import check_same_mesh, over_parts, part_rows, start_ranks, whole_rows
 
 __all__ = ["SinkingPlate3D", "plate_box"]

@@ -196,15 +196,15 @@ def nest_blocks(rows: sp.csr_matrix, first: np.ndarray, start: int) -> list:
         raise ValueError(f"rows {start}..{start + k - 1}: the first block's unknowns must "
                          f"come first on every rank (first_block_first)")
     first = np.asarray(first, dtype=bool)
+    nfirst = int(np.count_nonzero(first))
     new = np.empty(n, dtype=np.int64)                  # a column's place in its block
-    new[first] = np.arange(np.count_nonzero(first))
-    new[~first] = np.arange(n - np.count_nonzero(first))
+    new[first] = np.arange(nfirst)
+    new[~first] = np.arange(n - nfirst)
     rows = sp.csr_matrix(rows)
     if not rows.has_sorted_indices:
         rows = rows.sorted_indices()
     counts = np.zeros((k, 2), dtype=np.int64)
     _block_counts(rows.indptr, rows.indices, first, counts)
-    nfirst = int(np.count_nonzero(first))
     out, sizes = [], ((nv, nfirst), (k - nv, n - nfirst))   # (local, global) of each block
     for i, (r0, r1) in enumerate(((0, nv), (nv, k))):
         for j in range(2):
